@@ -1,0 +1,34 @@
+// Camera view of the solution: radiance per vertex, interpolated (smooth) or
+// constant per element (flat). Back faces of one-sided surfaces are black.
+
+struct Camera {
+    view_proj: mat4x4<f32>,
+}
+
+@group(0) @binding(0) var<uniform> cam: Camera;
+
+struct VsIn {
+    @location(0) pos: vec3<f32>,
+    @location(1) radiance: vec3<f32>,
+}
+
+struct VsOut {
+    @builtin(position) pos: vec4<f32>,
+    @location(0) radiance: vec3<f32>,
+}
+
+@vertex
+fn vs(in: VsIn) -> VsOut {
+    var out: VsOut;
+    out.pos = cam.view_proj * vec4<f32>(in.pos, 1.0);
+    out.radiance = in.radiance;
+    return out;
+}
+
+@fragment
+fn fs(in: VsOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if (!front) {
+        return vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    }
+    return vec4<f32>(in.radiance, 1.0);
+}

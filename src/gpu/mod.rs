@@ -1,0 +1,125 @@
+//! GPU plumbing (wgpu): getting a device, the hemisphere rasteriser, and the
+//! camera-view renderer. Nothing here knows about radiosity updates or MPI.
+//!
+//! Following wgpu's examples, acquiring a device ([`Gpu::new`]) is separate from
+//! doing work with `&Device, &Queue`, so tests can share one device.
+
+mod hemisphere;
+mod view;
+
+pub use hemisphere::{HemisphereRasterizer, RasterStats};
+pub use view::{render_view, Shading, ViewSettings};
+
+use std::time::Duration;
+
+/// The longest any single wait on the device may take before we give up
+/// (a stalled software driver must fail loudly, not hang).
+pub const DEVICE_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Why GPU work failed.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter could be found.
+    #[error("no Vulkan adapter found ({0}); install a Vulkan driver: on Debian 'apt-get install mesa-vulkan-drivers libvulkan1' (lavapipe runs on the CPU)")]
+    NoAdapter(String),
+    /// The adapter refused to create a device.
+    #[error("cannot create a device on '{adapter}': {message}")]
+    Device {
+        /// Adapter name.
+        adapter: String,
+        /// Why.
+        message: String,
+    },
+    /// The device did not finish in time.
+    #[error("the GPU did not finish within {0:?} (driver stalled?)")]
+    Timeout(Duration),
+    /// Any other failure while waiting on or reading from the device.
+    #[error("GPU failure: {0}")]
+    Failed(String),
+    /// The scene is too big for this device.
+    #[error("scene too large for the device: {0}")]
+    TooLarge(String),
+}
+
+/// A device and its queue, with a description of the adapter.
+pub struct Gpu {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter it runs on.
+    pub info: wgpu::AdapterInfo,
+}
+
+impl Gpu {
+    /// Opens the first suitable adapter. Vulkan only unless `WGPU_BACKEND` says otherwise.
+    pub fn new() -> Result<Gpu, GpuError> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN);
+        let instance = wgpu::Instance::new(desc);
+        let options = wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            apply_limit_buckets: false,
+        };
+        let adapter = pollster::block_on(instance.request_adapter(&options))
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        Self::from_adapter(&adapter)
+    }
+
+    /// Opens a device on a given adapter with the limits this renderer needs.
+    pub fn from_adapter(adapter: &wgpu::Adapter) -> Result<Gpu, GpuError> {
+        let info = adapter.get_info();
+        let desc = wgpu::DeviceDescriptor {
+            label: Some("radiosity"),
+            required_features: wgpu::Features::empty(),
+            required_limits: adapter.limits(),
+            ..Default::default()
+        };
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&desc)).map_err(|e| GpuError::Device {
+                adapter: info.name.clone(),
+                message: e.to_string(),
+            })?;
+        Ok(Gpu {
+            device,
+            queue,
+            info,
+        })
+    }
+
+    /// "name (backend, driver)" for reports and logs.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {} {})",
+            self.info.name, self.info.backend, self.info.driver, self.info.driver_info
+        )
+    }
+}
+
+/// Maps `buffer` for reading, waiting at most [`DEVICE_TIMEOUT`] for `submission`.
+pub(crate) fn map_read(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    submission: wgpu::SubmissionIndex,
+) -> Result<(), GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(submission),
+            timeout: Some(DEVICE_TIMEOUT),
+        })
+        .map_err(|e| match e {
+            wgpu::PollError::Timeout => GpuError::Timeout(DEVICE_TIMEOUT),
+            other => GpuError::Failed(other.to_string()),
+        })?;
+    match rx.recv_timeout(DEVICE_TIMEOUT) {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(e)) => Err(GpuError::Failed(e.to_string())),
+        Err(_) => Err(GpuError::Timeout(DEVICE_TIMEOUT)),
+    }
+}

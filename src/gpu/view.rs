@@ -1,0 +1,282 @@
+//! Renders the solved mesh from a camera into a linear-radiance image.
+
+use super::{map_read, GpuError};
+use crate::mesh::Mesh;
+use crate::scene::Camera;
+use bytemuck::{Pod, Zeroable};
+use glam::Mat4;
+use wgpu::util::DeviceExt;
+
+/// The WGSL source of the view pipeline.
+pub const SHADER: &str = include_str!("../../shaders/view.wgsl");
+
+/// How element radiosities become pixel colours.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Shading {
+    /// Interpolated from the elements around each vertex (within a polygon).
+    Smooth,
+    /// One value per element.
+    Flat,
+}
+
+/// Image size and shading.
+#[derive(Clone, Copy, Debug)]
+pub struct ViewSettings {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Smooth or flat.
+    pub shading: Shading,
+    /// Samples per pixel along each axis (box-filtered).
+    pub supersample: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Vertex {
+    pos: [f32; 3],
+    radiance: [f32; 3],
+}
+
+fn vertices(mesh: &Mesh, radiance: &[[f32; 3]], shading: Shading) -> Vec<Vertex> {
+    let mut out = Vec::with_capacity(mesh.elements.len() * 6);
+    let smooth: Vec<[f32; 3]> = if shading == Shading::Smooth {
+        let mut sum = vec![[0.0f32; 3]; mesh.vertices.len()];
+        let mut count = vec![0u32; mesh.vertices.len()];
+        for (e, r) in mesh.elements.iter().zip(radiance) {
+            let distinct = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
+            for &v in &e.vertices[..distinct] {
+                for c in 0..3 {
+                    sum[v as usize][c] += r[c];
+                }
+                count[v as usize] += 1;
+            }
+        }
+        sum.iter()
+            .zip(&count)
+            .map(|(s, &n)| s.map(|x| x / n.max(1) as f32))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    for (e, r) in mesh.elements.iter().zip(radiance) {
+        let corner = |k: usize| Vertex {
+            pos: e.corners[k].to_array(),
+            radiance: if shading == Shading::Smooth {
+                smooth[e.vertices[k] as usize]
+            } else {
+                *r
+            },
+        };
+        out.extend([corner(0), corner(1), corner(2)]);
+        if e.vertices[3] != e.vertices[2] {
+            out.extend([corner(0), corner(2), corner(3)]);
+        }
+    }
+    out
+}
+
+/// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2) from `camera`.
+/// Returns `width * height` RGB pixels, top row first.
+pub fn render_view(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    mesh: &Mesh,
+    radiance: &[[f32; 3]],
+    camera: &Camera,
+    settings: &ViewSettings,
+) -> Result<Vec<[f32; 3]>, GpuError> {
+    let ss = settings.supersample.max(1);
+    let (w, h) = (settings.width * ss, settings.height * ss);
+    let max_dim = device.limits().max_texture_dimension_2d;
+    if w > max_dim || h > max_dim || w == 0 || h == 0 {
+        return Err(GpuError::TooLarge(format!(
+            "image {w}x{h} (limit {max_dim})"
+        )));
+    }
+    let verts = vertices(mesh, radiance, settings.shading);
+    let far = mesh
+        .vertices
+        .iter()
+        .map(|v| (*v - camera.position).length())
+        .fold(1e-3f32, f32::max)
+        * 1.5;
+    let near = camera.znear.max(far * 1e-5);
+    let aspect = settings.width as f32 / settings.height as f32;
+    let view = Mat4::from_rotation_translation(camera.rotation, camera.position).inverse();
+    let view_proj = Mat4::perspective_rh(camera.yfov, aspect, near, far) * view;
+    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("camera"),
+        contents: bytemuck::cast_slice(&view_proj.to_cols_array()),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let vbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("view vertices"),
+        contents: if verts.is_empty() {
+            &[0u8; 24]
+        } else {
+            bytemuck::cast_slice(&verts)
+        },
+        usage: wgpu::BufferUsages::VERTEX,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("view.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+    });
+    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("view"),
+        layout: None,
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: wgpu::TextureFormat::Depth32Float,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: wgpu::TextureFormat::Rgba32Float,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    });
+    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("view"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: uniform.as_entire_binding(),
+        }],
+    });
+    let size = wgpu::Extent3d {
+        width: w,
+        height: h,
+        depth_or_array_layers: 1,
+    };
+    let texture = |format, usage, label| {
+        device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(label),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage,
+            view_formats: &[],
+        })
+    };
+    let color = texture(
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        "view color",
+    );
+    let depth = texture(
+        wgpu::TextureFormat::Depth32Float,
+        wgpu::TextureUsages::RENDER_ATTACHMENT,
+        "view depth",
+    );
+    let padded_row =
+        (w * 16).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("view readback"),
+        size: padded_row as u64 * h as u64,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    {
+        let color_view = color.create_view(&Default::default());
+        let depth_view = depth.create_view(&Default::default());
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("view"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &group, &[]);
+        pass.set_vertex_buffer(0, vbuf.slice(..));
+        pass.draw(0..verts.len() as u32, 0..1);
+    }
+    enc.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture: &color,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &readback,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded_row),
+                rows_per_image: Some(h),
+            },
+        },
+        size,
+    );
+    let submission = queue.submit([enc.finish()]);
+    map_read(device, &readback, submission)?;
+    let mut out = vec![[0.0f32; 3]; (settings.width * settings.height) as usize];
+    {
+        let data = readback
+            .slice(..)
+            .get_mapped_range()
+            .map_err(|e| GpuError::Failed(e.to_string()))?;
+        let norm = 1.0 / (ss * ss) as f32;
+        for y in 0..h {
+            let row = &data[(y * padded_row) as usize..][..(w * 16) as usize];
+            for x in 0..w {
+                let px = &row[(x * 16) as usize..][..12];
+                let o = &mut out[((y / ss) * settings.width + x / ss) as usize];
+                for c in 0..3 {
+                    let b = &px[c * 4..c * 4 + 4];
+                    o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
+                }
+            }
+        }
+    }
+    readback.unmap();
+    Ok(out)
+}

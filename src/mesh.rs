@@ -1,0 +1,453 @@
+//! Discretisation: polygons -> patches (shooters) -> elements (receivers), on
+//! uniform grids (bilinear for quads, barycentric lattices for triangles).
+//!
+//! # The automatic subdivision rule
+//! A shooter is treated as a point at its centre, which overestimates the form
+//! factor to receivers that are near compared with the shooter's size (two unit
+//! squares 1 apart: about 20 % high with one patch, 0.6 % with 5 x 5). The error
+//! falls roughly as (s / h)^2 for patch size s and distance h, so each polygon
+//! gets patches of size `near_field_ratio * h`, where h is the distance from its
+//! centre to the centre of the nearest polygon that faces it (in front of it,
+//! front side towards it, not coplanar). Polygons that nothing faces stay one
+//! patch. Each patch gets 2 x 2 elements. Both counts are capped per edge.
+//! `--patch-size`, `--element-size` and a node's `extras.radiosity` override it.
+
+use crate::scene::{Polygon, Scene};
+use glam::Vec3;
+use std::ops::Range;
+
+/// How polygons are subdivided.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct MeshSettings {
+    /// Fixed patch edge length in metres (automatic when `None`).
+    pub patch_size: Option<f32>,
+    /// Fixed element edge length in metres (2 x 2 elements per patch when `None`).
+    pub element_size: Option<f32>,
+    /// Automatic rule: patch size as a fraction of the distance to the nearest facing polygon.
+    pub near_field_ratio: f32,
+    /// Cap on patches along one polygon edge.
+    pub max_patches_per_edge: u32,
+    /// Cap on elements along one patch edge.
+    pub max_elements_per_edge: u32,
+}
+
+impl Default for MeshSettings {
+    fn default() -> Self {
+        Self {
+            patch_size: None,
+            element_size: None,
+            near_field_ratio: 0.2,
+            max_patches_per_edge: 32,
+            max_elements_per_edge: 16,
+        }
+    }
+}
+
+/// Above this many polygons the O(N^2) nearest-facing-polygon search is
+/// skipped and patches default to 1/32 of the scene's extent.
+const AUTO_SEARCH_LIMIT: usize = 20_000;
+
+/// Per-polygon data the solver and renderers share.
+#[derive(Clone, Debug)]
+pub struct MeshPolygon {
+    /// Index of the glTF node (see [`Scene::nodes`]).
+    pub node: usize,
+    /// Front normal.
+    pub normal: Vec3,
+    /// Unit tangent along the first edge (the shooter frame's x axis).
+    pub tangent: Vec3,
+    /// Reflectance per channel.
+    pub reflectance: [f64; 3],
+    /// Emitted radiosity (exitance) E = pi * L_e per channel, W/m^2.
+    pub exitance: [f64; 3],
+    /// Patches of this polygon.
+    pub patches: Range<u32>,
+    /// Elements of this polygon.
+    pub elements: Range<u32>,
+    /// Patch grid (triangles: [n, n]).
+    pub patch_grid: [u32; 2],
+    /// Elements per patch (triangles: [m, m]).
+    pub element_grid: [u32; 2],
+}
+
+/// A shooting patch.
+#[derive(Clone, Debug)]
+pub struct Patch {
+    /// Owning polygon.
+    pub polygon: u32,
+    /// Area-weighted centre: where the hemisphere is placed.
+    pub centre: Vec3,
+    /// Area in m^2.
+    pub area: f64,
+    /// Its elements (contiguous).
+    pub elements: Range<u32>,
+}
+
+/// A receiving element: a small planar quad or triangle.
+#[derive(Clone, Debug)]
+pub struct Element {
+    /// Owning patch.
+    pub patch: u32,
+    /// Owning polygon.
+    pub polygon: u32,
+    /// Corners counter-clockwise; a triangle repeats its last corner.
+    pub corners: [Vec3; 4],
+    /// Area in m^2.
+    pub area: f64,
+    /// Shading-vertex indices of the corners (shared within a polygon).
+    pub vertices: [u32; 4],
+}
+
+/// The discretised scene.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    /// One per scene polygon, same order.
+    pub polygons: Vec<MeshPolygon>,
+    /// All patches, polygon by polygon.
+    pub patches: Vec<Patch>,
+    /// All elements, patch by patch.
+    pub elements: Vec<Element>,
+    /// Positions of the shading vertices (element corners, shared within a polygon).
+    pub vertices: Vec<Vec3>,
+}
+
+impl Mesh {
+    /// Subdivides every polygon of `scene`.
+    pub fn build(scene: &Scene, settings: &MeshSettings) -> Mesh {
+        let sizes = patch_sizes(scene, settings);
+        let mut mesh = Mesh::default();
+        for (pi, (poly, &size)) in scene.polygons.iter().zip(&sizes).enumerate() {
+            mesh.add_polygon(pi as u32, poly, size, settings);
+        }
+        mesh
+    }
+
+    /// Total area of all elements.
+    pub fn total_area(&self) -> f64 {
+        self.elements.iter().map(|e| e.area).sum()
+    }
+
+    fn add_polygon(&mut self, index: u32, poly: &Polygon, patch_size: f32, s: &MeshSettings) {
+        let v = &poly.vertices;
+        let tri = v.len() == 3;
+        let cap_p = |len: f32| ((len / patch_size).ceil() as u32).clamp(1, s.max_patches_per_edge);
+        let (patch_grid, element_grid) = if let Some(sub) = poly.subdivision {
+            (sub.patches, sub.elements)
+        } else {
+            let (lu, lv) = if tri {
+                let m = (v[1] - v[0])
+                    .length()
+                    .max((v[2] - v[1]).length())
+                    .max((v[0] - v[2]).length());
+                (m, m)
+            } else {
+                (
+                    (v[1] - v[0]).length().max((v[2] - v[3]).length()),
+                    (v[3] - v[0]).length().max((v[2] - v[1]).length()),
+                )
+            };
+            let (nu, nv) = if tri {
+                (cap_p(lu), cap_p(lu))
+            } else {
+                (cap_p(lu), cap_p(lv))
+            };
+            let per = |len: f32, n: u32| match s.element_size {
+                Some(e) => ((len / n as f32 / e).ceil() as u32).clamp(1, s.max_elements_per_edge),
+                None => 2,
+            };
+            let (eu, ev) = if tri {
+                (per(lu, nu), per(lu, nu))
+            } else {
+                (per(lu, nu), per(lv, nv))
+            };
+            ([nu, nv], [eu, ev])
+        };
+        let refl = poly.reflectance.map(f64::from);
+        let exitance = poly.emission.map(|l| std::f64::consts::PI * l as f64);
+        let first_patch = self.patches.len() as u32;
+        let first_element = self.elements.len() as u32;
+        if tri {
+            self.triangle(index, v, patch_grid[0], element_grid[0]);
+        } else {
+            self.quad(index, v, patch_grid, element_grid);
+        }
+        let tangent = (v[1] - v[0]).normalize();
+        self.polygons.push(MeshPolygon {
+            node: poly.node,
+            normal: poly.normal,
+            tangent,
+            reflectance: refl,
+            exitance,
+            patches: first_patch..self.patches.len() as u32,
+            elements: first_element..self.elements.len() as u32,
+            patch_grid: if tri { [patch_grid[0]; 2] } else { patch_grid },
+            element_grid: if tri {
+                [element_grid[0]; 2]
+            } else {
+                element_grid
+            },
+        });
+    }
+
+    fn push_patch(&mut self, polygon: u32, first_element: u32) {
+        let els = &self.elements[first_element as usize..];
+        let area: f64 = els.iter().map(|e| e.area).sum();
+        let centre = els
+            .iter()
+            .fold(Vec3::ZERO, |acc, e| acc + element_centre(e) * e.area as f32)
+            / area as f32;
+        let patch = self.patches.len() as u32;
+        self.patches.push(Patch {
+            polygon,
+            centre,
+            area,
+            elements: first_element..self.elements.len() as u32,
+        });
+        for e in &mut self.elements[first_element as usize..] {
+            e.patch = patch;
+        }
+    }
+
+    fn push_element(&mut self, polygon: u32, corners: [Vec3; 4], vertices: [u32; 4]) {
+        let area = 0.5
+            * (corners[2] - corners[0])
+                .cross(corners[3] - corners[1])
+                .length() as f64;
+        self.elements.push(Element {
+            patch: 0,
+            polygon,
+            corners,
+            area,
+            vertices,
+        });
+    }
+
+    fn quad(&mut self, polygon: u32, v: &[Vec3], pg: [u32; 2], eg: [u32; 2]) {
+        let (nu, nv) = (pg[0] * eg[0], pg[1] * eg[1]);
+        let base = self.vertices.len() as u32;
+        for j in 0..=nv {
+            for i in 0..=nu {
+                let (u, w) = (i as f32 / nu as f32, j as f32 / nv as f32);
+                let p = v[0] * (1.0 - u) * (1.0 - w)
+                    + v[1] * u * (1.0 - w)
+                    + v[2] * u * w
+                    + v[3] * (1.0 - u) * w;
+                self.vertices.push(p);
+            }
+        }
+        let id = |i: u32, j: u32| base + j * (nu + 1) + i;
+        for pj in 0..pg[1] {
+            for pi in 0..pg[0] {
+                let first = self.elements.len() as u32;
+                for ej in 0..eg[1] {
+                    for ei in 0..eg[0] {
+                        let (i, j) = (pi * eg[0] + ei, pj * eg[1] + ej);
+                        let ids = [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)];
+                        let corners = ids.map(|k| self.vertices[k as usize]);
+                        self.push_element(polygon, corners, ids);
+                    }
+                }
+                self.push_patch(polygon, first);
+            }
+        }
+    }
+
+    fn triangle(&mut self, polygon: u32, v: &[Vec3], np: u32, ne: u32) {
+        let n = np * ne;
+        let base = self.vertices.len() as u32;
+        // Lattice point (i, j), i + j <= n: v0 + i/n (v1 - v0) + j/n (v2 - v0).
+        let mut starts = Vec::with_capacity(n as usize + 1);
+        let mut acc = 0u32;
+        for j in 0..=n {
+            starts.push(acc);
+            acc += n + 1 - j;
+        }
+        for j in 0..=n {
+            for i in 0..=(n - j) {
+                let p = v[0]
+                    + (v[1] - v[0]) * (i as f32 / n as f32)
+                    + (v[2] - v[0]) * (j as f32 / n as f32);
+                self.vertices.push(p);
+            }
+        }
+        let id = |i: u32, j: u32| base + starts[j as usize] + i;
+        // Each patch triangle is an up (sign +1) or down (sign -1) triangle of the
+        // patch lattice; its elements are the fine-lattice triangles inside it.
+        let mut patch_tris = Vec::new();
+        for pj in 0..np {
+            for pi in 0..(np - pj) {
+                patch_tris.push(((pi * ne) as i64, (pj * ne) as i64, 1i64));
+                if pi + pj + 1 < np {
+                    patch_tris.push((((pi + 1) * ne) as i64, ((pj + 1) * ne) as i64, -1i64));
+                }
+            }
+        }
+        let ne = ne as i64;
+        for (a, b, s) in patch_tris {
+            let first = self.elements.len() as u32;
+            let pt = |k: i64, l: i64| id((a + s * k) as u32, (b + s * l) as u32);
+            for l in 0..ne {
+                for k in 0..(ne - l) {
+                    let ids = [pt(k, l), pt(k + 1, l), pt(k, l + 1)];
+                    self.push_tri_element(polygon, ids);
+                    if k + l + 1 < ne {
+                        let ids = [pt(k + 1, l), pt(k + 1, l + 1), pt(k, l + 1)];
+                        self.push_tri_element(polygon, ids);
+                    }
+                }
+            }
+            self.push_patch(polygon, first);
+        }
+    }
+
+    fn push_tri_element(&mut self, polygon: u32, ids: [u32; 3]) {
+        let c = ids.map(|k| self.vertices[k as usize]);
+        self.push_element(
+            polygon,
+            [c[0], c[1], c[2], c[2]],
+            [ids[0], ids[1], ids[2], ids[2]],
+        );
+    }
+}
+
+/// Centroid of an element (vertex average of its distinct corners).
+pub fn element_centre(e: &Element) -> Vec3 {
+    if e.corners[3] == e.corners[2] {
+        (e.corners[0] + e.corners[1] + e.corners[2]) / 3.0
+    } else {
+        (e.corners[0] + e.corners[1] + e.corners[2] + e.corners[3]) / 4.0
+    }
+}
+
+/// Patch edge length for every polygon under the automatic rule (or the fixed size).
+fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
+    let n = scene.polygons.len();
+    if let Some(size) = s.patch_size {
+        return vec![size; n];
+    }
+    if n > AUTO_SEARCH_LIMIT {
+        return vec![scene.extent() / 32.0; n];
+    }
+    let eps = 1e-5 * scene.extent();
+    let centres: Vec<Vec3> = scene.polygons.iter().map(Polygon::centre).collect();
+    let mut nearest = vec![f32::INFINITY; n];
+    for i in 0..n {
+        let (ci, ni) = (centres[i], scene.polygons[i].normal);
+        for j in (i + 1)..n {
+            let (cj, nj) = (centres[j], scene.polygons[j].normal);
+            let d = cj - ci;
+            // Each must lie in front of the other: they exchange light.
+            if ni.dot(d) > eps && nj.dot(-d) > eps {
+                let h = d.length();
+                nearest[i] = nearest[i].min(h);
+                nearest[j] = nearest[j].min(h);
+            }
+        }
+    }
+    nearest
+        .into_iter()
+        .map(|h| s.near_field_ratio * h)
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Subdivision;
+
+    fn poly(vertices: Vec<Vec3>, sub: Option<Subdivision>) -> Polygon {
+        let normal = crate::scene::polygon_normal(&vertices);
+        Polygon {
+            vertices,
+            normal,
+            reflectance: [0.5; 3],
+            emission: [0.0; 3],
+            node: 0,
+            subdivision: sub,
+        }
+    }
+
+    #[test]
+    fn element_areas_sum_to_polygon_area() {
+        let quad = vec![
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(1.5, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        let tri = vec![Vec3::ZERO, Vec3::X, Vec3::Y];
+        let sub = Subdivision {
+            patches: [3, 2],
+            elements: [2, 3],
+        };
+        let scene = Scene {
+            polygons: vec![poly(quad, Some(sub)), poly(tri, Some(sub))],
+            nodes: vec!["n".into()],
+            ..Default::default()
+        };
+        let m = Mesh::build(&scene, &MeshSettings::default());
+        assert_eq!(m.patches.len(), 6 + 9);
+        assert_eq!(m.elements.len(), 36 + 9 * 4);
+        let qa: f64 = m.elements[..36].iter().map(|e| e.area).sum();
+        let ta: f64 = m.elements[36..].iter().map(|e| e.area).sum();
+        assert!((qa - 1.75).abs() < 1e-5, "{qa}");
+        assert!((ta - 0.5).abs() < 1e-6, "{ta}");
+        for p in &m.patches {
+            let a: f64 = m.elements[p.elements.start as usize..p.elements.end as usize]
+                .iter()
+                .map(|e| e.area)
+                .sum();
+            assert!((a - p.area).abs() < 1e-9);
+        }
+        // Every element faces the same way as its polygon.
+        for e in &m.elements {
+            let n = (e.corners[1] - e.corners[0]).cross(e.corners[2] - e.corners[0]);
+            assert!(n.z > 0.0);
+        }
+    }
+}
+
+/// Where and how a patch shoots: its centre and an orthonormal frame with z
+/// along the normal (theta = 0 along `tangent`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShooterFrame {
+    /// Hemisphere centre.
+    pub centre: Vec3,
+    /// x axis (theta = 0).
+    pub tangent: Vec3,
+    /// y axis (theta = pi / 2).
+    pub bitangent: Vec3,
+    /// z axis (phi = 0).
+    pub normal: Vec3,
+    /// The shooter's polygon, which must not see itself.
+    pub polygon: u32,
+}
+
+impl ShooterFrame {
+    /// A frame at `centre` with z along `normal` and x along `tangent`
+    /// (made orthogonal to the normal).
+    pub fn new(centre: Vec3, normal: Vec3, tangent: Vec3, polygon: u32) -> Self {
+        let normal = normal.normalize();
+        let mut t = tangent - normal * normal.dot(tangent);
+        if t.length_squared() < 1e-12 {
+            t = normal.any_orthonormal_vector();
+        }
+        let tangent = t.normalize();
+        Self {
+            centre,
+            tangent,
+            bitangent: normal.cross(tangent),
+            normal,
+            polygon,
+        }
+    }
+}
+
+impl Mesh {
+    /// The hemisphere frame of patch `patch`.
+    pub fn shooter_frame(&self, patch: u32) -> ShooterFrame {
+        let p = &self.patches[patch as usize];
+        let poly = &self.polygons[p.polygon as usize];
+        ShooterFrame::new(p.centre, poly.normal, poly.tangent, p.polygon)
+    }
+}

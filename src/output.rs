@@ -1,0 +1,136 @@
+//! Writing results: linear EXR, tone-mapped PNG preview, JSON — always atomically
+//! (a temporary file in the target directory, renamed into place), so a crash
+//! never leaves a half-written file behind.
+
+use std::io::{Cursor, Write};
+use std::path::{Path, PathBuf};
+
+/// Why an output could not be written. Names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// Creating, writing or renaming failed.
+    #[error("cannot write '{path}': {message}")]
+    Write {
+        /// The destination.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+}
+
+fn err(path: &Path, e: impl std::fmt::Display) -> OutputError {
+    OutputError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// Writes `bytes` to `path` atomically, creating parent directories.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(dir).map_err(|e| err(path, e))?;
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".radiosity-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|e| err(path, e))?;
+    tmp.write_all(bytes).map_err(|e| err(path, e))?;
+    tmp.as_file().sync_all().map_err(|e| err(path, e))?;
+    tmp.persist(path).map_err(|e| err(path, e.error))?;
+    Ok(())
+}
+
+/// Encodes linear RGB pixels (top row first) as an OpenEXR file in memory.
+pub fn encode_exr(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<Vec<u8>, String> {
+    use exr::prelude::*;
+    let w = width as usize;
+    let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
+        let p = pixels[y * w + x];
+        (p[0], p[1], p[2])
+    });
+    let image = Image::from_channels((w, height as usize), channels);
+    let mut buf = Cursor::new(Vec::new());
+    image
+        .write()
+        .non_parallel()
+        .to_buffered(&mut buf)
+        .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
+}
+
+/// Automatic exposure: the scale that maps the 95th percentile of the lit
+/// pixels' luminance to 0.8, times 2^`ev`.
+pub fn auto_exposure(pixels: &[[f32; 3]], ev: f32) -> f32 {
+    let mut lum: Vec<f32> = pixels
+        .iter()
+        .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
+        .filter(|l| *l > 0.0 && l.is_finite())
+        .collect();
+    if lum.is_empty() {
+        return 2f32.powf(ev);
+    }
+    let k = (lum.len() - 1) * 95 / 100;
+    let (_, v, _) = lum.select_nth_unstable_by(k, f32::total_cmp);
+    0.8 / v.max(1e-12) * 2f32.powf(ev)
+}
+
+fn srgb(x: f32) -> u8 {
+    let x = if x.is_finite() {
+        x.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let v = if x <= 0.0031308 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (v * 255.0 + 0.5) as u8
+}
+
+/// Tone-maps linear pixels (scaled by `exposure`, clipped, sRGB) into PNG bytes.
+pub fn encode_png(
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+    exposure: f32,
+) -> Result<Vec<u8>, String> {
+    let bytes: Vec<u8> = pixels
+        .iter()
+        .flat_map(|p| p.map(|c| srgb(c * exposure)))
+        .collect();
+    let img = image::RgbImage::from_raw(width, height, bytes)
+        .ok_or("pixel count does not match the image size")?;
+    let mut buf = Cursor::new(Vec::new());
+    img.write_to(&mut buf, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
+    Ok(buf.into_inner())
+}
+
+/// Writes the EXR at `path` and its PNG preview beside it (same stem, `.png`).
+/// Returns the PNG's path.
+pub fn write_image(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+    ev: f32,
+) -> Result<PathBuf, OutputError> {
+    let exr = encode_exr(width, height, pixels).map_err(|e| err(path, e))?;
+    write_atomic(path, &exr)?;
+    let png_path = path.with_extension("png");
+    let png = encode_png(width, height, pixels, auto_exposure(pixels, ev))
+        .map_err(|e| err(&png_path, e))?;
+    write_atomic(&png_path, &png)?;
+    Ok(png_path)
+}
+
+/// Serialises `value` as pretty JSON to `path`, atomically.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), OutputError> {
+    let mut text = serde_json::to_string_pretty(value).map_err(|e| err(path, e))?;
+    text.push('\n');
+    write_atomic(path, text.as_bytes())
+}

@@ -1,0 +1,225 @@
+//! Built-in scenes, generated as glTF text so they go through the same loader
+//! as files (and can be written out with `radiosity scene NAME --out FILE`).
+
+use super::gltf_write::{write_gltf, GltfSurface};
+use glam::{Quat, Vec3};
+
+/// Names accepted by [`builtin_gltf`].
+pub fn builtin_names() -> Vec<&'static str> {
+    vec!["cornell"]
+}
+
+/// The glTF text of a built-in scene, or `None` for an unknown name.
+pub fn builtin_gltf(name: &str) -> Option<String> {
+    match name {
+        "cornell" => Some(cornell()),
+        _ => None,
+    }
+}
+
+const WHITE: [f32; 3] = [0.73, 0.73, 0.73];
+const RED: [f32; 3] = [0.63, 0.065, 0.05];
+const GREEN: [f32; 3] = [0.14, 0.45, 0.091];
+
+/// Turns millimetre corner lists into metres, each polygon oriented so its
+/// front faces `towards` (inward) or away from it (outward).
+fn oriented(quads: &[[[f32; 3]; 4]], reference: Vec3, facing_reference: bool) -> Vec<Vec<Vec3>> {
+    quads
+        .iter()
+        .map(|q| {
+            let mut v: Vec<Vec3> = q.iter().map(|p| Vec3::from(*p) * 1e-3).collect();
+            let n = (v[2] - v[0]).cross(v[3] - v[1]);
+            let centre = v.iter().copied().sum::<Vec3>() / 4.0;
+            let faces = n.dot(reference - centre) > 0.0;
+            if faces != facing_reference {
+                v.reverse();
+            }
+            v
+        })
+        .collect()
+}
+
+fn surface(
+    name: &str,
+    polygons: Vec<Vec<Vec3>>,
+    reflectance: [f32; 3],
+    emission: [f32; 3],
+) -> GltfSurface {
+    GltfSurface {
+        name: name.into(),
+        polygons,
+        reflectance,
+        emission,
+        double_sided: false,
+        subdivision: None,
+    }
+}
+
+/// The Cornell box from the Cornell Program of Computer Graphics' measured
+/// data (millimetres, converted to metres), open at the front, with the light
+/// quad 1 mm below the ceiling facing down.
+fn cornell() -> String {
+    let room_centre = Vec3::new(0.278, 0.274, 0.280);
+    let floor = [[
+        [552.8, 0.0, 0.0],
+        [0.0, 0.0, 0.0],
+        [0.0, 0.0, 559.2],
+        [549.6, 0.0, 559.2],
+    ]];
+    let ceiling = [[
+        [556.0, 548.8, 0.0],
+        [556.0, 548.8, 559.2],
+        [0.0, 548.8, 559.2],
+        [0.0, 548.8, 0.0],
+    ]];
+    let back = [[
+        [549.6, 0.0, 559.2],
+        [0.0, 0.0, 559.2],
+        [0.0, 548.8, 559.2],
+        [556.0, 548.8, 559.2],
+    ]];
+    let right_green = [[
+        [0.0, 0.0, 559.2],
+        [0.0, 0.0, 0.0],
+        [0.0, 548.8, 0.0],
+        [0.0, 548.8, 559.2],
+    ]];
+    let left_red = [[
+        [552.8, 0.0, 0.0],
+        [549.6, 0.0, 559.2],
+        [556.0, 548.8, 559.2],
+        [556.0, 548.8, 0.0],
+    ]];
+    let light = [[
+        [343.0, 547.8, 227.0],
+        [343.0, 547.8, 332.0],
+        [213.0, 547.8, 332.0],
+        [213.0, 547.8, 227.0],
+    ]];
+    let short_block = [
+        [
+            [130.0, 165.0, 65.0],
+            [82.0, 165.0, 225.0],
+            [240.0, 165.0, 272.0],
+            [290.0, 165.0, 114.0],
+        ],
+        [
+            [290.0, 0.0, 114.0],
+            [290.0, 165.0, 114.0],
+            [240.0, 165.0, 272.0],
+            [240.0, 0.0, 272.0],
+        ],
+        [
+            [130.0, 0.0, 65.0],
+            [130.0, 165.0, 65.0],
+            [290.0, 165.0, 114.0],
+            [290.0, 0.0, 114.0],
+        ],
+        [
+            [82.0, 0.0, 225.0],
+            [82.0, 165.0, 225.0],
+            [130.0, 165.0, 65.0],
+            [130.0, 0.0, 65.0],
+        ],
+        [
+            [240.0, 0.0, 272.0],
+            [240.0, 165.0, 272.0],
+            [82.0, 165.0, 225.0],
+            [82.0, 0.0, 225.0],
+        ],
+    ];
+    let tall_block = [
+        [
+            [423.0, 330.0, 247.0],
+            [265.0, 330.0, 296.0],
+            [314.0, 330.0, 456.0],
+            [472.0, 330.0, 406.0],
+        ],
+        [
+            [423.0, 0.0, 247.0],
+            [423.0, 330.0, 247.0],
+            [472.0, 330.0, 406.0],
+            [472.0, 0.0, 406.0],
+        ],
+        [
+            [472.0, 0.0, 406.0],
+            [472.0, 330.0, 406.0],
+            [314.0, 330.0, 456.0],
+            [314.0, 0.0, 456.0],
+        ],
+        [
+            [314.0, 0.0, 456.0],
+            [314.0, 330.0, 456.0],
+            [265.0, 330.0, 296.0],
+            [265.0, 0.0, 296.0],
+        ],
+        [
+            [265.0, 0.0, 296.0],
+            [265.0, 330.0, 296.0],
+            [423.0, 330.0, 247.0],
+            [423.0, 0.0, 247.0],
+        ],
+    ];
+    let short_centre = Vec3::new(0.186, 0.0825, 0.1685);
+    let tall_centre = Vec3::new(0.3685, 0.165, 0.3515);
+    let surfaces = vec![
+        surface(
+            "floor",
+            oriented(&floor, room_centre, true),
+            WHITE,
+            [0.0; 3],
+        ),
+        surface(
+            "ceiling",
+            oriented(&ceiling, room_centre, true),
+            WHITE,
+            [0.0; 3],
+        ),
+        surface(
+            "back_wall",
+            oriented(&back, room_centre, true),
+            WHITE,
+            [0.0; 3],
+        ),
+        surface(
+            "right_wall_green",
+            oriented(&right_green, room_centre, true),
+            GREEN,
+            [0.0; 3],
+        ),
+        surface(
+            "left_wall_red",
+            oriented(&left_red, room_centre, true),
+            RED,
+            [0.0; 3],
+        ),
+        surface(
+            "light",
+            oriented(&light, Vec3::new(0.278, 0.0, 0.2795), true),
+            [0.78; 3],
+            [17.0, 12.0, 4.0],
+        ),
+        surface(
+            "short_block",
+            oriented(&short_block, short_centre, false),
+            WHITE,
+            [0.0; 3],
+        ),
+        surface(
+            "tall_block",
+            oriented(&tall_block, tall_centre, false),
+            WHITE,
+            [0.0; 3],
+        ),
+    ];
+    // The camera at (278, 273, -800) mm looks down +Z: glTF cameras look down
+    // their local -Z, so turn half a turn about Y. 35 mm lens, 25 mm film.
+    let yfov = 2.0 * (12.5f32 / 35.0).atan();
+    let camera = (
+        Vec3::new(0.278, 0.273, -0.8),
+        Quat::from_rotation_y(std::f32::consts::PI),
+        yfov,
+        1.0,
+    );
+    write_gltf(&surfaces, Some(camera))
+}

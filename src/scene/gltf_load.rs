@@ -1,0 +1,360 @@
+//! glTF 2.0 loading (DESIGN.md section 6).
+
+use super::{Camera, Polygon, Scene, SceneError, Subdivision};
+use glam::{Mat4, Vec3};
+use std::path::Path;
+
+/// Relative tolerance for "these triangles are coplanar" when merging pairs into quads.
+const COPLANAR_COS: f32 = 0.99999;
+
+/// Loads a `.gltf` or `.glb` file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Read {
+        path: name.clone(),
+        source,
+    })?;
+    load_with_base(&bytes, &name, path.parent())
+}
+
+/// Loads glTF from memory; `name` is used in messages. External buffer files
+/// cannot be resolved (embedded data URIs and GLB blobs can).
+pub fn load_slice(bytes: &[u8], name: &str) -> Result<Scene, SceneError> {
+    load_with_base(bytes, name, None)
+}
+
+fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene, SceneError> {
+    let parse_err = |e: gltf::Error| SceneError::Parse {
+        path: name.to_string(),
+        message: e.to_string(),
+    };
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(parse_err)?;
+    let base = base.map(|b| {
+        if b.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            b
+        }
+    });
+    let buffers =
+        gltf::import_buffers(&gltf.document, base, gltf.blob.clone()).map_err(parse_err)?;
+
+    let mut loader = Loader {
+        path: name.to_string(),
+        buffers: &buffers,
+        scene: Scene::default(),
+    };
+    loader.scene.name = name.to_string();
+    let doc = &gltf.document;
+    let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(s) => s.nodes().collect(),
+        // No scene: treat every node that is nobody's child as a root.
+        None => {
+            let mut is_child = vec![false; doc.nodes().len()];
+            for n in doc.nodes() {
+                for c in n.children() {
+                    is_child[c.index()] = true;
+                }
+            }
+            doc.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    for node in roots {
+        loader.visit(&node, Mat4::IDENTITY, 0)?;
+    }
+    let mut scene = loader.scene;
+    if scene.polygons.is_empty() {
+        return Err(SceneError::NoTriangles {
+            path: name.to_string(),
+        });
+    }
+    if !scene.polygons.iter().any(Polygon::is_emitter) {
+        return Err(SceneError::NoEmitter {
+            path: name.to_string(),
+        });
+    }
+    for w in &scene.warnings {
+        log::warn!("{name}: {w}");
+    }
+    scene.warnings.shrink_to_fit();
+    Ok(scene)
+}
+
+struct Loader<'a> {
+    path: String,
+    buffers: &'a [gltf::buffer::Data],
+    scene: Scene,
+}
+
+struct Material {
+    reflectance: [f32; 3],
+    emission: [f32; 3],
+    double_sided: bool,
+}
+
+impl Loader<'_> {
+    fn visit(&mut self, node: &gltf::Node, parent: Mat4, depth: usize) -> Result<(), SceneError> {
+        let name = node
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("node{}", node.index()));
+        if depth > 256 {
+            return Err(SceneError::Parse {
+                path: self.path.clone(),
+                message: format!("node '{name}' nests too deeply (a cycle?)"),
+            });
+        }
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if let (Some(cam), None) = (node.camera(), self.scene.camera) {
+            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
+                let (_, rotation, position) = world.to_scale_rotation_translation();
+                self.scene.camera = Some(Camera {
+                    position,
+                    rotation: rotation.normalize(),
+                    yfov: p.yfov(),
+                    aspect: p.aspect_ratio(),
+                    znear: p.znear(),
+                });
+            }
+        }
+        if let Some(mesh) = node.mesh() {
+            let subdivision = self.extras(node, &name)?;
+            let node_id = self.scene.nodes.len();
+            self.scene.nodes.push(name.clone());
+            let before = self.scene.polygons.len();
+            for prim in mesh.primitives() {
+                self.primitive(&prim, world, node_id, &name, subdivision)?;
+            }
+            if self.scene.polygons.len() == before {
+                self.scene.nodes.pop();
+            }
+        }
+        for child in node.children() {
+            self.visit(&child, world, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    fn extras(&self, node: &gltf::Node, name: &str) -> Result<Option<Subdivision>, SceneError> {
+        let Some(raw) = node.extras() else {
+            return Ok(None);
+        };
+        let bad = |message: String| SceneError::BadExtras {
+            path: self.path.clone(),
+            node: name.to_string(),
+            message,
+        };
+        let value: serde_json::Value =
+            serde_json::from_str(raw.get()).map_err(|e| bad(e.to_string()))?;
+        let Some(r) = value.get("radiosity") else {
+            return Ok(None);
+        };
+        let pair = |key: &str, default: [u32; 2]| -> Result<[u32; 2], SceneError> {
+            match r.get(key) {
+                None => Ok(default),
+                Some(v) => {
+                    let p: [u32; 2] = serde_json::from_value(v.clone())
+                        .map_err(|_| bad(format!("'{key}' must be two positive integers")))?;
+                    if p[0] == 0 || p[1] == 0 || p[0] > 4096 || p[1] > 4096 {
+                        return Err(bad(format!("'{key}' counts must be 1..=4096")));
+                    }
+                    Ok(p)
+                }
+            }
+        };
+        Ok(Some(Subdivision {
+            patches: pair("patches", [1, 1])?,
+            elements: pair("elements", [1, 1])?,
+        }))
+    }
+
+    fn material(prim: &gltf::Primitive) -> Material {
+        let m = prim.material();
+        let base = m.pbr_metallic_roughness().base_color_factor();
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        let e = m.emissive_factor();
+        let clamp = |x: f32| {
+            if x.is_finite() {
+                x.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        };
+        let nonneg = |x: f32| if x.is_finite() { x.max(0.0) } else { 0.0 };
+        Material {
+            reflectance: [clamp(base[0]), clamp(base[1]), clamp(base[2])],
+            emission: [
+                nonneg(e[0] * strength),
+                nonneg(e[1] * strength),
+                nonneg(e[2] * strength),
+            ],
+            double_sided: m.double_sided(),
+        }
+    }
+
+    fn primitive(
+        &mut self,
+        prim: &gltf::Primitive,
+        world: Mat4,
+        node: usize,
+        name: &str,
+        subdivision: Option<Subdivision>,
+    ) -> Result<(), SceneError> {
+        if prim.mode() != gltf::mesh::Mode::Triangles {
+            self.scene.warnings.push(format!(
+                "node '{name}': primitive mode {:?} skipped (only triangles are rendered)",
+                prim.mode()
+            ));
+            return Ok(());
+        }
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
+        let Some(positions) = reader.read_positions() else {
+            self.scene.warnings.push(format!(
+                "node '{name}': primitive without positions skipped"
+            ));
+            return Ok(());
+        };
+        let positions: Vec<Vec3> = positions
+            .map(|p| world.transform_point3(Vec3::from(p)))
+            .collect();
+        if positions.iter().any(|p| !p.is_finite()) {
+            return Err(SceneError::NonFinite {
+                path: self.path.clone(),
+                node: name.to_string(),
+            });
+        }
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(i) => i.into_u32().collect(),
+            None => (0..positions.len() as u32).collect(),
+        };
+        // A mirroring transform flips the winding (glTF spec, 3.7.4).
+        let flip = world.determinant() < 0.0;
+        let mat = Self::material(prim);
+        let mut tris = Vec::with_capacity(indices.len() / 3);
+        let mut degenerate = 0usize;
+        for (k, t) in indices.chunks_exact(3).enumerate() {
+            let get = |i: u32| positions.get(i as usize).copied();
+            let (Some(a), Some(b), Some(c)) = (get(t[0]), get(t[1]), get(t[2])) else {
+                return Err(SceneError::Parse {
+                    path: self.path.clone(),
+                    message: format!(
+                        "node '{name}': triangle {k} indexes past the end of its positions"
+                    ),
+                });
+            };
+            let tri = if flip { [a, c, b] } else { [a, b, c] };
+            let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+            let scale = (tri[1] - tri[0])
+                .length_squared()
+                .max((tri[2] - tri[0]).length_squared());
+            if n.length() <= 1e-7 * scale || scale == 0.0 {
+                degenerate += 1;
+                continue;
+            }
+            tris.push(tri);
+        }
+        if degenerate > 0 {
+            self.scene.warnings.push(format!(
+                "node '{name}': {degenerate} degenerate triangle(s) skipped"
+            ));
+        }
+        for verts in merge_quads(&tris) {
+            let normal = polygon_normal(&verts);
+            let poly = Polygon {
+                vertices: verts,
+                normal,
+                reflectance: mat.reflectance,
+                emission: mat.emission,
+                node,
+                subdivision,
+            };
+            if mat.double_sided {
+                let mut back = poly.clone();
+                back.vertices.reverse();
+                back.normal = -normal;
+                self.scene.polygons.push(poly);
+                self.scene.polygons.push(back);
+            } else {
+                self.scene.polygons.push(poly);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Unit normal of a counter-clockwise triangle or planar quad.
+pub fn polygon_normal(v: &[Vec3]) -> Vec3 {
+    match v.len() {
+        3 => (v[1] - v[0]).cross(v[2] - v[0]).normalize(),
+        _ => (v[2] - v[0]).cross(v[3] - v[1]).normalize(),
+    }
+}
+
+/// Merges consecutive triangles that share an edge, are coplanar and together
+/// form a convex quad; everything else stays a triangle.
+fn merge_quads(tris: &[[Vec3; 3]]) -> Vec<Vec<Vec3>> {
+    let mut out = Vec::with_capacity(tris.len());
+    let mut i = 0;
+    while i < tris.len() {
+        if i + 1 < tris.len() {
+            if let Some(q) = try_merge(&tris[i], &tris[i + 1]) {
+                out.push(q.to_vec());
+                i += 2;
+                continue;
+            }
+        }
+        out.push(tris[i].to_vec());
+        i += 1;
+    }
+    out
+}
+
+fn try_merge(a: &[Vec3; 3], b: &[Vec3; 3]) -> Option<[Vec3; 4]> {
+    let na = polygon_normal(a);
+    let nb = polygon_normal(b);
+    if na.dot(nb) < COPLANAR_COS {
+        return None;
+    }
+    // Find the edge (a[i], a[i+1]) that b contains reversed, and b's third vertex.
+    for i in 0..3 {
+        let (p, q) = (a[i], a[(i + 1) % 3]);
+        for j in 0..3 {
+            if b[j] == q && b[(j + 1) % 3] == p {
+                let x = b[(j + 2) % 3];
+                let r = a[(i + 2) % 3];
+                // Quad in counter-clockwise order: r, p, x, q.
+                let quad = [r, p, x, q];
+                let convex = (0..4).all(|k| {
+                    let e0 = quad[(k + 1) % 4] - quad[k];
+                    let e1 = quad[(k + 2) % 4] - quad[(k + 1) % 4];
+                    e0.cross(e1).dot(na) > 0.0
+                });
+                return convex.then_some(quad);
+            }
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_triangles_of_a_square_merge() {
+        let (a, b, c, d) = (Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y);
+        let q = try_merge(&[a, b, c], &[a, c, d]).expect("merges");
+        assert!(polygon_normal(&q).dot(Vec3::Z) > 0.999);
+        let area = 0.5 * (q[2] - q[0]).cross(q[3] - q[1]).length();
+        assert!((area - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn concave_or_bent_pairs_stay_triangles() {
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        // Folded: second triangle out of plane.
+        assert!(try_merge(&[a, b, c], &[c, b, Vec3::new(1.0, 1.0, 1.0)]).is_none());
+        // Concave (dart) shape.
+        assert!(try_merge(&[a, b, c], &[c, b, Vec3::new(0.2, 0.2, 0.0)]).is_none());
+    }
+}

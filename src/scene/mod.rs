@@ -1,0 +1,201 @@
+//! The scene as the solver sees it: planar polygons (triangles and quads) with
+//! diffuse reflectance and emitted radiance, grouped by the glTF node they came
+//! from, plus an optional camera.
+//!
+//! Loading ([`load`]) follows the glTF conventions of DESIGN.md section 6.
+
+mod builtin;
+mod gltf_load;
+mod gltf_write;
+
+pub use builtin::{builtin_gltf, builtin_names};
+pub use gltf_load::{load, load_slice, polygon_normal};
+pub use gltf_write::{write_gltf, GltfSurface};
+
+use glam::{Quat, Vec3};
+
+/// A planar polygon: a triangle or a convex quad, counter-clockwise seen from its front.
+#[derive(Clone, Debug)]
+pub struct Polygon {
+    /// 3 or 4 vertices, counter-clockwise around `normal`.
+    pub vertices: Vec<Vec3>,
+    /// Unit normal of the front side.
+    pub normal: Vec3,
+    /// Diffuse reflectance rho per RGB channel.
+    pub reflectance: [f32; 3],
+    /// Emitted radiance L_e per RGB channel (W sr^-1 m^-2); exitance is pi * L_e.
+    pub emission: [f32; 3],
+    /// Index into [`Scene::nodes`] of the glTF node this polygon belongs to.
+    pub node: usize,
+    /// Subdivision fixed by the node's `extras.radiosity`, if any.
+    pub subdivision: Option<Subdivision>,
+}
+
+impl Polygon {
+    /// Area of the polygon.
+    pub fn area(&self) -> f32 {
+        let v = &self.vertices;
+        match v.len() {
+            3 => 0.5 * (v[1] - v[0]).cross(v[2] - v[0]).length(),
+            _ => 0.5 * (v[2] - v[0]).cross(v[3] - v[1]).length(),
+        }
+    }
+
+    /// Vertex average (equal to the centroid for parallelograms and triangles).
+    pub fn centre(&self) -> Vec3 {
+        self.vertices.iter().copied().sum::<Vec3>() / self.vertices.len() as f32
+    }
+
+    /// Whether the polygon emits light.
+    pub fn is_emitter(&self) -> bool {
+        self.emission.iter().any(|&e| e > 0.0)
+    }
+}
+
+/// A fixed subdivision: patches per polygon and elements per patch, along the
+/// polygon's first and second edge directions (triangles use the first count).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Subdivision {
+    /// Patches along u and v.
+    pub patches: [u32; 2],
+    /// Elements per patch along u and v.
+    pub elements: [u32; 2],
+}
+
+/// A perspective camera (glTF conventions: looks down its local -Z, +Y up).
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    /// Eye position in world space.
+    pub position: Vec3,
+    /// Camera-to-world rotation.
+    pub rotation: Quat,
+    /// Vertical field of view in radians.
+    pub yfov: f32,
+    /// Width / height, if the file fixes it.
+    pub aspect: Option<f32>,
+    /// Near plane distance.
+    pub znear: f32,
+}
+
+/// A loaded scene.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Where it came from (a path or a built-in name).
+    pub name: String,
+    /// Names of the glTF nodes that hold surfaces, indexed by [`Polygon::node`].
+    pub nodes: Vec<String>,
+    /// Every polygon, both sides of double-sided surfaces included.
+    pub polygons: Vec<Polygon>,
+    /// The first perspective camera, if any.
+    pub camera: Option<Camera>,
+    /// Non-fatal problems met while loading (e.g. degenerate triangles skipped).
+    pub warnings: Vec<String>,
+}
+
+impl Scene {
+    /// Axis-aligned bounds (min, max) of all vertices.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for v in self.polygons.iter().flat_map(|p| p.vertices.iter()) {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        (lo, hi)
+    }
+
+    /// Length of the bounding-box diagonal.
+    pub fn extent(&self) -> f32 {
+        let (lo, hi) = self.bounds();
+        (hi - lo).length()
+    }
+
+    /// A camera that frames the whole scene from +Z, for scenes without one.
+    pub fn default_camera(&self) -> Camera {
+        let (lo, hi) = self.bounds();
+        let centre = 0.5 * (lo + hi);
+        let radius = 0.5 * (hi - lo).length().max(1e-3);
+        let yfov = 0.8f32;
+        let distance = radius / (0.5 * yfov).sin();
+        Camera {
+            position: centre + Vec3::Z * distance,
+            rotation: Quat::IDENTITY,
+            yfov,
+            aspect: None,
+            znear: (distance - radius).max(distance * 1e-3),
+        }
+    }
+}
+
+/// Why a scene could not be loaded. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("cannot read scene '{path}': {source}")]
+    Read {
+        /// The scene path.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not valid glTF (or a buffer it references is missing or short).
+    #[error("scene '{path}' is not valid glTF: {message}")]
+    Parse {
+        /// The scene path.
+        path: String,
+        /// What the parser said.
+        message: String,
+    },
+    /// No usable triangle in the whole scene.
+    #[error("scene '{path}' has no triangles to render")]
+    NoTriangles {
+        /// The scene path.
+        path: String,
+    },
+    /// Nothing emits light, so the solution would be black.
+    #[error("scene '{path}' has no emitter: give some material an emissiveFactor")]
+    NoEmitter {
+        /// The scene path.
+        path: String,
+    },
+    /// A vertex (after the node transforms) is NaN or infinite.
+    #[error("scene '{path}', node '{node}': non-finite vertex coordinates")]
+    NonFinite {
+        /// The scene path.
+        path: String,
+        /// The node holding the vertex.
+        node: String,
+    },
+    /// A node's `extras.radiosity` could not be understood.
+    #[error("scene '{path}', node '{node}': bad extras.radiosity: {message}")]
+    BadExtras {
+        /// The scene path.
+        path: String,
+        /// The node.
+        node: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A scene name that is neither a file nor a built-in scene.
+    #[error("no scene file '{0}' and no built-in scene of that name (built-ins: {1})")]
+    Unknown(String, String),
+}
+
+/// Loads a scene from a glTF/GLB path or a built-in scene name.
+pub fn open(name_or_path: &str) -> Result<Scene, SceneError> {
+    let path = std::path::Path::new(name_or_path);
+    if path.exists() {
+        return load(path);
+    }
+    if let Some(doc) = builtin_gltf(name_or_path) {
+        return load_slice(doc.as_bytes(), name_or_path);
+    }
+    let looks_like_file = path.extension().is_some() || name_or_path.contains('/');
+    if looks_like_file {
+        return load(path);
+    }
+    Err(SceneError::Unknown(
+        name_or_path.to_string(),
+        builtin_names().join(", "),
+    ))
+}
