@@ -3,6 +3,7 @@
 //!
 //! Pure maths: nothing here knows about GPUs or ranks.
 
+use glam::Vec3;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::fmt;
 use std::str::FromStr;
@@ -207,6 +208,115 @@ impl FormFactorAccumulator {
     }
 }
 
+/// A conservative rectangle of cells holding a planar piece's projection:
+/// columns `x0..x1` and rows `y0..y1` in cell units (cell (p, t) spans
+/// `t..t+1` by `p..p+1`). `x1` may exceed R_theta: the rectangle then wraps
+/// past the theta = 0 seam.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellRect {
+    /// First column (fractional).
+    pub x0: f32,
+    /// Last column (fractional, may exceed R_theta).
+    pub x1: f32,
+    /// First row.
+    pub y0: f32,
+    /// Last row.
+    pub y1: f32,
+}
+
+/// Rectangles grow by this many cells to absorb rounding.
+const RECT_MARGIN: f32 = 0.01;
+
+/// Bounds, in cells, of the projection of a convex planar quad (a triangle
+/// repeats a corner) whose corners `d` are given in the shooter's frame
+/// (z = normal, relative to the hemisphere centre). `None` when no cell centre
+/// can see it: it lies on or below the tangent plane, or falls between cell centres.
+///
+/// Azimuth: a convex piece that holds neither pole spans less than pi, and its
+/// extreme azimuths are at corners, so the smallest arc holding every corner
+/// bounds it; a wider span means a pole is inside and every column is taken.
+/// Polar angle: the largest is at a corner (or clipped at the horizon); the
+/// smallest at a corner or inside an edge's great-circle arc.
+pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect> {
+    use std::f32::consts::{FRAC_PI_2 as HALF_PI, PI as PI32, TAU};
+    let zmax = d.iter().fold(f32::MIN, |m, c| m.max(c.z));
+    if zmax <= 1e-6 * far {
+        return None;
+    }
+    let (rows, cols) = (res.rows as f32, res.cols as f32);
+    let mut u = [Vec3::Z; 4];
+    for k in 0..4 {
+        let len = d[k].length();
+        if len < 1e-7 * far {
+            // A corner at the centre: the piece may fill the hemisphere.
+            return Some(CellRect {
+                x0: 0.0,
+                x1: cols,
+                y0: 0.0,
+                y1: rows,
+            });
+        }
+        u[k] = d[k] / len;
+    }
+    let wrap = |a: f32| a - TAU * (a / TAU).floor();
+    let mut full = false;
+    let mut a = [0.0f32; 4];
+    for k in 0..4 {
+        if u[k].x.hypot(u[k].y) < 1e-6 {
+            full = true;
+        }
+        a[k] = wrap(u[k].y.atan2(u[k].x));
+    }
+    let (mut t0, mut span) = (0.0f32, TAU);
+    for k in 0..4 {
+        let s = (0..4).map(|j| wrap(a[j] - a[k])).fold(0.0f32, f32::max);
+        if s < span {
+            span = s;
+            t0 = a[k];
+        }
+    }
+    if span >= 0.999 * PI32 {
+        full = true;
+    }
+    let (mut phi_min, mut phi_max) = (HALF_PI, 0.0f32);
+    for k in 0..4 {
+        let ph = u[k].z.clamp(-1.0, 1.0).acos();
+        phi_max = phi_max.max(ph);
+        phi_min = phi_min.min(ph);
+        let b = u[(k + 1) % 4];
+        let m = u[k].cross(b);
+        let ml = m.length();
+        if ml > 1e-9 {
+            let mh = m / ml;
+            let q = Vec3::Z - mh * mh.z;
+            let ql = q.length();
+            if ql > 1e-9 {
+                let top = q / ql;
+                if u[k].cross(top).dot(mh) >= 0.0 && top.cross(b).dot(mh) >= 0.0 {
+                    phi_min = phi_min.min(top.z.clamp(-1.0, 1.0).acos());
+                }
+            }
+        }
+    }
+    let phi_max = phi_max.min(HALF_PI);
+    let y1 = phi_max / HALF_PI * rows + RECT_MARGIN;
+    let (x0, x1, y0) = if full {
+        (0.0, cols, 0.0)
+    } else {
+        (
+            t0 / TAU * cols - RECT_MARGIN,
+            (t0 + span) / TAU * cols + RECT_MARGIN,
+            phi_min / HALF_PI * rows - RECT_MARGIN,
+        )
+    };
+    // Does any cell centre (i + 0.5) fall inside, along each axis?
+    let holds_centre = |lo: f32, hi: f32| (lo - 0.5).ceil() <= (hi - 0.5).floor();
+    if !holds_centre(y0.max(0.0), y1.min(rows)) || !holds_centre(x0, x1) {
+        return None;
+    }
+    Some(CellRect { x0, x1, y0, y1 })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -231,6 +341,86 @@ mod tests {
         assert_eq!(l.owner(0, 0), (0, 0));
         assert_eq!(l.owner(1, 5), (1, 1));
         assert_eq!(l.owner(2, 7), (3, 0));
+    }
+
+    /// Brute force: every cell whose centre ray hits the quad lies in its rectangle.
+    #[test]
+    fn cell_bounds_are_conservative() {
+        let res = Resolution {
+            rows: 32,
+            cols: 128,
+        };
+        let quads: Vec<[Vec3; 4]> = vec![
+            // across the seam
+            [
+                Vec3::new(1.0, -0.3, 0.2),
+                Vec3::new(1.0, 0.3, 0.2),
+                Vec3::new(1.0, 0.3, 0.8),
+                Vec3::new(1.0, -0.3, 0.8),
+            ],
+            // around the pole
+            [
+                Vec3::new(-0.5, -0.5, 1.0),
+                Vec3::new(0.5, -0.5, 1.0),
+                Vec3::new(0.5, 0.5, 1.0),
+                Vec3::new(-0.5, 0.5, 1.0),
+            ],
+            // just beside the pole
+            [
+                Vec3::new(0.05, -0.5, 1.0),
+                Vec3::new(0.6, -0.5, 1.0),
+                Vec3::new(0.6, 0.5, 1.0),
+                Vec3::new(0.05, 0.5, 1.0),
+            ],
+            // through the horizon
+            [
+                Vec3::new(-0.2, 1.0, -0.5),
+                Vec3::new(0.4, 1.0, -0.5),
+                Vec3::new(0.4, 1.0, 0.5),
+                Vec3::new(-0.2, 1.0, 0.5),
+            ],
+            // a triangle, tilted
+            [
+                Vec3::new(-1.0, -0.2, 0.1),
+                Vec3::new(-0.3, -0.9, 0.4),
+                Vec3::new(-0.6, 0.4, 0.9),
+                Vec3::new(-0.6, 0.4, 0.9),
+            ],
+        ];
+        for q in &quads {
+            let r = cell_bounds(q, res, 10.0).expect("visible");
+            let n = (q[2] - q[0]).cross(q[3] - q[1]).normalize();
+            for p in 0..res.rows {
+                for t in 0..res.cols {
+                    let d = res.cell_direction(p, t);
+                    let d = Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32);
+                    let tt = n.dot(q[0]) / n.dot(d);
+                    if !(tt > 0.0) {
+                        continue;
+                    }
+                    let hit = d * tt;
+                    let inside =
+                        (0..4).all(|k| (q[(k + 1) % 4] - q[k]).cross(hit - q[k]).dot(n) >= -1e-6);
+                    if inside {
+                        let (x, y) = (t as f32 + 0.5, p as f32 + 0.5);
+                        let in_x =
+                            (r.x0 <= x && x <= r.x1) || (r.x0 <= x + 128.0 && x + 128.0 <= r.x1);
+                        assert!(
+                            in_x && r.y0 <= y && y <= r.y1,
+                            "cell ({p},{t}) outside {r:?} for {q:?}"
+                        );
+                    }
+                }
+            }
+        }
+        // Entirely below the tangent plane: culled.
+        let below = [
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, -1.0),
+            Vec3::new(1.0, 1.0, -1.0),
+            Vec3::new(0.0, 1.0, -1.0),
+        ];
+        assert!(cell_bounds(&below, res, 10.0).is_none());
     }
 
     #[test]

@@ -5,11 +5,14 @@
 //! A shooter is treated as a point at its centre, which overestimates the form
 //! factor to receivers that are near compared with the shooter's size (two unit
 //! squares 1 apart: about 20 % high with one patch, 0.6 % with 5 x 5). The error
-//! falls roughly as (s / h)^2 for patch size s and distance h, so each polygon
-//! gets patches of size `near_field_ratio * h`, where h is the distance from its
-//! centre to the centre of the nearest polygon that faces it (in front of it,
-//! front side towards it, not coplanar). Polygons that nothing faces stay one
-//! patch. Each patch gets 2 x 2 elements. Both counts are capped per edge.
+//! falls roughly as (s / h)^2 for patch size s and distance h. For every pair of
+//! polygons P, Q that face each other (each centre in front of the other), at
+//! centre distance h, P's patches may be at most `near_field_ratio * h`, relaxed
+//! by sqrt(0.2 / F) (up to h) when the disk estimate F = A_Q cos cos / (pi h^2 + A_Q)
+//! of the form factor P -> Q is below 0.2: a pair that exchanges little light
+//! matters little to the solution. P takes the smallest size over all Q;
+//! polygons that nothing faces stay one patch. Each patch gets 2 x 2 elements.
+//! Both counts are capped per edge.
 //! `--patch-size`, `--element-size` and a node's `extras.radiosity` override it.
 
 use crate::scene::{Polygon, Scene};
@@ -330,24 +333,35 @@ fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
     }
     let eps = 1e-5 * scene.extent();
     let centres: Vec<Vec3> = scene.polygons.iter().map(Polygon::centre).collect();
-    let mut nearest = vec![f32::INFINITY; n];
+    let areas: Vec<f32> = scene.polygons.iter().map(Polygon::area).collect();
+    let mut size = vec![f32::INFINITY; n];
     for i in 0..n {
         let (ci, ni) = (centres[i], scene.polygons[i].normal);
         for j in (i + 1)..n {
             let (cj, nj) = (centres[j], scene.polygons[j].normal);
             let d = cj - ci;
+            let h = d.length();
             // Each must lie in front of the other: they exchange light.
-            if ni.dot(d) > eps && nj.dot(-d) > eps {
-                let h = d.length();
-                nearest[i] = nearest[i].min(h);
-                nearest[j] = nearest[j].min(h);
+            let (cos_i, cos_j) = (ni.dot(d), nj.dot(-d));
+            if cos_i <= eps || cos_j <= eps {
+                continue;
             }
+            let (cos_i, cos_j) = (cos_i / h, cos_j / h);
+            let pi_h2 = std::f32::consts::PI * h * h;
+            // Disk estimate of F in each direction; a pair that exchanges
+            // little light tolerates a larger relative error (up to h / ratio).
+            let allow = |f: f32| {
+                s.near_field_ratio
+                    * h
+                    * (0.2 / f.max(1e-6))
+                        .sqrt()
+                        .clamp(1.0, 1.0 / s.near_field_ratio)
+            };
+            size[i] = size[i].min(allow(areas[j] * cos_i * cos_j / (pi_h2 + areas[j])));
+            size[j] = size[j].min(allow(areas[i] * cos_i * cos_j / (pi_h2 + areas[i])));
         }
     }
-    nearest
-        .into_iter()
-        .map(|h| s.near_field_ratio * h)
-        .collect()
+    size
 }
 
 #[cfg(test)]

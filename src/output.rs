@@ -39,6 +39,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
         .map_err(|e| err(path, e))?;
     tmp.write_all(bytes).map_err(|e| err(path, e))?;
     tmp.as_file().sync_all().map_err(|e| err(path, e))?;
+    // Temporary files are private (0600); results are ordinary files.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| err(path, e))?;
+    }
     tmp.persist(path).map_err(|e| err(path, e.error))?;
     Ok(())
 }

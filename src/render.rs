@@ -64,6 +64,10 @@ pub enum RenderError {
 /// Per-shot phase timings of the GPU form-factor source.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SourceTimings {
+    /// Finding cell rectangles (CPU).
+    pub bounds: Duration,
+    /// Rectangles drawn.
+    pub rects: u64,
     /// Drawing.
     pub rasterise: Duration,
     /// Reading back.
@@ -141,6 +145,8 @@ impl FormFactorSource for GpuFormFactors<'_> {
                     (rx, ry),
                     &mut self.items,
                 )?;
+                self.timings.bounds += stats.bounds;
+                self.timings.rects += stats.rects as u64;
                 self.timings.rasterise += stats.rasterise;
                 self.timings.read_back += stats.readback;
                 let t = Instant::now();
@@ -244,6 +250,8 @@ pub fn render(
     timings.solve = solve_start.elapsed().as_secs_f64();
     timings.select_shooter = select.as_secs_f64();
     timings.update = update.as_secs_f64();
+    timings.bounds = source.timings.bounds.as_secs_f64();
+    timings.rects_per_shot = source.timings.rects as f64 / solver.shots().max(1) as f64;
     timings.rasterise = source.timings.rasterise.as_secs_f64();
     timings.read_back = source.timings.read_back.as_secs_f64();
     timings.sum_form_factors = source.timings.sum.as_secs_f64();

@@ -80,7 +80,11 @@ pub struct Timings {
     pub solve: f64,
     /// Choosing shooters (summed over shots).
     pub select_shooter: f64,
-    /// Drawing hemispheres (summed over shots).
+    /// Finding the cell rectangles to draw, on the CPU (summed over shots).
+    pub bounds: f64,
+    /// Mean rectangles drawn per shot.
+    pub rects_per_shot: f64,
+    /// Drawing hemispheres on the GPU and waiting for them (summed over shots).
     pub rasterise: f64,
     /// Reading item buffers back (summed over shots).
     pub read_back: f64,

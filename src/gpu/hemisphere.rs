@@ -1,103 +1,91 @@
 //! The hemisphere rasteriser: draws every element as seen from a shooter into
 //! an R32Uint item buffer of R_phi rows by R_theta columns (see
 //! `shaders/hemisphere.wgsl` for the projection and its traps).
+//!
+//! Per shot the CPU finds a conservative cell rectangle for each piece the
+//! shooter can see (`hemisphere::cell_bounds`: cheap, and it culls everything
+//! below the tangent plane before any GPU work) and the piece's edge planes in
+//! the shooter's frame; the GPU rasterises the rectangles and tests every cell
+//! exactly. Pipelines, buffers and geometry are created once.
 
 use super::{map_read, GpuError};
-use crate::hemisphere::{Resolution, TileLayout, EMPTY};
+use crate::hemisphere::{cell_bounds, Resolution, TileLayout, EMPTY};
 use crate::mesh::{Mesh, ShooterFrame};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use std::ops::Range;
 use std::time::{Duration, Instant};
 
-/// The WGSL source of the hemisphere pipelines.
+/// The WGSL source of the hemisphere pipeline.
 pub const SHADER: &str = include_str!("../../shaders/hemisphere.wgsl");
 
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct ShotUniform {
-    centre: [f32; 4],
-    tangent: [f32; 4],
-    bitangent: [f32; 4],
-    normal: [f32; 4],
     res: [u32; 4],
     tiles: [u32; 4],
     own: [u32; 4],
+    depth: [f32; 4],
 }
 
+/// One rectangle to draw, with what the fragment test needs (see the shader's `Rect`).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-struct ProxyGpu {
-    c: [[f32; 4]; 4],
-    n: [f32; 3],
-    polygon: u32,
-    element: u32,
-    _pad: [u32; 3],
+struct Instance {
+    rect: [f32; 4],
+    edges: [[f32; 3]; 4],
+    plane: [f32; 4],
+    item: [u32; 2],
+    _pad: [u32; 2],
 }
 
 /// Time spent in the phases of one rasterisation.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RasterStats {
-    /// Recording and submitting the GPU work and waiting for it.
+    /// Finding the cell rectangles on the CPU.
+    pub bounds: Duration,
+    /// Rectangles drawn (seam copies included).
+    pub rects: u32,
+    /// Uploading, drawing and waiting for the GPU.
     pub rasterise: Duration,
     /// Mapping the item buffer and copying it out.
     pub readback: Duration,
+}
+
+/// A polygon's pieces and what culling needs.
+struct PolygonProxies {
+    proxies: Range<u32>,
+    normal: Vec3,
+    centre: Vec3,
+    radius: f32,
 }
 
 /// Pipelines, buffers and scene geometry for hemisphere rendering, created once.
 pub struct HemisphereRasterizer {
     res: Resolution,
     far: f32,
-    proxy_count: u32,
+    /// Corners of every rasterisation proxy (world space).
+    corners: Vec<[Vec3; 4]>,
+    /// Element each proxy belongs to.
+    element: Vec<u32>,
+    polygons: Vec<PolygonProxies>,
+    /// Rectangles of the current shot, CPU side (reused).
+    instances: Vec<Instance>,
+    instance_buf: wgpu::Buffer,
     uniform: wgpu::Buffer,
-    bounds_pipeline: wgpu::ComputePipeline,
-    draw_pipeline: wgpu::RenderPipeline,
-    bounds_group: wgpu::BindGroup,
-    draw_group: wgpu::BindGroup,
+    pipeline: wgpu::RenderPipeline,
+    group: wgpu::BindGroup,
+    color: wgpu::Texture,
     color_view: wgpu::TextureView,
     depth_view: wgpu::TextureView,
-    color: wgpu::Texture,
     readback: wgpu::Buffer,
     padded_row: u32,
 }
 
-fn split_proxies(mesh: &Mesh, split: u32) -> Vec<ProxyGpu> {
-    let split = split.max(1);
-    let mut out = Vec::with_capacity(mesh.elements.len() * (split * split) as usize);
-    for (id, e) in mesh.elements.iter().enumerate() {
-        let n = mesh.polygons[e.polygon as usize].normal;
-        let c = e.corners;
-        let at = |u: f32, v: f32| -> Vec3 {
-            c[0] * (1.0 - u) * (1.0 - v)
-                + c[1] * u * (1.0 - v)
-                + c[2] * u * v
-                + c[3] * (1.0 - u) * v
-        };
-        for j in 0..split {
-            for i in 0..split {
-                let (u0, u1) = (i as f32 / split as f32, (i + 1) as f32 / split as f32);
-                let (v0, v1) = (j as f32 / split as f32, (j + 1) as f32 / split as f32);
-                let q = if split == 1 {
-                    c
-                } else {
-                    [at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)]
-                };
-                out.push(ProxyGpu {
-                    c: q.map(|p| [p.x, p.y, p.z, 1.0]),
-                    n: n.to_array(),
-                    polygon: e.polygon,
-                    element: id as u32,
-                    _pad: [0; 3],
-                });
-            }
-        }
-    }
-    out
-}
-
 impl HemisphereRasterizer {
-    /// Uploads the mesh and builds the pipelines. `split` cuts each element into
-    /// split x split proxies for tighter rasterisation bounds (results are exact
-    /// either way). `extent` bounds every distance in the scene (the depth range).
+    /// Builds the pipeline and the per-shot buffers for `mesh`. `split` cuts
+    /// each element into split x split proxies for tighter rectangles (results
+    /// are exact either way). `extent` bounds every distance in the scene.
     pub fn new(
         device: &wgpu::Device,
         mesh: &Mesh,
@@ -105,17 +93,8 @@ impl HemisphereRasterizer {
         split: u32,
         extent: f32,
     ) -> Result<Self, GpuError> {
-        let proxies = split_proxies(mesh, split);
+        let split = split.max(1);
         let limits = device.limits();
-        let bytes = (proxies.len() * std::mem::size_of::<ProxyGpu>()) as u64;
-        if bytes > limits.max_storage_buffer_binding_size as u64
-            || proxies.len() as u64 * 12 > u32::MAX as u64
-        {
-            return Err(GpuError::TooLarge(format!(
-                "{} rasterisation proxies ({bytes} bytes)",
-                proxies.len()
-            )));
-        }
         if res.cols > limits.max_texture_dimension_2d || res.rows > limits.max_texture_dimension_2d
         {
             return Err(GpuError::TooLarge(format!(
@@ -123,21 +102,56 @@ impl HemisphereRasterizer {
                 limits.max_texture_dimension_2d
             )));
         }
-        use wgpu::util::DeviceExt;
-        let proxy_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("proxies"),
-            // An empty scene still needs a bindable buffer.
-            contents: if proxies.is_empty() {
-                &[0u8; std::mem::size_of::<ProxyGpu>()]
-            } else {
-                bytemuck::cast_slice(&proxies)
-            },
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let rects = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("rects"),
-            size: (proxies.len().max(1) * 16) as u64,
-            usage: wgpu::BufferUsages::STORAGE,
+        let mut corners = Vec::with_capacity(mesh.elements.len() * (split * split) as usize);
+        let mut element = Vec::with_capacity(corners.capacity());
+        let mut polygons = Vec::with_capacity(mesh.polygons.len());
+        for poly in &mesh.polygons {
+            let first = corners.len() as u32;
+            let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);
+            for id in poly.elements.clone() {
+                let c = mesh.elements[id as usize].corners;
+                for p in c {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+                let at = |u: f32, v: f32| {
+                    c[0] * (1.0 - u) * (1.0 - v)
+                        + c[1] * u * (1.0 - v)
+                        + c[2] * u * v
+                        + c[3] * (1.0 - u) * v
+                };
+                for j in 0..split {
+                    for i in 0..split {
+                        let (u0, u1) = (i as f32 / split as f32, (i + 1) as f32 / split as f32);
+                        let (v0, v1) = (j as f32 / split as f32, (j + 1) as f32 / split as f32);
+                        corners.push(if split == 1 {
+                            c
+                        } else {
+                            [at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)]
+                        });
+                        element.push(id);
+                    }
+                }
+            }
+            polygons.push(PolygonProxies {
+                proxies: first..corners.len() as u32,
+                normal: poly.normal,
+                centre: 0.5 * (lo + hi),
+                radius: 0.5 * (hi - lo).length(),
+            });
+        }
+        let max_instances = 2 * corners.len().max(1) as u64;
+        let instance_bytes = max_instances * std::mem::size_of::<Instance>() as u64;
+        if instance_bytes > limits.max_buffer_size {
+            return Err(GpuError::TooLarge(format!(
+                "{} rasterisation proxies need {instance_bytes} bytes of rectangles",
+                corners.len()
+            )));
+        }
+        let instance_buf = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rectangles"),
+            size: instance_bytes,
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
@@ -150,25 +164,24 @@ impl HemisphereRasterizer {
             label: Some("hemisphere.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let bounds_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("bounds"),
-            layout: None,
-            module: &module,
-            entry_point: Some("bounds"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        let draw_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("hemisphere"),
             layout: None,
             vertex: wgpu::VertexState {
                 module: &module,
                 entry_point: Some("vs"),
                 compilation_options: Default::default(),
-                buffers: &[],
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<Instance>() as u64,
+                    step_mode: wgpu::VertexStepMode::Instance,
+                    attributes: &wgpu::vertex_attr_array![
+                        0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
+                        4 => Float32x3, 5 => Float32x4, 6 => Uint32x2
+                    ],
+                })],
             },
             primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
+                topology: wgpu::PrimitiveTopology::TriangleStrip,
                 cull_mode: None,
                 ..Default::default()
             },
@@ -193,67 +206,41 @@ impl HemisphereRasterizer {
             multiview_mask: None,
             cache: None,
         });
-        let bounds_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("bounds"),
-            layout: &bounds_pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: proxy_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: rects.as_entire_binding(),
-                },
-            ],
-        });
-        let draw_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("draw"),
-            layout: &draw_pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: proxy_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: rects.as_entire_binding(),
-                },
-            ],
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hemisphere"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniform.as_entire_binding(),
+            }],
         });
         let size = wgpu::Extent3d {
             width: res.cols,
             height: res.rows,
             depth_or_array_layers: 1,
         };
-        let color = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("item buffer"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::R32Uint,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
-        let depth = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("hemisphere depth"),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Depth32Float,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
+        let texture = |format, usage, label| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size,
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            })
+        };
+        let color = texture(
+            wgpu::TextureFormat::R32Uint,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            "item buffer",
+        );
+        let depth = texture(
+            wgpu::TextureFormat::Depth32Float,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            "hemisphere depth",
+        );
         let padded_row = (res.cols * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -265,12 +252,14 @@ impl HemisphereRasterizer {
         Ok(Self {
             res,
             far: extent.max(1e-6) * 2.0,
-            proxy_count: proxies.len() as u32,
+            instances: Vec::with_capacity(corners.len()),
+            corners,
+            element,
+            polygons,
+            instance_buf,
             uniform,
-            bounds_pipeline,
-            draw_pipeline,
-            bounds_group,
-            draw_group,
+            pipeline,
+            group,
             color_view: color.create_view(&Default::default()),
             depth_view: depth.create_view(&Default::default()),
             color,
@@ -284,16 +273,69 @@ impl HemisphereRasterizer {
         self.res
     }
 
-    /// Number of rasterisation proxies drawn per shot.
-    pub fn proxy_count(&self) -> u32 {
-        self.proxy_count
+    /// Number of rasterisation proxies (elements times split squared).
+    pub fn proxy_count(&self) -> usize {
+        self.corners.len()
+    }
+
+    /// Fills `self.instances` with a rectangle for every proxy the shooter can
+    /// see, in proxy order (so the draw order, and with it every depth tie, is
+    /// the same on every run), seam copies right after their originals.
+    fn collect_rects(&mut self, shooter: &ShooterFrame) {
+        self.instances.clear();
+        let cols = self.res.cols as f32;
+        let local = |d: Vec3| {
+            Vec3::new(
+                d.dot(shooter.tangent),
+                d.dot(shooter.bitangent),
+                d.dot(shooter.normal),
+            )
+        };
+        for (pi, poly) in self.polygons.iter().enumerate() {
+            // The shooter never sees its own polygon; skip polygons wholly below its plane.
+            if pi as u32 == shooter.polygon
+                || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
+            {
+                continue;
+            }
+            let n = local(poly.normal);
+            for i in poly.proxies.clone() {
+                let d = self.corners[i as usize].map(|c| local(c - shooter.centre));
+                let Some(r) = cell_bounds(&d, self.res, self.far) else {
+                    continue;
+                };
+                // The shooter is in front when it is on the side n points to.
+                let offset = n.dot(d[0]);
+                let back = offset >= 0.0;
+                // Inside <=> the direction is on the inner side of every edge plane;
+                // which side is inner depends on the side the shooter sees.
+                let sign = if back { 1.0 } else { -1.0 };
+                let edges = std::array::from_fn(|k| {
+                    (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array()
+                });
+                let inst = Instance {
+                    rect: [r.x0, r.x1, r.y0, r.y1],
+                    edges,
+                    plane: [n.x, n.y, n.z, offset],
+                    item: [self.element[i as usize], back as u32],
+                    _pad: [0; 2],
+                };
+                self.instances.push(inst);
+                if r.x1 > cols {
+                    self.instances.push(Instance {
+                        rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
+                        ..inst
+                    });
+                }
+            }
+        }
     }
 
     /// Renders the cells of the tiles that rank `own` of `layout` owns, as seen
     /// from `shooter`, into `items` (row-major, R_phi x R_theta). Cells other
     /// ranks own are [`EMPTY`].
     pub fn render(
-        &self,
+        &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         shooter: &ShooterFrame,
@@ -302,18 +344,10 @@ impl HemisphereRasterizer {
         items: &mut Vec<u32>,
     ) -> Result<RasterStats, GpuError> {
         let start = Instant::now();
-        let v4 = |v: Vec3, w: f32| [v.x, v.y, v.z, w];
+        self.collect_rects(shooter);
+        let bounds = start.elapsed();
         let u = ShotUniform {
-            centre: v4(shooter.centre, self.far),
-            tangent: v4(shooter.tangent, 0.0),
-            bitangent: v4(shooter.bitangent, 0.0),
-            normal: v4(shooter.normal, 0.0),
-            res: [
-                self.res.rows,
-                self.res.cols,
-                shooter.polygon,
-                self.proxy_count,
-            ],
+            res: [self.res.rows, self.res.cols, 0, 0],
             tiles: [
                 layout.tile_w.max(1),
                 layout.tile_h.max(1),
@@ -321,21 +355,15 @@ impl HemisphereRasterizer {
                 layout.py.max(1),
             ],
             own: [own.0, own.1, 0, 0],
+            depth: [1.0 / self.far, 0.0, 0.0, 0.0],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
+        if !self.instances.is_empty() {
+            queue.write_buffer(&self.instance_buf, 0, bytemuck::cast_slice(&self.instances));
+        }
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("shot"),
         });
-        if self.proxy_count > 0 {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("bounds"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.bounds_pipeline);
-            pass.set_bind_group(0, &self.bounds_group, &[]);
-            let groups = self.proxy_count.div_ceil(64);
-            pass.dispatch_workgroups(groups.min(65535), groups.div_ceil(65535), 1);
-        }
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("hemisphere"),
@@ -365,10 +393,11 @@ impl HemisphereRasterizer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            if self.proxy_count > 0 {
-                pass.set_pipeline(&self.draw_pipeline);
-                pass.set_bind_group(0, &self.draw_group, &[]);
-                pass.draw(0..self.proxy_count * 12, 0..1);
+            if !self.instances.is_empty() {
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.group, &[]);
+                pass.set_vertex_buffer(0, self.instance_buf.slice(..));
+                pass.draw(0..4, 0..self.instances.len() as u32);
             }
         }
         enc.copy_texture_to_buffer(
@@ -394,7 +423,7 @@ impl HemisphereRasterizer {
         );
         let submission = queue.submit([enc.finish()]);
         map_read(device, &self.readback, submission)?;
-        let rasterise = start.elapsed();
+        let rasterise = start.elapsed() - bounds;
         let start = Instant::now();
         {
             let view = self
@@ -415,6 +444,8 @@ impl HemisphereRasterizer {
         }
         self.readback.unmap();
         Ok(RasterStats {
+            bounds,
+            rects: self.instances.len() as u32,
             rasterise,
             readback: start.elapsed(),
         })

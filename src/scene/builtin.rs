@@ -2,6 +2,7 @@
 //! as files (and can be written out with `radiosity scene NAME --out FILE`).
 
 use super::gltf_write::{write_gltf, GltfSurface};
+use super::Subdivision;
 use glam::{Quat, Vec3};
 
 /// Names accepted by [`builtin_gltf`].
@@ -44,16 +45,31 @@ fn surface(
     polygons: Vec<Vec<Vec3>>,
     reflectance: [f32; 3],
     emission: [f32; 3],
+    grid: Grid,
 ) -> GltfSurface {
+    let subdivision = Some(Subdivision {
+        patches: grid.0,
+        elements: grid.1,
+    });
     GltfSurface {
         name: name.into(),
         polygons,
         reflectance,
         emission,
         double_sided: false,
-        subdivision: None,
+        subdivision,
     }
 }
+
+/// Patches per polygon and elements per patch.
+type Grid = ([u32; 2], [u32; 2]);
+
+// Subdivisions of the Cornell box, fixed in the file as a modeller would, so
+// the default render is quick: the automatic rule would give about 1000
+// patches; these keep every shooter at most a sixth of a wall.
+const CORNELL_WALL: Grid = ([6, 6], [3, 3]);
+const CORNELL_BLOCK: Grid = ([3, 3], [2, 2]);
+const CORNELL_LIGHT: Grid = ([2, 2], [2, 2]);
 
 /// The Cornell box from the Cornell Program of Computer Graphics' measured
 /// data (millimetres, converted to metres), open at the front, with the light
@@ -168,48 +184,56 @@ fn cornell() -> String {
             oriented(&floor, room_centre, true),
             WHITE,
             [0.0; 3],
+            CORNELL_WALL,
         ),
         surface(
             "ceiling",
             oriented(&ceiling, room_centre, true),
             WHITE,
             [0.0; 3],
+            CORNELL_WALL,
         ),
         surface(
             "back_wall",
             oriented(&back, room_centre, true),
             WHITE,
             [0.0; 3],
+            CORNELL_WALL,
         ),
         surface(
             "right_wall_green",
             oriented(&right_green, room_centre, true),
             GREEN,
             [0.0; 3],
+            CORNELL_WALL,
         ),
         surface(
             "left_wall_red",
             oriented(&left_red, room_centre, true),
             RED,
             [0.0; 3],
+            CORNELL_WALL,
         ),
         surface(
             "light",
             oriented(&light, Vec3::new(0.278, 0.0, 0.2795), true),
             [0.78; 3],
             [17.0, 12.0, 4.0],
+            CORNELL_LIGHT,
         ),
         surface(
             "short_block",
             oriented(&short_block, short_centre, false),
             WHITE,
             [0.0; 3],
+            CORNELL_BLOCK,
         ),
         surface(
             "tall_block",
             oriented(&tall_block, tall_centre, false),
             WHITE,
             [0.0; 3],
+            CORNELL_BLOCK,
         ),
     ];
     // The camera at (278, 273, -800) mm looks down +Z: glTF cameras look down
