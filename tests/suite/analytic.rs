@@ -1,0 +1,80 @@
+//! Form factors through the whole pipeline (glTF file -> render -> report)
+//! against closed-form values (DESIGN.md section 5), automatic subdivision.
+//!
+//! The emitter (L_e = 1, exitance pi, black) lights a white receiver (rho = 1)
+//! in empty space; nothing comes back, so the receiver's mean radiosity is
+//! pi * F_er * A_e / A_r and the form factor follows from the report.
+
+use crate::common::*;
+use radiosity::report::Surface;
+
+fn form_factor(emitter: &Surface, receiver: &Surface) -> f64 {
+    receiver.radiosity[0] * receiver.area / (std::f64::consts::PI * emitter.area)
+}
+
+fn check(name: &str, emitter: Vec<Vec<glam::Vec3>>, receiver: Vec<Vec<glam::Vec3>>, expected: f64) {
+    let (_dir, path) = write_scene(
+        name,
+        &[
+            surface("emitter", emitter, 0.0, 1.0),
+            surface("receiver", receiver, 1.0, 0.0),
+        ],
+    );
+    let r = solve_file(&path, &tight(1e-9));
+    let f = form_factor(node(&r, "emitter"), node(&r, "receiver"));
+    eprintln!(
+        "{name}: F = {f:.5} (expected {expected}, {} patches)",
+        r.report.counts.patches
+    );
+    assert!(
+        rel(f, expected) < 0.01,
+        "{name}: F = {f}, expected {expected} within 1%"
+    );
+}
+
+#[test]
+fn parallel_unit_squares_one_apart() {
+    check(
+        "parallel",
+        vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+        vec![rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false)],
+        0.19982,
+    );
+}
+
+#[test]
+fn perpendicular_unit_squares_sharing_an_edge() {
+    // Emitter in z = 0 facing +z; receiver in y = 0 facing +y; common edge along x.
+    check(
+        "perpendicular",
+        vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+        vec![rect(1, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+        0.20004,
+    );
+}
+
+#[test]
+fn parallel_rectangles_half_apart() {
+    check(
+        "rectangles",
+        vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.5], true)],
+        vec![rect(2, 0.5, [0.0, 0.0], [1.0, 1.5], false)],
+        0.47558,
+    );
+}
+
+#[test]
+fn coaxial_disks() {
+    // Polygonal disks of 96 sides (area within 0.07 % of the circles').
+    let (r1, r2, a) = (0.1f64, 0.2f64, 0.5f64);
+    let (big_r1, big_r2) = (r1 / a, r2 / a);
+    let s = 1.0 + (1.0 + big_r2 * big_r2) / (big_r1 * big_r1);
+    let expected = 0.5 * (s - (s * s - 4.0 * (r2 / r1).powi(2)).sqrt());
+    assert!((expected - 0.13393).abs() < 5e-5);
+    check(
+        "disks",
+        disk(0.1, 0.0, 96, true),
+        disk(0.2, 0.5, 96, false),
+        expected,
+    );
+}

@@ -1,0 +1,197 @@
+//! Bad input gets a one-line error naming the cause, a non-zero exit and no panic.
+
+use crate::common::*;
+use glam::Vec3;
+use std::process::Command;
+
+fn run(args: &[&str], envs: &[(&str, &str)]) -> (i32, String) {
+    let out_dir = tempfile::tempdir().expect("temp dir");
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_radiosity"));
+    cmd.args(args)
+        .arg("--out-dir")
+        .arg(out_dir.path())
+        .arg("--max-shots")
+        .arg("3")
+        .arg("--width")
+        .arg("16");
+    for (k, v) in envs {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().expect("run radiosity");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!stderr.contains("panicked"), "panic: {stderr}");
+    (out.status.code().unwrap_or(-1), stderr)
+}
+
+fn expect_error(args: &[&str], needle: &str) {
+    let (code, stderr) = run(args, &[]);
+    assert_ne!(code, 0, "should fail: {stderr}");
+    let line = stderr
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_else(|| panic!("no error line in: {stderr}"));
+    assert!(
+        line.contains(needle),
+        "error line '{line}' should mention '{needle}'"
+    );
+}
+
+fn render_args(path: &std::path::Path) -> Vec<String> {
+    vec!["render".into(), path.to_string_lossy().into_owned()]
+}
+
+#[test]
+fn missing_file() {
+    expect_error(
+        &["render", "/nonexistent/scene.gltf"],
+        "/nonexistent/scene.gltf",
+    );
+}
+
+#[test]
+fn unknown_name() {
+    expect_error(&["render", "no-such-scene"], "no-such-scene");
+}
+
+#[test]
+fn truncated_gltf() {
+    let (dir, path) = write_scene(
+        "good",
+        &[surface(
+            "light",
+            vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+            0.5,
+            1.0,
+        )],
+    );
+    let text = std::fs::read(&path).expect("read");
+    let cut = dir.path().join("cut.gltf");
+    std::fs::write(&cut, &text[..text.len() / 2]).expect("write");
+    let args = render_args(&cut);
+    expect_error(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        "cut.gltf",
+    );
+    // A .glb that is not binary glTF at all.
+    let glb = dir.path().join("junk.glb");
+    std::fs::write(&glb, b"glTF\x02\x00\x00\x00junk").expect("write");
+    let args = render_args(&glb);
+    expect_error(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        "junk.glb",
+    );
+}
+
+#[test]
+fn no_triangles() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("empty.gltf");
+    std::fs::write(
+        &path,
+        r#"{"asset":{"version":"2.0"},"scenes":[{"nodes":[0]}],"nodes":[{"name":"nothing"}]}"#,
+    )
+    .expect("write");
+    let args = render_args(&path);
+    expect_error(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        "no triangles",
+    );
+}
+
+#[test]
+fn no_emitter() {
+    let (_dir, path) = write_scene(
+        "dark",
+        &[surface(
+            "wall",
+            vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+            0.5,
+            0.0,
+        )],
+    );
+    let args = render_args(&path);
+    expect_error(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        "no emitter",
+    );
+}
+
+#[test]
+fn non_finite_coordinates() {
+    // A node scale that overflows f32 turns finite vertices into infinities.
+    let (_dir, path) = write_scene(
+        "huge",
+        &[surface(
+            "light",
+            vec![rect(2, 1e10, [0.0, 0.0], [1e10, 1e10], true)],
+            0.5,
+            1.0,
+        )],
+    );
+    let text = std::fs::read_to_string(&path).expect("read");
+    let text = text.replacen(
+        "\"mesh\": 0,",
+        "\"mesh\": 0, \"scale\": [1e30, 1e30, 1e30],",
+        1,
+    );
+    std::fs::write(&path, text).expect("write");
+    let args = render_args(&path);
+    expect_error(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        "node 'light': non-finite",
+    );
+}
+
+#[test]
+fn degenerate_triangles_are_skipped_with_a_warning() {
+    let light = rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false);
+    let floor = rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true);
+    let sliver = vec![Vec3::ZERO, Vec3::X, Vec3::new(2.0, 0.0, 0.0)];
+    let (_dir, path) = write_scene(
+        "sliver",
+        &[
+            surface("light", vec![light], 0.0, 1.0),
+            surface("floor", vec![floor, sliver], 0.5, 0.0),
+        ],
+    );
+    let report = path.with_extension("json");
+    let (code, stderr) = run(
+        &[
+            "render",
+            path.to_str().expect("utf-8"),
+            "--report",
+            report.to_str().expect("utf-8"),
+        ],
+        &[],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("degenerate"), "warning expected: {stderr}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).expect("report")).expect("json");
+    assert!(json["warnings"][0]
+        .as_str()
+        .expect("warning")
+        .contains("degenerate"));
+    assert!(
+        json["surfaces"][1]["radiosity"][0]
+            .as_f64()
+            .expect("number")
+            > 0.0
+    );
+}
+
+#[test]
+fn no_vulkan_adapter() {
+    let (code, stderr) = run(
+        &["render", "cornell"],
+        &[
+            ("VK_ICD_FILENAMES", "/nonexistent/icd.json"),
+            ("VK_DRIVER_FILES", "/nonexistent/icd.json"),
+        ],
+    );
+    assert_ne!(code, 0, "should fail without a driver: {stderr}");
+    assert!(
+        stderr.contains("mesa-vulkan-drivers"),
+        "should name the package: {stderr}"
+    );
+}

@@ -1,0 +1,82 @@
+//! Same scene and settings, same numbers: across runs, and however the
+//! hemisphere is split into tiles and rank grids.
+
+use crate::common::*;
+use radiosity::hemisphere::TileLayout;
+use radiosity::render::{render, RenderOptions};
+use std::time::Duration;
+
+fn cornell(opts: &RenderOptions) -> radiosity::render::Rendered {
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    render(gpu(), &scene, opts, Duration::ZERO, &mut |_| {}).expect("render")
+}
+
+#[test]
+fn identical_runs_are_bitwise_identical() {
+    let mut opts = RenderOptions {
+        width: 96,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 120;
+    let a = cornell(&opts);
+    let b = cornell(&opts);
+    assert_eq!(a.report.surfaces, b.report.surfaces);
+    assert!(a.radiosity == b.radiosity, "element radiosities differ");
+    let (ia, ib) = (a.image.expect("image"), b.image.expect("image"));
+    assert!(
+        ia.2.iter()
+            .zip(&ib.2)
+            .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits)),
+        "image pixels differ"
+    );
+    assert!(ia.2.iter().any(|p| p[0] > 0.0), "image is black");
+}
+
+#[test]
+fn tiling_does_not_change_the_solution() {
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 40;
+    let whole = cornell(&opts);
+    opts.layout = Some(TileLayout {
+        tile_w: 8,
+        tile_h: 4,
+        px: 3,
+        py: 2,
+    });
+    let tiled = cornell(&opts);
+    assert!(
+        whole.radiosity == tiled.radiosity,
+        "radiosities differ between tilings"
+    );
+}
+
+#[test]
+fn cornell_box_looks_right() {
+    // Red wall on the left of the camera view, green on the right, light brightest at the top.
+    let mut opts = RenderOptions {
+        width: 64,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 200;
+    let r = cornell(&opts);
+    let (w, h, px) = r.image.as_ref().expect("image");
+    let (w, h) = (*w, *h);
+    let at = |x: u32, y: u32| px[(y * w + x) as usize];
+    let left = at(w / 16, h / 2);
+    let right = at(w - 1 - w / 16, h / 2);
+    assert!(left[0] > 2.0 * left[1], "left wall should be red: {left:?}");
+    assert!(
+        right[1] > 2.0 * right[0],
+        "right wall should be green: {right:?}"
+    );
+    // Energy in the report: the light's mean radiosity is its exitance pi * L_e.
+    let light = node(&r, "light");
+    assert!(
+        rel(light.radiosity[0], std::f64::consts::PI * 17.0) < 0.01,
+        "light {:?}",
+        light.radiosity
+    );
+}

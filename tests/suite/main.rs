@@ -1,0 +1,10 @@
+//! The test suite, one binary so every test shares one wgpu device (lavapipe
+//! in CI). A missing adapter fails the tests with the package to install.
+
+mod analytic;
+mod bad_input;
+mod common;
+mod determinism;
+mod furnace;
+mod shaders;
+mod traps;
