@@ -395,7 +395,7 @@ mod tests {
                     let d = res.cell_direction(p, t);
                     let d = Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32);
                     let tt = n.dot(q[0]) / n.dot(d);
-                    if !(tt > 0.0) {
+                    if tt.is_nan() || tt <= 0.0 {
                         continue;
                     }
                     let hit = d * tt;

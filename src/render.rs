@@ -193,7 +193,7 @@ pub fn render(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Rendered, RenderError> {
     opts.resolution.validate().map_err(RenderError::Settings)?;
-    if !(opts.stop.threshold >= 0.0) {
+    if opts.stop.threshold.is_nan() || opts.stop.threshold < 0.0 {
         return Err(RenderError::Settings(format!(
             "threshold {} must be >= 0",
             opts.stop.threshold

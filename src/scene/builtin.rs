@@ -5,17 +5,133 @@ use super::gltf_write::{write_gltf, GltfSurface};
 use super::Subdivision;
 use glam::{Quat, Vec3};
 
-/// Names accepted by [`builtin_gltf`].
+/// Names accepted by [`builtin_gltf`] (`cubes-N` takes any N from 1 to 40).
 pub fn builtin_names() -> Vec<&'static str> {
-    vec!["cornell"]
+    vec!["cornell", "cubes-N", "cubes-b1", "cubes-b2", "cubes-b3"]
 }
 
 /// The glTF text of a built-in scene, or `None` for an unknown name.
 pub fn builtin_gltf(name: &str) -> Option<String> {
     match name {
         "cornell" => Some(cornell()),
-        _ => None,
+        // The paper's benchmark scenes B1-B3 (DESIGN.md section 4).
+        "cubes-b1" => Some(cubes(16)),
+        "cubes-b2" => Some(cubes(20)),
+        "cubes-b3" => Some(cubes(26)),
+        _ => {
+            let n: u32 = name.strip_prefix("cubes-")?.parse().ok()?;
+            (1..=40).contains(&n).then(|| cubes(n))
+        }
     }
+}
+
+/// Six faces of an axis-aligned box, each facing outwards (or inwards).
+fn box_faces(lo: Vec3, hi: Vec3, outward: bool) -> Vec<Vec<Vec3>> {
+    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let (a, b) = (lo, hi);
+    // Counter-clockwise seen from outside.
+    let mut faces = vec![
+        vec![
+            c(a.x, a.y, a.z),
+            c(a.x, a.y, b.z),
+            c(a.x, b.y, b.z),
+            c(a.x, b.y, a.z),
+        ], // -x
+        vec![
+            c(b.x, a.y, a.z),
+            c(b.x, b.y, a.z),
+            c(b.x, b.y, b.z),
+            c(b.x, a.y, b.z),
+        ], // +x
+        vec![
+            c(a.x, a.y, a.z),
+            c(b.x, a.y, a.z),
+            c(b.x, a.y, b.z),
+            c(a.x, a.y, b.z),
+        ], // -y
+        vec![
+            c(a.x, b.y, a.z),
+            c(a.x, b.y, b.z),
+            c(b.x, b.y, b.z),
+            c(b.x, b.y, a.z),
+        ], // +y
+        vec![
+            c(a.x, a.y, a.z),
+            c(a.x, b.y, a.z),
+            c(b.x, b.y, a.z),
+            c(b.x, a.y, a.z),
+        ], // -z
+        vec![
+            c(a.x, a.y, b.z),
+            c(b.x, a.y, b.z),
+            c(b.x, b.y, b.z),
+            c(a.x, b.y, b.z),
+        ], // +z
+    ];
+    if !outward {
+        faces.iter_mut().for_each(|f| f.reverse());
+    }
+    faces
+}
+
+/// The paper's benchmark: a 10 m room (10 x 10 patches of 2 x 2 elements per
+/// face) lit by a box light under the ceiling (2 x 2 patches of one element per
+/// face), holding an n x n x n grid of cubes (2 patches of 2 x 2 elements per face).
+fn cubes(n: u32) -> String {
+    let room = GltfSurface {
+        name: "room".into(),
+        polygons: box_faces(Vec3::ZERO, Vec3::splat(10.0), false),
+        reflectance: [0.6; 3],
+        emission: [0.0; 3],
+        double_sided: false,
+        subdivision: Some(Subdivision {
+            patches: [10, 10],
+            elements: [2, 2],
+        }),
+    };
+    let light = GltfSurface {
+        name: "light".into(),
+        polygons: box_faces(Vec3::new(4.0, 9.2, 4.0), Vec3::new(6.0, 9.6, 6.0), true),
+        reflectance: [0.0; 3],
+        emission: [20.0; 3],
+        double_sided: false,
+        subdivision: Some(Subdivision {
+            patches: [2, 2],
+            elements: [1, 1],
+        }),
+    };
+    let spacing = 7.0 / n as f32;
+    let edge = 0.5 * spacing;
+    let mut cubes = Vec::with_capacity((n * n * n * 6) as usize);
+    for i in 0..n {
+        for j in 0..n {
+            for k in 0..n {
+                let lo = Vec3::new(1.5, 1.0, 1.5)
+                    + Vec3::new(i as f32, j as f32, k as f32) * spacing
+                    + Vec3::splat(0.25 * spacing);
+                cubes.extend(box_faces(lo, lo + Vec3::splat(edge), true));
+            }
+        }
+    }
+    let cubes = GltfSurface {
+        name: "cubes".into(),
+        polygons: cubes,
+        reflectance: [0.7, 0.6, 0.5],
+        emission: [0.0; 3],
+        double_sided: false,
+        subdivision: Some(Subdivision {
+            patches: [2, 1],
+            elements: [2, 2],
+        }),
+    };
+    // Inside the room by the +z wall, looking down -z at the grid.
+    let camera = (
+        Vec3::new(5.0, 4.5, 9.9),
+        glam::Quat::IDENTITY,
+        1.3f32,
+        1.0f32,
+    );
+    write_gltf(&[room, light, cubes], Some(camera))
 }
 
 const WHITE: [f32; 3] = [0.73, 0.73, 0.73];

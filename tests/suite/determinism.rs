@@ -80,3 +80,18 @@ fn cornell_box_looks_right() {
         light.radiosity
     );
 }
+
+#[test]
+fn benchmark_scene_counts_match_the_paper() {
+    // DESIGN.md section 4, Table 1 (B1): polygons, patches, elements.
+    let scene = radiosity::scene::open("cubes-b1").expect("built-in");
+    let mesh = radiosity::mesh::Mesh::build(&scene, &Default::default());
+    assert_eq!(
+        (
+            scene.polygons.len(),
+            mesh.patches.len(),
+            mesh.elements.len()
+        ),
+        (24_588, 49_776, 199_032)
+    );
+}

@@ -164,7 +164,7 @@ fn back_face_blocks_but_receives_nothing() {
 
     // Without the blocker the receiver sees its analytic share.
     let alone = look(
-        &[receiver.clone()],
+        std::slice::from_ref(&receiver),
         RES,
         origin_frame(),
         4,
