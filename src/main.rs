@@ -44,7 +44,7 @@ enum Command {
 pub struct SolveArgs {
     /// Hemisphere resolution R_phi x R_theta (polar rows x azimuth columns).
     #[arg(long, default_value = "128x512")]
-    resolution: Resolution,
+    pub resolution: Resolution,
     /// Stop when the unshot power is at most this fraction of the emitted power.
     #[arg(long, default_value_t = 1e-3)]
     threshold: f64,
@@ -72,7 +72,8 @@ pub struct SolveArgs {
 }
 
 impl SolveArgs {
-    fn options(&self) -> RenderOptions {
+    /// The render options these flags describe.
+    pub fn options(&self) -> RenderOptions {
         RenderOptions {
             resolution: self.resolution,
             stop: StopRule {
