@@ -51,10 +51,12 @@ pub struct SolveArgs {
     /// Stop after this many shots even if the threshold is not reached.
     #[arg(long, default_value_t = 100_000)]
     max_shots: u64,
-    /// Patch edge length in metres (default: automatic, see --near-field-ratio).
+    /// Patch edge length in metres, for every polygon (default: the node's
+    /// extras.radiosity, else automatic: see --near-field-ratio).
     #[arg(long)]
     patch_size: Option<f32>,
-    /// Element edge length in metres (default: 2 x 2 elements per patch).
+    /// Element edge length in metres, for every polygon (default: the node's
+    /// extras.radiosity, else 2 x 2 elements per patch).
     #[arg(long)]
     element_size: Option<f32>,
     /// Automatic subdivision: patch size as a fraction of the distance to the
@@ -95,7 +97,8 @@ impl SolveArgs {
 
 #[derive(Args)]
 struct RenderArgs {
-    /// A .gltf/.glb file, or a built-in scene name: cornell.
+    /// A .gltf/.glb file, or a built-in scene: cornell, cubes-N (N^3 cubes in a
+    /// lit room), cubes-b1, cubes-b2, cubes-b3 (the paper's benchmark scenes).
     scene: String,
     /// Output EXR path (linear radiance); the PNG preview goes beside it.
     /// Default: OUT_DIR/<scene>.exr.

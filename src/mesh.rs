@@ -13,7 +13,8 @@
 //! matters little to the solution. P takes the smallest size over all Q;
 //! polygons that nothing faces stay one patch. Each patch gets 2 x 2 elements.
 //! Both counts are capped per edge.
-//! `--patch-size`, `--element-size` and a node's `extras.radiosity` override it.
+//! A node's `extras.radiosity` overrides it, and `--patch-size` / `--element-size`
+//! (given for one run) override both.
 
 use crate::scene::{Polygon, Scene};
 use glam::Vec3;
@@ -134,36 +135,24 @@ impl Mesh {
         let v = &poly.vertices;
         let tri = v.len() == 3;
         let cap_p = |len: f32| ((len / patch_size).ceil() as u32).clamp(1, s.max_patches_per_edge);
-        let (patch_grid, element_grid) = if let Some(sub) = poly.subdivision {
-            (sub.patches, sub.elements)
+        // Precedence: a flag given for this run, then the node's extras, then the automatic rule.
+        let (lu, lv) = if tri {
+            let m = (v[1] - v[0]).length().max((v[2] - v[1]).length()).max((v[0] - v[2]).length());
+            (m, m)
         } else {
-            let (lu, lv) = if tri {
-                let m = (v[1] - v[0])
-                    .length()
-                    .max((v[2] - v[1]).length())
-                    .max((v[0] - v[2]).length());
-                (m, m)
-            } else {
-                (
-                    (v[1] - v[0]).length().max((v[2] - v[3]).length()),
-                    (v[3] - v[0]).length().max((v[2] - v[1]).length()),
-                )
-            };
-            let (nu, nv) = if tri {
-                (cap_p(lu), cap_p(lu))
-            } else {
-                (cap_p(lu), cap_p(lv))
-            };
-            let per = |len: f32, n: u32| match s.element_size {
-                Some(e) => ((len / n as f32 / e).ceil() as u32).clamp(1, s.max_elements_per_edge),
-                None => 2,
-            };
-            let (eu, ev) = if tri {
-                (per(lu, nu), per(lu, nu))
-            } else {
-                (per(lu, nu), per(lv, nv))
-            };
-            ([nu, nv], [eu, ev])
+            ((v[1] - v[0]).length().max((v[2] - v[3]).length()), (v[3] - v[0]).length().max((v[2] - v[1]).length()))
+        };
+        let patch_grid = match (s.patch_size, poly.subdivision) {
+            (None, Some(sub)) => sub.patches,
+            _ if tri => [cap_p(lu); 2],
+            _ => [cap_p(lu), cap_p(lv)],
+        };
+        let per = |len: f32, n: u32, e: f32| ((len / n as f32 / e).ceil() as u32).clamp(1, s.max_elements_per_edge);
+        let element_grid = match (s.element_size, poly.subdivision) {
+            (Some(e), _) if tri => [per(lu, patch_grid[0], e); 2],
+            (Some(e), _) => [per(lu, patch_grid[0], e), per(lv, patch_grid[1], e)],
+            (None, Some(sub)) => sub.elements,
+            (None, None) => [2, 2],
         };
         let refl = poly.reflectance.map(f64::from);
         let exitance = poly.emission.map(|l| std::f64::consts::PI * l as f64);
