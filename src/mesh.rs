@@ -137,17 +137,25 @@ impl Mesh {
         let cap_p = |len: f32| ((len / patch_size).ceil() as u32).clamp(1, s.max_patches_per_edge);
         // Precedence: a flag given for this run, then the node's extras, then the automatic rule.
         let (lu, lv) = if tri {
-            let m = (v[1] - v[0]).length().max((v[2] - v[1]).length()).max((v[0] - v[2]).length());
+            let m = (v[1] - v[0])
+                .length()
+                .max((v[2] - v[1]).length())
+                .max((v[0] - v[2]).length());
             (m, m)
         } else {
-            ((v[1] - v[0]).length().max((v[2] - v[3]).length()), (v[3] - v[0]).length().max((v[2] - v[1]).length()))
+            (
+                (v[1] - v[0]).length().max((v[2] - v[3]).length()),
+                (v[3] - v[0]).length().max((v[2] - v[1]).length()),
+            )
         };
         let patch_grid = match (s.patch_size, poly.subdivision) {
             (None, Some(sub)) => sub.patches,
             _ if tri => [cap_p(lu); 2],
             _ => [cap_p(lu), cap_p(lv)],
         };
-        let per = |len: f32, n: u32, e: f32| ((len / n as f32 / e).ceil() as u32).clamp(1, s.max_elements_per_edge);
+        let per = |len: f32, n: u32, e: f32| {
+            ((len / n as f32 / e).ceil() as u32).clamp(1, s.max_elements_per_edge)
+        };
         let element_grid = match (s.element_size, poly.subdivision) {
             (Some(e), _) if tri => [per(lu, patch_grid[0], e); 2],
             (Some(e), _) => [per(lu, patch_grid[0], e), per(lv, patch_grid[1], e)],

@@ -78,3 +78,63 @@ fn coaxial_disks() {
         expected,
     );
 }
+
+/// Packs a self-contained .gltf (one data-URI buffer) into a .glb container.
+fn to_glb(gltf_text: &str) -> Vec<u8> {
+    use base64::Engine;
+    let mut json: serde_json::Value = serde_json::from_str(gltf_text).expect("json");
+    let uri = json["buffers"][0]["uri"].as_str().expect("uri").to_string();
+    let mut bin = base64::engine::general_purpose::STANDARD
+        .decode(uri.split(',').nth(1).expect("data uri"))
+        .expect("base64");
+    json["buffers"][0]
+        .as_object_mut()
+        .expect("buffer")
+        .remove("uri");
+    let mut text = serde_json::to_vec(&json).expect("json");
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + text.len() + 8 + bin.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    out
+}
+
+#[test]
+fn glb_gives_the_same_answer_as_gltf() {
+    let surfaces = [
+        surface(
+            "emitter",
+            vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+            0.0,
+            1.0,
+        ),
+        surface(
+            "receiver",
+            vec![rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false)],
+            1.0,
+            0.0,
+        ),
+    ];
+    let (dir, path) = write_scene("pair", &surfaces);
+    let glb = dir.path().join("pair.glb");
+    std::fs::write(&glb, to_glb(&std::fs::read_to_string(&path).expect("read"))).expect("write");
+    let mut opts = tight(1e-6);
+    opts.stop.max_shots = 30;
+    let a = solve_file(&path, &opts);
+    let b = solve_file(&glb, &opts);
+    assert_eq!(a.report.surfaces, b.report.surfaces);
+    assert!(node(&b, "receiver").radiosity[0] > 0.5);
+}
