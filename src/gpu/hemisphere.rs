@@ -8,7 +8,8 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
-use super::{map_read, GpuError};
+use super::target::RenderTarget;
+use super::GpuError;
 use crate::hemisphere::{cell_bounds, Resolution, TileLayout, EMPTY};
 use crate::mesh::{Mesh, ShooterFrame};
 use bytemuck::{Pod, Zeroable};
@@ -75,11 +76,7 @@ pub struct HemisphereRasterizer {
     uniform: wgpu::Buffer,
     pipeline: wgpu::RenderPipeline,
     group: wgpu::BindGroup,
-    color: wgpu::Texture,
-    color_view: wgpu::TextureView,
-    depth_view: wgpu::TextureView,
-    readback: wgpu::Buffer,
-    padded_row: u32,
+    target: RenderTarget,
 }
 
 impl HemisphereRasterizer {
@@ -214,41 +211,14 @@ impl HemisphereRasterizer {
                 resource: uniform.as_entire_binding(),
             }],
         });
-        let size = wgpu::Extent3d {
-            width: res.cols,
-            height: res.rows,
-            depth_or_array_layers: 1,
-        };
-        let texture = |format, usage, label| {
-            device.create_texture(&wgpu::TextureDescriptor {
-                label: Some(label),
-                size,
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let color = texture(
+        let target = RenderTarget::new(
+            device,
+            res.cols,
+            res.rows,
             wgpu::TextureFormat::R32Uint,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            4,
             "item buffer",
         );
-        let depth = texture(
-            wgpu::TextureFormat::Depth32Float,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-            "hemisphere depth",
-        );
-        let padded_row = (res.cols * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
-            * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("item readback"),
-            size: padded_row as u64 * res.rows as u64,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
         Ok(Self {
             res,
             far: extent.max(1e-6) * 2.0,
@@ -260,11 +230,7 @@ impl HemisphereRasterizer {
             uniform,
             pipeline,
             group,
-            color_view: color.create_view(&Default::default()),
-            depth_view: depth.create_view(&Default::default()),
-            color,
-            readback,
-            padded_row,
+            target,
         })
     }
 
@@ -365,34 +331,15 @@ impl HemisphereRasterizer {
             label: Some("shot"),
         });
         {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("hemisphere"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.color_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: EMPTY as f64,
-                            g: 0.0,
-                            b: 0.0,
-                            a: 0.0,
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = self.target.begin_pass(
+                &mut enc,
+                wgpu::Color {
+                    r: EMPTY as f64,
+                    g: 0.0,
+                    b: 0.0,
+                    a: 0.0,
+                },
+            );
             if !self.instances.is_empty() {
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &self.group, &[]);
@@ -400,54 +347,25 @@ impl HemisphereRasterizer {
                 pass.draw(0..4, 0..self.instances.len() as u32);
             }
         }
-        enc.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.color,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &self.readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(self.padded_row),
-                    rows_per_image: Some(self.res.rows),
-                },
-            },
-            wgpu::Extent3d {
-                width: self.res.cols,
-                height: self.res.rows,
-                depth_or_array_layers: 1,
-            },
-        );
+        self.target.copy_out(&mut enc);
         let submission = queue.submit([enc.finish()]);
-        map_read(device, &self.readback, submission)?;
-        let rasterise = start.elapsed() - bounds;
-        let start = Instant::now();
-        {
-            let view = self
-                .readback
-                .slice(..)
-                .get_mapped_range()
-                .map_err(|e| GpuError::Failed(e.to_string()))?;
-            items.clear();
-            items.reserve(self.res.cells());
-            let row_bytes = self.res.cols as usize * 4;
-            for row in view.chunks_exact(self.padded_row as usize) {
-                items.extend(
-                    row[..row_bytes]
-                        .chunks_exact(4)
-                        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-                );
-            }
-        }
-        self.readback.unmap();
+        items.clear();
+        items.reserve(self.res.cells());
+        let mut waited = None;
+        self.target.read_rows(device, submission, |_, row| {
+            waited.get_or_insert_with(Instant::now);
+            items.extend(
+                row.chunks_exact(4)
+                    .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            );
+        })?;
+        let read_start = waited.unwrap_or_else(Instant::now);
+        let rasterise = read_start - start - bounds;
         Ok(RasterStats {
             bounds,
             rects: self.instances.len() as u32,
             rasterise,
-            readback: start.elapsed(),
+            readback: read_start.elapsed(),
         })
     }
 }

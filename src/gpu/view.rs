@@ -1,6 +1,7 @@
 //! Renders the solved mesh from a camera into a linear-radiance image.
 
-use super::{map_read, GpuError};
+use super::target::RenderTarget;
+use super::GpuError;
 use crate::mesh::Mesh;
 use crate::scene::Camera;
 use bytemuck::{Pod, Zeroable};
@@ -172,111 +173,27 @@ pub fn render_view(
             resource: uniform.as_entire_binding(),
         }],
     });
-    let size = wgpu::Extent3d {
-        width: w,
-        height: h,
-        depth_or_array_layers: 1,
-    };
-    let texture = |format, usage, label| {
-        device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage,
-            view_formats: &[],
-        })
-    };
-    let color = texture(
-        wgpu::TextureFormat::Rgba32Float,
-        wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        "view color",
-    );
-    let depth = texture(
-        wgpu::TextureFormat::Depth32Float,
-        wgpu::TextureUsages::RENDER_ATTACHMENT,
-        "view depth",
-    );
-    let padded_row =
-        (w * 16).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let readback = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("view readback"),
-        size: padded_row as u64 * h as u64,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
+    let target = RenderTarget::new(device, w, h, wgpu::TextureFormat::Rgba32Float, 16, "view");
     let mut enc = device.create_command_encoder(&Default::default());
     {
-        let color_view = color.create_view(&Default::default());
-        let depth_view = depth.create_view(&Default::default());
-        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("view"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &color_view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &depth_view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = target.begin_pass(&mut enc, wgpu::Color::BLACK);
         pass.set_pipeline(&pipeline);
         pass.set_bind_group(0, &group, &[]);
         pass.set_vertex_buffer(0, vbuf.slice(..));
         pass.draw(0..verts.len() as u32, 0..1);
     }
-    enc.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture: &color,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &readback,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded_row),
-                rows_per_image: Some(h),
-            },
-        },
-        size,
-    );
+    target.copy_out(&mut enc);
     let submission = queue.submit([enc.finish()]);
-    map_read(device, &readback, submission)?;
     let mut out = vec![[0.0f32; 3]; (settings.width * settings.height) as usize];
-    {
-        let data = readback
-            .slice(..)
-            .get_mapped_range()
-            .map_err(|e| GpuError::Failed(e.to_string()))?;
-        let norm = 1.0 / (ss * ss) as f32;
-        for y in 0..h {
-            let row = &data[(y * padded_row) as usize..][..(w * 16) as usize];
-            for x in 0..w {
-                let px = &row[(x * 16) as usize..][..12];
-                let o = &mut out[((y / ss) * settings.width + x / ss) as usize];
-                for c in 0..3 {
-                    let b = &px[c * 4..c * 4 + 4];
-                    o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
-                }
+    let norm = 1.0 / (ss * ss) as f32;
+    target.read_rows(device, submission, |y, row| {
+        for (x, px) in row.chunks_exact(16).enumerate() {
+            let o = &mut out[(y as u32 / ss * settings.width + x as u32 / ss) as usize];
+            for c in 0..3 {
+                let b = &px[c * 4..c * 4 + 4];
+                o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
             }
         }
-    }
-    readback.unmap();
+    })?;
     Ok(out)
 }
