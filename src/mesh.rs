@@ -454,6 +454,17 @@ impl ShooterFrame {
     }
 }
 
+impl ShooterFrame {
+    /// A world-space vector in this frame's coordinates (x: tangent, z: normal).
+    pub fn to_local(&self, v: Vec3) -> Vec3 {
+        Vec3::new(
+            v.dot(self.tangent),
+            v.dot(self.bitangent),
+            v.dot(self.normal),
+        )
+    }
+}
+
 impl Mesh {
     /// The hemisphere frame of patch `patch`.
     pub fn shooter_frame(&self, patch: u32) -> ShooterFrame {

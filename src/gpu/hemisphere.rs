@@ -246,54 +246,68 @@ impl HemisphereRasterizer {
 
     /// Fills `self.instances` with a rectangle for every proxy the shooter can
     /// see, in proxy order (so the draw order, and with it every depth tie, is
-    /// the same on every run), seam copies right after their originals.
+    /// the same on every run), seam copies right after their originals. Large
+    /// scenes split the polygons between threads and join the lists in order.
     fn collect_rects(&mut self, shooter: &ShooterFrame) {
         self.instances.clear();
-        let cols = self.res.cols as f32;
-        let local = |d: Vec3| {
-            Vec3::new(
-                d.dot(shooter.tangent),
-                d.dot(shooter.bitangent),
-                d.dot(shooter.normal),
-            )
+        let threads = if self.corners.len() < PARALLEL_PROXIES {
+            1
+        } else {
+            std::thread::available_parallelism()
+                .map_or(1, |n| n.get())
+                .min(8)
         };
-        for (pi, poly) in self.polygons.iter().enumerate() {
-            // The shooter never sees its own polygon; skip polygons wholly below its plane.
-            if pi as u32 == shooter.polygon
-                || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
-            {
-                continue;
-            }
-            let n = local(poly.normal);
-            for i in poly.proxies.clone() {
-                let d = self.corners[i as usize].map(|c| local(c - shooter.centre));
-                let Some(r) = cell_bounds(&d, self.res, self.far) else {
+        let (res, far, corners, element) = (self.res, self.far, &self.corners, &self.element);
+        let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
+            for (k, poly) in polys.iter().enumerate() {
+                // The shooter never sees its own polygon; skip polygons wholly below its plane.
+                if (first + k) as u32 == shooter.polygon
+                    || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
+                {
                     continue;
-                };
-                // The shooter is in front when it is on the side n points to.
-                let offset = n.dot(d[0]);
-                let back = offset >= 0.0;
-                // Inside <=> the direction is on the inner side of every edge plane;
-                // which side is inner depends on the side the shooter sees.
-                let sign = if back { 1.0 } else { -1.0 };
-                let edges = std::array::from_fn(|k| {
-                    (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array()
-                });
-                let inst = Instance {
-                    rect: [r.x0, r.x1, r.y0, r.y1],
-                    edges,
-                    plane: [n.x, n.y, n.z, offset],
-                    item: [self.element[i as usize], back as u32],
-                    _pad: [0; 2],
-                };
-                self.instances.push(inst);
-                if r.x1 > cols {
-                    self.instances.push(Instance {
-                        rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
-                        ..inst
-                    });
+                }
+                let n = shooter.to_local(poly.normal);
+                for i in poly.proxies.clone() {
+                    let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
+                    push_piece(out, &d, n, element[i as usize], res, far);
                 }
             }
+        };
+        if threads <= 1 {
+            visit(&self.polygons, 0, &mut self.instances);
+            return;
+        }
+        // Contiguous runs of polygons with about equal proxy counts.
+        let per = self.corners.len().div_ceil(threads) as u32;
+        let mut bounds = vec![0usize];
+        for (k, poly) in self.polygons.iter().enumerate() {
+            if poly.proxies.end >= per * bounds.len() as u32 && bounds.len() < threads {
+                bounds.push(k + 1);
+            }
+        }
+        bounds.push(self.polygons.len());
+        bounds.dedup();
+        let polygons = &self.polygons;
+        let parts: Vec<Vec<Instance>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = bounds
+                .windows(2)
+                .map(|w| {
+                    let (lo, hi) = (w[0], w[1]);
+                    scope.spawn(move || {
+                        let mut out = Vec::new();
+                        visit(&polygons[lo..hi], lo, &mut out);
+                        out
+                    })
+                })
+                .collect();
+            // A panic in a worker is a bug; surface it on this thread.
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
+        for part in parts {
+            self.instances.extend_from_slice(&part);
         }
     }
 
@@ -324,8 +338,9 @@ impl HemisphereRasterizer {
             depth: [1.0 / self.far, 0.0, 0.0, 0.0],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
-        if !self.instances.is_empty() {
-            queue.write_buffer(&self.instance_buf, 0, bytemuck::cast_slice(&self.instances));
+        let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
+        if !bytes.is_empty() {
+            queue.write_buffer(&self.instance_buf, 0, bytes);
         }
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("shot"),
@@ -367,5 +382,46 @@ impl HemisphereRasterizer {
             rasterise,
             readback: read_start.elapsed(),
         })
+    }
+}
+
+/// Scenes with at least this many proxies find their rectangles on several threads.
+const PARALLEL_PROXIES: usize = 8192;
+
+/// Adds the rectangle(s) of one planar quad `d` (corners in the shooter's frame)
+/// of element `element` on a plane with normal `n`.
+fn push_piece(
+    out: &mut Vec<Instance>,
+    d: &[Vec3; 4],
+    n: Vec3,
+    element: u32,
+    res: Resolution,
+    far: f32,
+) {
+    let Some(r) = cell_bounds(d, res, far) else {
+        return;
+    };
+    // The shooter is in front when it is on the side n points to.
+    let offset = n.dot(d[0]);
+    let back = offset >= 0.0;
+    // Inside <=> the direction is on the inner side of every edge plane; which
+    // side is inner depends on the side the shooter sees.
+    let sign = if back { 1.0 } else { -1.0 };
+    let edges =
+        std::array::from_fn(|k| (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array());
+    let inst = Instance {
+        rect: [r.x0, r.x1, r.y0, r.y1],
+        edges,
+        plane: [n.x, n.y, n.z, offset],
+        item: [element, back as u32],
+        _pad: [0; 2],
+    };
+    out.push(inst);
+    let cols = res.cols as f32;
+    if r.x1 > cols {
+        out.push(Instance {
+            rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
+            ..inst
+        });
     }
 }
