@@ -107,3 +107,14 @@ fn threaded_rectangle_pass_is_deterministic() {
     assert_eq!(a.mesh.elements.len(), 8424);
     assert!(a.radiosity == b.radiosity, "radiosities differ between runs");
 }
+
+#[test]
+fn shipped_cornell_file_matches_the_built_in_scene() {
+    let shipped = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell.gltf");
+    let text = std::fs::read_to_string(&shipped).expect("scenes/cornell.gltf is shipped");
+    let built_in = radiosity::scene::builtin_gltf("cornell").expect("built-in");
+    assert!(text == built_in, "scenes/cornell.gltf is stale: regenerate with `radiosity scene cornell --out scenes/cornell.gltf`");
+    let scene = radiosity::scene::open(shipped.to_str().expect("utf-8")).expect("loads");
+    assert_eq!(scene.nodes.len(), 8);
+    assert!(scene.camera.is_some());
+}
