@@ -180,16 +180,63 @@ impl FormFactorAccumulator {
     }
 
     /// Adds the delta form factor of every cell of `items` (row-major, `cols`
-    /// values per row, rows starting at `first_row`) to the element it names.
-    pub fn add_cells(&mut self, items: &[u32], cols: usize, first_row: usize, dff_fixed: &[u64]) {
+    /// values per row, rows starting at `first_row`) to the element it names,
+    /// skipping elements for which `keep` (indexed by element) is false.
+    pub fn add_cells(
+        &mut self,
+        items: &[u32],
+        cols: usize,
+        first_row: usize,
+        dff_fixed: &[u64],
+        keep: Option<&[bool]>,
+    ) {
         for (r, row) in items.chunks_exact(cols).enumerate() {
             let w = dff_fixed[first_row + r];
             for &id in row {
-                if let Some(slot) = self.fixed.get_mut(id as usize) {
-                    if *slot == 0 {
-                        self.touched.push(id);
-                    }
-                    *slot += w;
+                if keep.is_some_and(|k| !k.get(id as usize).copied().unwrap_or(false)) {
+                    continue;
+                }
+                self.add(id, w);
+            }
+        }
+    }
+
+    /// Adds `value` (fixed point) to element `id`; ids past the end (EMPTY, BLOCKED) are ignored.
+    pub fn add(&mut self, id: u32, value: u64) {
+        if let Some(slot) = self.fixed.get_mut(id as usize) {
+            if *slot == 0 {
+                self.touched.push(id);
+            }
+            *slot += value;
+        }
+    }
+
+    /// Drains the accumulated fixed-point sums as (element, sum) pairs sorted by element.
+    pub fn drain_fixed(&mut self, out: &mut Vec<(u32, u64)>) {
+        out.clear();
+        self.touched.sort_unstable();
+        for &id in &self.touched {
+            out.push((id, std::mem::take(&mut self.fixed[id as usize])));
+        }
+        self.touched.clear();
+    }
+
+    /// The dense fixed-point sums (one per element), for exchanges that move
+    /// them whole. After changing them call [`FormFactorAccumulator::retouch`].
+    pub fn dense_mut(&mut self) -> &mut [u64] {
+        &mut self.fixed
+    }
+
+    /// Rebuilds the list of nonzero elements after [`FormFactorAccumulator::dense_mut`],
+    /// keeping only elements for which `keep` is true (the others are zeroed).
+    pub fn retouch(&mut self, keep: &[bool]) {
+        self.touched.clear();
+        for (id, slot) in self.fixed.iter_mut().enumerate() {
+            if *slot != 0 {
+                if keep.get(id).copied().unwrap_or(false) {
+                    self.touched.push(id as u32);
+                } else {
+                    *slot = 0;
                 }
             }
         }

@@ -6,13 +6,17 @@
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
 //! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
-//! - [`render`]: one render from scene to image and report;
+//! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
+//!   MPI implementation (the only module that calls MPI);
+//! - [`render`]: one render from scene to image and report, on one or many ranks;
 //! - [`output`], [`report`]: files out.
 
+pub mod comm;
 pub mod gpu;
 pub mod hemisphere;
 pub mod mesh;
 pub mod output;
+pub mod parallel;
 pub mod render;
 pub mod report;
 pub mod scene;

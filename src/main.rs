@@ -3,10 +3,12 @@
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use radiosity::comm::MpiComm;
 use radiosity::gpu::{Gpu, Shading};
 use radiosity::hemisphere::Resolution;
 use radiosity::mesh::MeshSettings;
-use radiosity::render::{render, Progress, RenderOptions};
+use radiosity::parallel::{Collectives, Exchange, Single};
+use radiosity::render::{render_on, Progress, RenderOptions};
 use radiosity::solver::StopRule;
 use radiosity::{output, scene};
 use std::io::IsTerminal;
@@ -122,11 +124,58 @@ struct RenderArgs {
     /// Leave the ambient term out of the image (it never enters the report).
     #[arg(long)]
     no_ambient: bool,
+    /// Tile size WxH in hemisphere cells when running on several MPI ranks
+    /// (tiles are dealt to the rank grid by 2-D interleave; 1x1 is the paper's
+    /// per-cell interleave).
+    #[arg(long, default_value = "1x1", value_parser = parse_tile)]
+    tile: (u32, u32),
+    /// How ranks exchange form factors each shot.
+    #[arg(long, value_enum, default_value = "hemispheres")]
+    exchange: Exchange,
     /// PNG preview exposure adjustment in stops, on top of automatic exposure.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
     #[command(flatten)]
     solve: SolveArgs,
+}
+
+fn parse_tile(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("expected WxH such as 8x4, got '{s}'"))?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|&n| (1..=8192).contains(&n))
+            .ok_or_else(|| format!("bad tile size '{s}': each side must be 1..=8192"))
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+/// An error already reported by rank 0: other ranks exit quietly.
+#[derive(Debug)]
+struct ReportedByRankZero;
+
+impl std::fmt::Display for ReportedByRankZero {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("failed (reported by rank 0)")
+    }
+}
+
+impl std::error::Error for ReportedByRankZero {}
+
+/// Under mpirun, several lavapipe devices on one host must share its cores:
+/// give each rank cores / ranks-on-this-host worker threads (unless set).
+fn share_cores_between_ranks() {
+    let local: usize = std::env::var("OMPI_COMM_WORLD_LOCAL_SIZE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1);
+    if local > 1 && std::env::var_os("LP_NUM_THREADS").is_none() {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        std::env::set_var("LP_NUM_THREADS", (cores / local).max(1).to_string());
+    }
 }
 
 fn main() {
@@ -142,7 +191,9 @@ fn main() {
         Command::Bench(args) => bench::run(args),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        if e.downcast_ref::<ReportedByRankZero>().is_none() {
+            eprintln!("error: {e:#}");
+        }
         std::process::exit(1);
     }
 }
@@ -225,9 +276,43 @@ fn stem(scene: &str) -> String {
 }
 
 fn run_render(args: RenderArgs) -> Result<()> {
+    share_cores_between_ranks();
+    let mpi = MpiComm::init();
+    let single = Single::default();
+    let comm: &dyn Collectives = match &mpi {
+        Some(c) => c,
+        None => &single,
+    };
+    let (rank, ranks) = (comm.rank(), comm.size());
+    if rank > 0 {
+        log::set_max_level(log::LevelFilter::Warn);
+    }
+    // Every rank loads the scene and opens a device; any failure ends all of
+    // them, with rank 0 reporting which rank failed and why.
     let t = Instant::now();
-    let scene = scene::open(&args.scene)?;
+    let setup = scene::open(&args.scene)
+        .map_err(anyhow::Error::from)
+        .and_then(|s| Ok((s, Gpu::new()?)));
     let load_time = t.elapsed();
+    if let Err(failures) = comm.all_ok(setup.as_ref().map(|_| ()).map_err(|e| format!("{e:#}"))) {
+        return match failures.first() {
+            Some((r, m)) if ranks > 1 => Err(anyhow::anyhow!("rank {r}: {m}")),
+            Some((_, m)) => Err(anyhow::anyhow!("{m}")),
+            None => Err(ReportedByRankZero.into()),
+        };
+    }
+    let (scene, gpu) = setup?;
+    if rank == 0 {
+        log::info!(
+            "device: {}{}",
+            gpu.describe(),
+            if ranks > 1 {
+                format!(", {ranks} ranks")
+            } else {
+                String::new()
+            }
+        );
+    }
     let image_path = args
         .image
         .clone()
@@ -236,17 +321,34 @@ fn run_render(args: RenderArgs) -> Result<()> {
         .report
         .clone()
         .unwrap_or_else(|| args.out_dir.join(format!("{}.json", stem(&args.scene))));
-    let gpu = Gpu::new()?;
-    log::info!("device: {}", gpu.describe());
     let mut opts = args.solve.options();
     opts.width = args.width;
     opts.height = args.height;
     opts.shading = args.shading;
     opts.ambient = !args.no_ambient;
-    let mut reporter = Reporter::new(opts.stop.max_shots, opts.stop.threshold);
-    let rendered = render(&gpu, &scene, &opts, load_time, &mut |p| reporter.update(p));
-    reporter.finish();
-    let rendered = rendered?;
+    opts.tile = args.tile;
+    opts.exchange = args.exchange;
+    let mut reporter = (rank == 0).then(|| Reporter::new(opts.stop.max_shots, opts.stop.threshold));
+    let rendered = render_on(&gpu, &scene, &opts, comm, load_time, &mut |p| {
+        if let Some(r) = reporter.as_mut() {
+            r.update(p)
+        }
+    });
+    if let Some(r) = &reporter {
+        r.finish();
+    }
+    let rendered = match rendered {
+        Ok(r) => r,
+        // A failure mid-solve is seen by one rank only: end every rank now.
+        Err(e) if ranks > 1 => {
+            eprintln!("error: rank {rank}: {e:#}");
+            comm.abort(1)
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let Some(rendered) = rendered else {
+        return Ok(());
+    };
     let r = &rendered.report;
     log::info!(
         "{} shots, unshot fraction {:.3e}, solve {:.2} s (median shot {:.2} ms)",

@@ -5,9 +5,10 @@
 use crate::gpu::{render_view, Gpu, GpuError, HemisphereRasterizer, Shading, ViewSettings};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout};
 use crate::mesh::{Mesh, MeshSettings};
-use crate::report::{self, Counts, Report, Settings, Timings};
+use crate::parallel::{rank_grid, Collectives, Exchange, Single};
+use crate::report::{self, Counts, LoadBalance, Parallel, RankStats, Report, Settings, Timings};
 use crate::scene::Scene;
-use crate::solver::{FormFactorSource, Solver, StopRule};
+use crate::solver::{Candidate, FormFactorSource, Solver, StopRule, UNSHOT_ONE};
 use std::time::{Duration, Instant};
 
 /// Everything a render can be told.
@@ -21,9 +22,15 @@ pub struct RenderOptions {
     pub mesh: MeshSettings,
     /// Rasterisation proxies per element edge (tessellation control).
     pub raster_split: u32,
-    /// How the hemisphere is tiled and over which rank grid; every rank's
-    /// tiles are drawn here in turn (one tile, one rank by default).
+    /// How the hemisphere is tiled and over which rank grid. Under MPI the
+    /// grid comes from the rank count and only the tile size is used; in one
+    /// process every rank's tiles are drawn in turn (one tile by default).
     pub layout: Option<TileLayout>,
+    /// Tile size in cells (width along theta, height along phi) when running on
+    /// several ranks; 1 x 1 is the paper's per-cell interleave.
+    pub tile: (u32, u32),
+    /// How ranks exchange form factors.
+    pub exchange: Exchange,
     /// Image width in pixels (0: no image).
     pub width: u32,
     /// Image height (from the camera's aspect ratio when `None`).
@@ -42,6 +49,8 @@ impl Default for RenderOptions {
             mesh: MeshSettings::default(),
             raster_split: 1,
             layout: None,
+            tile: (1, 1),
+            exchange: Exchange::Hemispheres,
             width: 512,
             height: None,
             shading: Shading::Smooth,
@@ -61,60 +70,112 @@ pub enum RenderError {
     Settings(String),
 }
 
-/// Per-shot phase timings of the GPU form-factor source.
+/// Time one rank spent per phase, summed over shots.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct SourceTimings {
+pub struct PhaseTimes {
     /// Finding cell rectangles (CPU).
     pub bounds: Duration,
-    /// Rectangles drawn.
-    pub rects: u64,
-    /// Drawing.
+    /// Drawing and waiting for the GPU.
     pub rasterise: Duration,
-    /// Reading back.
+    /// Reading the item buffer back.
     pub read_back: Duration,
+    /// The form-factor exchange between ranks.
+    pub exchange: Duration,
     /// Summing delta form factors.
     pub sum: Duration,
+    /// Rectangles drawn.
+    pub rects: u64,
 }
 
-/// Form factors by rasterising the hemisphere on the GPU, tile by tile.
+/// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
+/// exchanging them between ranks as DESIGN.md section 3 describes. Returns
+/// the form factors of this rank's elements only.
 pub struct GpuFormFactors<'a> {
     gpu: &'a Gpu,
     mesh: &'a Mesh,
+    comm: &'a dyn Collectives,
     raster: HemisphereRasterizer,
     layout: TileLayout,
+    exchange: Exchange,
+    /// Whether this rank owns each element.
+    owned: Vec<bool>,
+    /// Rank owning each element (sparse exchange).
+    element_rank: Vec<u32>,
+    /// Cells (row-major indices) of each rank's tiles (hemisphere exchange).
+    cells_of: Vec<Vec<u32>>,
     acc: FormFactorAccumulator,
     dff: Vec<u64>,
     items: Vec<u32>,
-    /// Time spent so far, summed over shots.
-    pub timings: SourceTimings,
+    full: Vec<u32>,
+    pairs: Vec<(u32, u64)>,
+    /// Time spent so far.
+    pub timings: PhaseTimes,
+    /// This rank's busy time (everything but waiting in collectives) per shot.
+    pub busy: Vec<f64>,
 }
 
 impl<'a> GpuFormFactors<'a> {
-    /// Uploads the mesh and builds the pipelines.
+    /// Uploads the mesh and builds the pipelines. With one process and a
+    /// multi-rank `layout`, every rank's tiles are drawn here in turn.
     pub fn new(
         gpu: &'a Gpu,
         mesh: &'a Mesh,
-        res: Resolution,
-        raster_split: u32,
-        layout: Option<TileLayout>,
+        opts: &RenderOptions,
+        comm: &'a dyn Collectives,
         extent: f32,
     ) -> Result<Self, RenderError> {
-        let layout = layout.unwrap_or_else(|| TileLayout::whole(res));
+        let res = opts.resolution;
+        let n = comm.size();
+        let layout = if n > 1 {
+            let (px, py) = rank_grid(n);
+            TileLayout {
+                tile_w: opts.tile.0,
+                tile_h: opts.tile.1,
+                px,
+                py,
+            }
+        } else {
+            opts.layout.unwrap_or_else(|| TileLayout::whole(res))
+        };
         if layout.tile_w == 0 || layout.tile_h == 0 || layout.px == 0 || layout.py == 0 {
             return Err(RenderError::Settings(format!(
                 "tile layout {layout:?} has a zero size"
             )));
         }
-        let raster = HemisphereRasterizer::new(&gpu.device, mesh, res, raster_split, extent)?;
+        let raster = HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_split, extent)?;
+        let rank = comm.rank();
+        let element_rank: Vec<u32> = mesh
+            .elements
+            .iter()
+            .map(|e| (e.patch as usize % n) as u32)
+            .collect();
+        let owned = element_rank.iter().map(|&r| r as usize == rank).collect();
+        let mut cells_of = vec![Vec::new(); n];
+        if n > 1 && layout.ranks() as usize == n {
+            for p in 0..res.rows {
+                for t in 0..res.cols {
+                    let (x, y) = layout.owner(p, t);
+                    cells_of[(y * layout.px + x) as usize].push(p * res.cols + t);
+                }
+            }
+        }
         Ok(Self {
             gpu,
             mesh,
+            comm,
             raster,
             layout,
+            exchange: opts.exchange,
+            owned,
+            element_rank,
+            cells_of,
             acc: FormFactorAccumulator::new(mesh.elements.len()),
             dff: res.delta_form_factors_fixed(),
             items: Vec::new(),
-            timings: SourceTimings::default(),
+            full: vec![crate::hemisphere::EMPTY; res.cells()],
+            pairs: Vec::new(),
+            timings: PhaseTimes::default(),
+            busy: Vec::new(),
         })
     }
 
@@ -123,9 +184,77 @@ impl<'a> GpuFormFactors<'a> {
         &self.raster
     }
 
-    /// The item buffer of the last rank drawn in the last shot.
+    /// The tile layout in use.
+    pub fn layout(&self) -> TileLayout {
+        self.layout
+    }
+
+    /// The item buffer of the last hemisphere this rank drew.
     pub fn last_items(&self) -> &[u32] {
         &self.items
+    }
+
+    fn draw(&mut self, frame: &crate::mesh::ShooterFrame, own: (u32, u32)) -> Result<(), GpuError> {
+        let stats = self.raster.render(
+            &self.gpu.device,
+            &self.gpu.queue,
+            frame,
+            &self.layout,
+            own,
+            &mut self.items,
+        )?;
+        self.timings.bounds += stats.bounds;
+        self.timings.rects += stats.rects as u64;
+        self.timings.rasterise += stats.rasterise;
+        self.timings.read_back += stats.readback;
+        Ok(())
+    }
+
+    /// Adds this rank's cells to the accumulator, exchanges, and leaves the
+    /// sums for this rank's elements in the accumulator.
+    fn exchange(&mut self, cols: usize) -> Duration {
+        let (comm, owned) = (self.comm, &self.owned[..]);
+        let mut exchange = Duration::ZERO;
+        match self.exchange {
+            Exchange::Hemispheres => {
+                let packed: Vec<u32> = self.cells_of[comm.rank()]
+                    .iter()
+                    .map(|&i| self.items[i as usize])
+                    .collect();
+                let t = Instant::now();
+                let all = comm.all_gather_u32(&packed);
+                exchange += t.elapsed();
+                for (cells, values) in self.cells_of.iter().zip(&all) {
+                    for (&c, &v) in cells.iter().zip(values) {
+                        self.full[c as usize] = v;
+                    }
+                }
+                self.acc
+                    .add_cells(&self.full, cols, 0, &self.dff, Some(owned));
+            }
+            Exchange::FormFactors => {
+                self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+                let t = Instant::now();
+                comm.reduce_broadcast_sum(self.acc.dense_mut());
+                exchange += t.elapsed();
+                self.acc.retouch(owned);
+            }
+            Exchange::Sparse => {
+                self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+                self.acc.drain_fixed(&mut self.pairs);
+                let mut outgoing = vec![Vec::new(); comm.size()];
+                for &(id, v) in &self.pairs {
+                    outgoing[self.element_rank[id as usize] as usize].push((id, v));
+                }
+                let t = Instant::now();
+                let incoming = comm.all_to_all_pairs(&outgoing);
+                exchange += t.elapsed();
+                for (id, v) in incoming {
+                    self.acc.add(id, v);
+                }
+            }
+        }
+        exchange
     }
 }
 
@@ -133,30 +262,40 @@ impl FormFactorSource for GpuFormFactors<'_> {
     type Error = GpuError;
 
     fn form_factors(&mut self, shooter: u32, out: &mut Vec<(u32, f64)>) -> Result<(), GpuError> {
+        let start = Instant::now();
         let frame = self.mesh.shooter_frame(shooter);
         let cols = self.raster.resolution().cols as usize;
-        for ry in 0..self.layout.py {
-            for rx in 0..self.layout.px {
-                let stats = self.raster.render(
-                    &self.gpu.device,
-                    &self.gpu.queue,
-                    &frame,
-                    &self.layout,
-                    (rx, ry),
-                    &mut self.items,
-                )?;
-                self.timings.bounds += stats.bounds;
-                self.timings.rects += stats.rects as u64;
-                self.timings.rasterise += stats.rasterise;
-                self.timings.read_back += stats.readback;
-                let t = Instant::now();
-                self.acc.add_cells(&self.items, cols, 0, &self.dff);
-                self.timings.sum += t.elapsed();
+        let before = self.timings.bounds + self.timings.rasterise + self.timings.read_back;
+        let exchange = if self.comm.size() == 1 && self.layout.ranks() > 1 {
+            // One process standing in for a rank grid: draw every rank's tiles.
+            for ry in 0..self.layout.py {
+                for rx in 0..self.layout.px {
+                    self.draw(&frame, (rx, ry))?;
+                    self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+                }
             }
-        }
-        let t = Instant::now();
-        self.acc.drain_sorted(out);
-        self.timings.sum += t.elapsed();
+            Duration::ZERO
+        } else if self.comm.size() == 1 {
+            self.draw(&frame, (0, 0))?;
+            self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+            Duration::ZERO
+        } else {
+            let rank = self.comm.rank() as u32;
+            self.draw(&frame, (rank % self.layout.px, rank / self.layout.px))?;
+            self.exchange(cols)
+        };
+        self.acc.drain_fixed(&mut self.pairs);
+        out.clear();
+        out.extend(
+            self.pairs
+                .iter()
+                .map(|&(id, v)| (id, v as f64 / crate::hemisphere::FIXED_ONE)),
+        );
+        let total = start.elapsed();
+        let drawn = self.timings.bounds + self.timings.rasterise + self.timings.read_back - before;
+        self.timings.exchange += exchange;
+        self.timings.sum += total.saturating_sub(exchange + drawn);
+        self.busy.push((total - exchange).as_secs_f64());
         Ok(())
     }
 }
@@ -184,7 +323,8 @@ pub struct Rendered {
     pub report: Report,
 }
 
-/// Solves `scene` and renders its camera view. `load_time` is reported as the load phase.
+/// Solves `scene` in this process and renders its camera view. `load_time` is
+/// reported as the load phase.
 pub fn render(
     gpu: &Gpu,
     scene: &Scene,
@@ -192,6 +332,43 @@ pub fn render(
     load_time: Duration,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Rendered, RenderError> {
+    let single = Single::default();
+    render_on(gpu, scene, opts, &single, load_time, progress)
+        .map(|r| r.expect("rank 0 of one rank gets the result"))
+}
+
+fn stats_vector(
+    t: &PhaseTimes,
+    select: Duration,
+    update: Duration,
+    comm: &dyn Collectives,
+) -> Vec<f64> {
+    let traffic = comm.traffic();
+    vec![
+        select.as_secs_f64(),
+        t.bounds.as_secs_f64(),
+        t.rasterise.as_secs_f64(),
+        t.read_back.as_secs_f64(),
+        t.exchange.as_secs_f64(),
+        t.sum.as_secs_f64(),
+        update.as_secs_f64(),
+        traffic.sent as f64,
+        traffic.received as f64,
+        t.rects as f64,
+    ]
+}
+
+/// Solves `scene` over the ranks of `comm` (every rank calls this with the
+/// same arguments) and, on rank 0, renders the camera view and the report.
+/// Other ranks get `Ok(None)`.
+pub fn render_on(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    load_time: Duration,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Option<Rendered>, RenderError> {
     opts.resolution.validate().map_err(RenderError::Settings)?;
     if opts.stop.threshold.is_nan() || opts.stop.threshold < 0.0 {
         return Err(RenderError::Settings(format!(
@@ -199,6 +376,7 @@ pub fn render(
             opts.stop.threshold
         )));
     }
+    let (rank, ranks) = (comm.rank(), comm.size());
     let mut timings = Timings {
         load: load_time.as_secs_f64(),
         ..Default::default()
@@ -206,55 +384,101 @@ pub fn render(
     let t = Instant::now();
     let mesh = Mesh::build(scene, &opts.mesh);
     timings.mesh = t.elapsed().as_secs_f64();
-    log::info!(
-        "{}: {} polygons, {} patches, {} elements",
-        scene.name,
-        scene.polygons.len(),
-        mesh.patches.len(),
-        mesh.elements.len()
-    );
+    if rank == 0 {
+        log::info!(
+            "{}: {} polygons, {} patches, {} elements",
+            scene.name,
+            scene.polygons.len(),
+            mesh.patches.len(),
+            mesh.elements.len()
+        );
+    }
 
     let t = Instant::now();
-    let mut source = GpuFormFactors::new(
-        gpu,
-        &mesh,
-        opts.resolution,
-        opts.raster_split,
-        opts.layout,
-        scene.extent(),
-    )?;
+    let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
     timings.setup = t.elapsed().as_secs_f64();
+    let layout = source.layout();
 
-    let mut solver = Solver::new(&mesh);
+    let mut solver = Solver::partitioned(&mesh, rank, ranks);
     let mut ff = Vec::new();
     let mut shot_times = Vec::new();
     let (mut select, mut update) = (Duration::ZERO, Duration::ZERO);
     let solve_start = Instant::now();
-    while !solver.done(&opts.stop) {
+    let mut unshot_fraction;
+    loop {
         let shot_start = Instant::now();
-        let Some(shooter) = solver.select_shooter() else {
+        unshot_fraction = comm.all_sum_u64(solver.local_unshot_fixed()) as f64 / UNSHOT_ONE;
+        if solver.done_at(&opts.stop, unshot_fraction) {
             break;
-        };
+        }
+        let local = solver
+            .local_candidate()
+            .map_or([-1.0, 0.0, 0.0, 0.0, 0.0], |c| {
+                [
+                    c.patch as f64,
+                    c.power,
+                    c.unshot[0],
+                    c.unshot[1],
+                    c.unshot[2],
+                ]
+            });
+        let all = comm.all_gather_f64(&local);
+        let best =
+            Candidate::best(
+                all.chunks_exact(5)
+                    .filter(|c| c[0] >= 0.0)
+                    .map(|c| Candidate {
+                        patch: c[0] as u32,
+                        power: c[1],
+                        unshot: [c[2], c[3], c[4]],
+                    }),
+            );
         select += shot_start.elapsed();
-        source.form_factors(shooter, &mut ff)?;
+        let Some(best) = best else { break };
+        source.form_factors(best.patch, &mut ff)?;
         let t = Instant::now();
-        solver.shoot(shooter, &ff);
-        update += t.elapsed();
+        solver.shoot_candidate(&best, &ff);
+        let dt = t.elapsed();
+        update += dt;
+        if let Some(b) = source.busy.last_mut() {
+            *b += dt.as_secs_f64();
+        }
         shot_times.push(shot_start.elapsed());
-        progress(&Progress {
-            shots: solver.shots(),
-            unshot_fraction: solver.unshot_fraction(),
-            elapsed: solve_start.elapsed(),
-        });
+        if rank == 0 {
+            progress(&Progress {
+                shots: solver.shots(),
+                unshot_fraction,
+                elapsed: solve_start.elapsed(),
+            });
+        }
     }
     timings.solve = solve_start.elapsed().as_secs_f64();
+    let shots = solver.shots();
+
+    // Gather the solution and every rank's statistics to rank 0.
+    let (b, u) = solver.local_state();
+    let gathered_b = comm.gather_f64(&b);
+    let gathered_u = comm.gather_f64(&u);
+    let stats = comm.gather_f64(&stats_vector(&source.timings, select, update, comm));
+    let busy = comm.gather_f64(&source.busy);
+    let timings_src = source.timings;
+    drop(source);
+    let (Some(gathered_b), Some(gathered_u), Some(stats), Some(busy)) =
+        (gathered_b, gathered_u, stats, busy)
+    else {
+        return Ok(None);
+    };
+    solver.assemble(&gathered_b, &gathered_u);
+    solver.set_shots(shots);
+
     timings.select_shooter = select.as_secs_f64();
     timings.update = update.as_secs_f64();
-    timings.bounds = source.timings.bounds.as_secs_f64();
-    timings.rects_per_shot = source.timings.rects as f64 / solver.shots().max(1) as f64;
-    timings.rasterise = source.timings.rasterise.as_secs_f64();
-    timings.read_back = source.timings.read_back.as_secs_f64();
-    timings.sum_form_factors = source.timings.sum.as_secs_f64();
+    timings.bounds = timings_src.bounds.as_secs_f64();
+    timings.rects_per_shot = timings_src.rects as f64 / shots.max(1) as f64;
+    timings.rasterise = timings_src.rasterise.as_secs_f64();
+    timings.read_back = timings_src.read_back.as_secs_f64();
+    timings.exchange = timings_src.exchange.as_secs_f64();
+    timings.sum_form_factors = timings_src.sum.as_secs_f64();
     shot_times.sort();
     timings.median_shot_ms = shot_times
         .get(shot_times.len() / 2)
@@ -289,7 +513,32 @@ pub fn render(
     };
     timings.image = t.elapsed().as_secs_f64();
 
-    let unshot_fraction = solver.unshot_fraction();
+    let per_rank: Vec<RankStats> = stats
+        .iter()
+        .enumerate()
+        .map(|(r, v)| RankStats {
+            rank: r,
+            select_shooter: v[0],
+            bounds: v[1],
+            rasterise: v[2],
+            read_back: v[3],
+            exchange: v[4],
+            sum_form_factors: v[5],
+            update: v[6],
+            bytes_sent: v[7] as u64,
+            bytes_received: v[8] as u64,
+        })
+        .collect();
+    let parallel = Parallel::new(
+        ranks,
+        layout,
+        opts.exchange,
+        opts.resolution,
+        mesh.elements.len(),
+        shots,
+        per_rank,
+        LoadBalance::from_busy(&busy),
+    );
     let report = Report {
         scene: scene.name.clone(),
         settings: Settings {
@@ -308,23 +557,23 @@ pub fn render(
             patches: mesh.patches.len(),
             elements: mesh.elements.len(),
             cells: opts.resolution.cells(),
-            ranks: 1,
+            ranks,
         },
-        shots: solver.shots(),
+        shots,
         unshot_fraction,
         converged: unshot_fraction <= opts.stop.threshold,
         emitted_power: solver.emitted_power(),
         timings,
+        parallel,
         surfaces: report::surfaces(&mesh, &scene.nodes, solver.radiosity()),
         warnings: scene.warnings.clone(),
     };
     let radiosity = solver.radiosity().to_vec();
     drop(solver);
-    drop(source);
-    Ok(Rendered {
+    Ok(Some(Rendered {
         mesh,
         radiosity,
         image,
         report,
-    })
+    }))
 }

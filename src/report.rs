@@ -23,8 +23,10 @@ pub struct Report {
     pub converged: bool,
     /// Total emitted power (sum over RGB), W.
     pub emitted_power: f64,
-    /// Wall-clock seconds per phase.
+    /// Wall-clock seconds per phase (rank 0's; every rank's are in `parallel`).
     pub timings: Timings,
+    /// Ranks, their grid and tiles, the exchange, per-rank phases and traffic, load balance.
+    pub parallel: Parallel,
     /// Per glTF node: area and area-weighted mean radiosity.
     pub surfaces: Vec<Surface>,
     /// Non-fatal problems met on the way.
@@ -88,6 +90,8 @@ pub struct Timings {
     pub rasterise: f64,
     /// Reading item buffers back (summed over shots).
     pub read_back: f64,
+    /// Exchanging form factors between ranks (summed over shots).
+    pub exchange: f64,
     /// Summing delta form factors per element (summed over shots).
     pub sum_form_factors: f64,
     /// Distributing radiosity (summed over shots).
@@ -96,6 +100,132 @@ pub struct Timings {
     pub image: f64,
     /// Median milliseconds per shot.
     pub median_shot_ms: f64,
+}
+
+/// How the solve was spread over ranks, and what that cost.
+#[derive(Clone, Debug, Serialize)]
+pub struct Parallel {
+    /// MPI ranks.
+    pub ranks: usize,
+    /// The Px x Py rank grid the hemisphere's tiles are dealt to.
+    pub rank_grid: [u32; 2],
+    /// Tile size in cells (along theta, along phi).
+    pub tile: [u32; 2],
+    /// The form-factor exchange.
+    pub exchange: crate::parallel::Exchange,
+    /// Per rank: seconds per phase (summed over shots) and bytes exchanged.
+    pub per_rank: Vec<RankStats>,
+    /// Bytes per shot received by a rank, by the paper's formulas: hemispheres
+    /// 4 N_M (N - 1) / N (over N stages); form factors one stage's 8 N_El
+    /// (64-bit fixed point; the reduction and broadcast take ceil(log2 N) + 1
+    /// such stages inside MPI); sparse has no closed form (null).
+    pub formula_bytes_per_shot: Option<f64>,
+    /// Mean bytes received per rank per shot, measured.
+    pub measured_bytes_per_shot: f64,
+    /// Load balance epsilon = T_min / T_max of each shot's busy time over ranks.
+    pub load_balance: LoadBalance,
+}
+
+impl Parallel {
+    /// Assembles the parallel section.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ranks: usize,
+        layout: crate::hemisphere::TileLayout,
+        exchange: crate::parallel::Exchange,
+        res: Resolution,
+        elements: usize,
+        shots: u64,
+        per_rank: Vec<RankStats>,
+        load_balance: LoadBalance,
+    ) -> Self {
+        use crate::parallel::Exchange;
+        let n = ranks as f64;
+        let formula = match exchange {
+            _ if ranks == 1 => Some(0.0),
+            Exchange::Hemispheres => Some(4.0 * res.cells() as f64 * (n - 1.0) / n),
+            Exchange::FormFactors => Some(8.0 * elements as f64),
+            Exchange::Sparse => None,
+        };
+        let received: f64 = per_rank.iter().map(|r| r.bytes_received as f64).sum();
+        Self {
+            ranks,
+            rank_grid: [layout.px, layout.py],
+            tile: [layout.tile_w, layout.tile_h],
+            exchange,
+            per_rank,
+            formula_bytes_per_shot: formula,
+            measured_bytes_per_shot: received / n / shots.max(1) as f64,
+            load_balance,
+        }
+    }
+}
+
+/// One rank's costs.
+#[derive(Clone, Debug, Serialize)]
+pub struct RankStats {
+    /// The rank.
+    pub rank: usize,
+    /// Seconds choosing shooters (including the global reduction).
+    pub select_shooter: f64,
+    /// Seconds finding cell rectangles.
+    pub bounds: f64,
+    /// Seconds drawing.
+    pub rasterise: f64,
+    /// Seconds reading item buffers back.
+    pub read_back: f64,
+    /// Seconds in the form-factor exchange.
+    pub exchange: f64,
+    /// Seconds summing form factors.
+    pub sum_form_factors: f64,
+    /// Seconds updating radiosities.
+    pub update: f64,
+    /// Bytes sent in exchanges.
+    pub bytes_sent: u64,
+    /// Bytes received in exchanges.
+    pub bytes_received: u64,
+}
+
+/// Statistics of epsilon = T_min / T_max over shots (1 is perfect balance).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct LoadBalance {
+    /// Mean over shots.
+    pub mean: f64,
+    /// Best shot.
+    pub max: f64,
+    /// Worst shot.
+    pub min: f64,
+}
+
+impl LoadBalance {
+    /// From every rank's busy seconds per shot (`busy[rank][shot]`).
+    pub fn from_busy(busy: &[Vec<f64>]) -> Self {
+        let shots = busy.iter().map(Vec::len).min().unwrap_or(0);
+        if shots == 0 {
+            return Self {
+                mean: 1.0,
+                max: 1.0,
+                min: 1.0,
+            };
+        }
+        let eps: Vec<f64> = (0..shots)
+            .map(|s| {
+                let (lo, hi) = busy.iter().fold((f64::MAX, 0.0f64), |(lo, hi), b| {
+                    (lo.min(b[s]), hi.max(b[s]))
+                });
+                if hi > 0.0 {
+                    lo / hi
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        Self {
+            mean: eps.iter().sum::<f64>() / shots as f64,
+            max: eps.iter().cloned().fold(0.0, f64::max),
+            min: eps.iter().cloned().fold(1.0, f64::min),
+        }
+    }
 }
 
 /// One glTF node's result.

@@ -49,9 +49,42 @@ pub struct Shot {
     pub form_factor_sum: f64,
 }
 
-/// Radiosity state over a mesh.
+/// A rank's proposal for the next shooter: its patch with the most unshot power.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// The patch.
+    pub patch: u32,
+    /// Its unshot power (sum over RGB), W.
+    pub power: f64,
+    /// Its unshot radiosity dB.
+    pub unshot: [f64; 3],
+}
+
+impl Candidate {
+    /// The global shooter: the largest power, the lowest patch index on ties
+    /// (the same answer whatever the order of `candidates`).
+    pub fn best(candidates: impl IntoIterator<Item = Candidate>) -> Option<Candidate> {
+        candidates
+            .into_iter()
+            .fold(None, |best: Option<Candidate>, c| match best {
+                Some(b) if b.power > c.power || (b.power == c.power && b.patch < c.patch) => {
+                    Some(b)
+                }
+                _ => Some(c),
+            })
+    }
+}
+
+/// Fixed-point scale of unshot power as a fraction of the emitted power, so
+/// the stop rule sums exactly and ranks agree bit for bit.
+pub const UNSHOT_ONE: f64 = (1u64 << 40) as f64;
+
+/// Radiosity state over a mesh, or over one rank's share of it: patch k
+/// belongs to rank k mod ranks, and an element to its patch's rank.
 pub struct Solver<'m> {
     mesh: &'m Mesh,
+    rank: usize,
+    ranks: usize,
     /// Radiosity B per element, W/m^2 per channel.
     radiosity: Vec<[f64; 3]>,
     /// Unshot radiosity dB per patch.
@@ -68,6 +101,11 @@ fn power(b: &[f64; 3], area: f64) -> f64 {
 impl<'m> Solver<'m> {
     /// Starts with B = dB = E (the emitters' exitance) everywhere.
     pub fn new(mesh: &'m Mesh) -> Self {
+        Self::partitioned(mesh, 0, 1)
+    }
+
+    /// The share of rank `rank` of `ranks` (it holds every patch but updates only its own).
+    pub fn partitioned(mesh: &'m Mesh, rank: usize, ranks: usize) -> Self {
         let radiosity = mesh
             .elements
             .iter()
@@ -85,6 +123,8 @@ impl<'m> Solver<'m> {
             .sum();
         Self {
             mesh,
+            rank,
+            ranks: ranks.max(1),
             radiosity,
             unshot,
             emitted_power,
@@ -113,49 +153,79 @@ impl<'m> Solver<'m> {
         self.emitted_power
     }
 
-    /// Unshot power / emitted power.
+    /// Whether this rank owns `patch`.
+    pub fn owns(&self, patch: u32) -> bool {
+        patch as usize % self.ranks == self.rank
+    }
+
+    fn own_patches(&self) -> impl Iterator<Item = usize> + '_ {
+        (self.rank..self.mesh.patches.len()).step_by(self.ranks)
+    }
+
+    /// This rank's unshot power over the emitted power, in [`UNSHOT_ONE`] fixed point.
+    pub fn local_unshot_fixed(&self) -> u64 {
+        if self.emitted_power <= 0.0 {
+            return 0;
+        }
+        self.own_patches()
+            .map(|i| {
+                (power(&self.unshot[i], self.mesh.patches[i].area) / self.emitted_power
+                    * UNSHOT_ONE)
+                    .round() as u64
+            })
+            .sum()
+    }
+
+    /// Unshot power / emitted power (one rank: this solver's; see [`Solver::local_unshot_fixed`]).
     pub fn unshot_fraction(&self) -> f64 {
-        let unshot: f64 = self
-            .unshot
-            .iter()
-            .zip(&self.mesh.patches)
-            .map(|(b, p)| power(b, p.area))
-            .sum();
-        if self.emitted_power > 0.0 {
-            unshot / self.emitted_power
-        } else {
-            0.0
-        }
+        self.local_unshot_fixed() as f64 / UNSHOT_ONE
     }
 
-    /// Whether the stop rule is met.
+    /// Whether the stop rule is met, given the unshot fraction over all ranks.
+    pub fn done_at(&self, rule: &StopRule, unshot_fraction: f64) -> bool {
+        self.shots >= rule.max_shots || unshot_fraction <= rule.threshold
+    }
+
+    /// Whether the stop rule is met (one rank).
     pub fn done(&self, rule: &StopRule) -> bool {
-        self.shots >= rule.max_shots || self.unshot_fraction() <= rule.threshold
+        self.done_at(rule, self.unshot_fraction())
     }
 
-    /// The patch with the largest unshot power (lowest index on ties), if any has some.
+    /// This rank's patch with the largest unshot power (lowest index on ties), if any has some.
+    pub fn local_candidate(&self) -> Option<Candidate> {
+        Candidate::best(self.own_patches().filter_map(|i| {
+            let w = power(&self.unshot[i], self.mesh.patches[i].area);
+            (w > 0.0).then_some(Candidate {
+                patch: i as u32,
+                power: w,
+                unshot: self.unshot[i],
+            })
+        }))
+    }
+
+    /// The patch with the largest unshot power (one rank).
     pub fn select_shooter(&self) -> Option<u32> {
-        let mut best: Option<(u32, f64)> = None;
-        for (i, (b, p)) in self.unshot.iter().zip(&self.mesh.patches).enumerate() {
-            let w = power(b, p.area);
-            if w > 0.0 && best.is_none_or(|(_, bw)| w > bw) {
-                best = Some((i as u32, w));
-            }
-        }
-        best.map(|(i, _)| i)
+        self.local_candidate().map(|c| c.patch)
     }
 
-    /// Distributes the shooter's unshot radiosity through the form factors `ff`.
-    pub fn shoot(&mut self, shooter: u32, ff: &[(u32, f64)]) -> Shot {
+    /// Distributes the unshot radiosity of `shooter` through the form factors
+    /// `ff`, updating only this rank's elements.
+    pub fn shoot_candidate(&mut self, shooter: &Candidate, ff: &[(u32, f64)]) -> Shot {
         let mesh = self.mesh;
-        let sp = &mesh.patches[shooter as usize];
-        let db = std::mem::take(&mut self.unshot[shooter as usize]);
+        let i = shooter.patch as usize;
+        if self.owns(shooter.patch) {
+            self.unshot[i] = [0.0; 3];
+        }
+        let (db, area) = (shooter.unshot, mesh.patches[i].area);
         let mut form_factor_sum = 0.0;
         for &(j, f) in ff {
             form_factor_sum += f;
             let el = &mesh.elements[j as usize];
+            if !self.owns(el.patch) {
+                continue;
+            }
             let rho = mesh.polygons[el.polygon as usize].reflectance;
-            let scale = f * sp.area / el.area;
+            let scale = f * area / el.area;
             let patch_share = el.area / mesh.patches[el.patch as usize].area;
             for c in 0..3 {
                 let d = rho[c] * db[c] * scale;
@@ -165,10 +235,63 @@ impl<'m> Solver<'m> {
         }
         self.shots += 1;
         Shot {
-            shooter,
-            power: power(&db, sp.area),
+            shooter: shooter.patch,
+            power: shooter.power,
             form_factor_sum,
         }
+    }
+
+    /// This rank's elements' radiosities and patches' unshot radiosities, flattened
+    /// (own patches in order, each followed by nothing; elements of own patches in order).
+    pub fn local_state(&self) -> (Vec<f64>, Vec<f64>) {
+        let mut b = Vec::new();
+        let mut u = Vec::new();
+        for i in self.own_patches() {
+            u.extend_from_slice(&self.unshot[i]);
+            let p = &self.mesh.patches[i];
+            for j in p.elements.clone() {
+                b.extend_from_slice(&self.radiosity[j as usize]);
+            }
+        }
+        (b, u)
+    }
+
+    /// Installs every rank's [`Solver::local_state`] (rank order), so this
+    /// solver holds the whole solution.
+    pub fn assemble(&mut self, radiosity: &[Vec<f64>], unshot: &[Vec<f64>]) {
+        let ranks = radiosity.len();
+        for (r, (b, u)) in radiosity.iter().zip(unshot).enumerate() {
+            let (mut bi, mut ui) = (b.chunks_exact(3), u.chunks_exact(3));
+            for i in (r..self.mesh.patches.len()).step_by(ranks) {
+                if let Some(x) = ui.next() {
+                    self.unshot[i] = [x[0], x[1], x[2]];
+                }
+                for j in self.mesh.patches[i].elements.clone() {
+                    if let Some(x) = bi.next() {
+                        self.radiosity[j as usize] = [x[0], x[1], x[2]];
+                    }
+                }
+            }
+        }
+        self.rank = 0;
+        self.ranks = 1;
+    }
+
+    /// Sets the shot count (after assembling a distributed solution).
+    pub fn set_shots(&mut self, shots: u64) {
+        self.shots = shots;
+    }
+
+    /// Distributes the shooter's unshot radiosity through the form factors `ff` (one rank).
+    pub fn shoot(&mut self, shooter: u32, ff: &[(u32, f64)]) -> Shot {
+        let i = shooter as usize;
+        let unshot = self.unshot[i];
+        let c = Candidate {
+            patch: shooter,
+            power: power(&unshot, self.mesh.patches[i].area),
+            unshot,
+        };
+        self.shoot_candidate(&c, ff)
     }
 
     /// One whole shot: select, get form factors, distribute. `None` when nothing is left to shoot.

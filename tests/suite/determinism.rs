@@ -100,12 +100,18 @@ fn benchmark_scene_counts_match_the_paper() {
 fn threaded_rectangle_pass_is_deterministic() {
     // cubes-5 has 8424 elements, enough for the multi-threaded rectangle pass.
     let scene = radiosity::scene::open("cubes-5").expect("built-in");
-    let mut opts = RenderOptions { width: 0, ..RenderOptions::default() };
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
     opts.stop.max_shots = 12;
     let a = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
     let b = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
     assert_eq!(a.mesh.elements.len(), 8424);
-    assert!(a.radiosity == b.radiosity, "radiosities differ between runs");
+    assert!(
+        a.radiosity == b.radiosity,
+        "radiosities differ between runs"
+    );
 }
 
 #[test]

@@ -1,0 +1,230 @@
+//! MPI plumbing (rsmpi): the [`Collectives`] of a solve spread over ranks.
+//! This is the only module that calls MPI.
+
+use crate::parallel::{Collectives, Traffic};
+use mpi::datatype::{Partition, PartitionMut};
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::*;
+use mpi::Count;
+use std::cell::Cell;
+
+/// The MPI world of this process (a singleton world when not under mpirun).
+pub struct MpiComm {
+    // Dropping the universe finalises MPI, so it lives as long as the communicator.
+    _universe: mpi::environment::Universe,
+    world: SimpleCommunicator,
+    traffic: Cell<Traffic>,
+}
+
+impl MpiComm {
+    /// Initialises MPI; `None` if it was already initialised or cannot start.
+    pub fn init() -> Option<Self> {
+        let universe = mpi::initialize()?;
+        let world = universe.world();
+        Some(Self {
+            _universe: universe,
+            world,
+            traffic: Cell::new(Traffic::default()),
+        })
+    }
+
+    fn count(&self, sent: usize, received: usize) {
+        let mut t = self.traffic.get();
+        t.sent += sent as u64;
+        t.received += received as u64;
+        self.traffic.set(t);
+    }
+
+    fn displacements(counts: &[Count]) -> Vec<Count> {
+        counts
+            .iter()
+            .scan(0, |acc, &c| {
+                let d = *acc;
+                *acc += c;
+                Some(d)
+            })
+            .collect()
+    }
+
+    fn all_counts(&self, len: usize) -> Vec<Count> {
+        let mut counts = vec![0 as Count; self.size()];
+        self.world.all_gather_into(&(len as Count), &mut counts[..]);
+        counts
+    }
+}
+
+impl Collectives for MpiComm {
+    fn rank(&self) -> usize {
+        self.world.rank() as usize
+    }
+
+    fn size(&self) -> usize {
+        self.world.size() as usize
+    }
+
+    fn all_gather_f64(&self, local: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; local.len() * self.size()];
+        self.world.all_gather_into(local, &mut out[..]);
+        out
+    }
+
+    fn all_gather_u32(&self, local: &[u32]) -> Vec<Vec<u32>> {
+        let counts = self.all_counts(local.len());
+        let displs = Self::displacements(&counts);
+        let total: usize = counts.iter().map(|&c| c as usize).sum();
+        let mut buf = vec![0u32; total];
+        {
+            let mut part = PartitionMut::new(&mut buf[..], &counts[..], &displs[..]);
+            self.world.all_gather_varcount_into(local, &mut part);
+        }
+        self.count(
+            4 * local.len() * (self.size() - 1),
+            4 * (total - local.len()),
+        );
+        counts
+            .iter()
+            .zip(&displs)
+            .map(|(&c, &d)| buf[d as usize..(d + c) as usize].to_vec())
+            .collect()
+    }
+
+    fn reduce_broadcast_sum(&self, data: &mut [u64]) {
+        let root = self.world.process_at_rank(0);
+        if self.rank() == 0 {
+            let mut sum = vec![0u64; data.len()];
+            root.reduce_into_root(
+                &data[..],
+                &mut sum[..],
+                mpi::collective::SystemOperation::sum(),
+            );
+            data.copy_from_slice(&sum);
+        } else {
+            root.reduce_into(&data[..], mpi::collective::SystemOperation::sum());
+        }
+        root.broadcast_into(&mut data[..]);
+        // One reduction stage and one broadcast stage of the whole array per rank.
+        self.count(8 * data.len(), 8 * data.len());
+    }
+
+    fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
+        let n = self.size();
+        // Pairs travel as two flat arrays (element ids, fixed-point values).
+        let send_counts: Vec<Count> = outgoing.iter().map(|v| v.len() as Count).collect();
+        let mut recv_counts = vec![0 as Count; n];
+        self.world
+            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
+        let (sd, rd) = (
+            Self::displacements(&send_counts),
+            Self::displacements(&recv_counts),
+        );
+        let total_in: usize = recv_counts.iter().map(|&c| c as usize).sum();
+        let ids: Vec<u32> = outgoing
+            .iter()
+            .flat_map(|v| v.iter().map(|p| p.0))
+            .collect();
+        let vals: Vec<u64> = outgoing
+            .iter()
+            .flat_map(|v| v.iter().map(|p| p.1))
+            .collect();
+        let mut in_ids = vec![0u32; total_in];
+        let mut in_vals = vec![0u64; total_in];
+        {
+            let send = Partition::new(&ids[..], &send_counts[..], &sd[..]);
+            let mut recv = PartitionMut::new(&mut in_ids[..], &recv_counts[..], &rd[..]);
+            self.world.all_to_all_varcount_into(&send, &mut recv);
+        }
+        {
+            let send = Partition::new(&vals[..], &send_counts[..], &sd[..]);
+            let mut recv = PartitionMut::new(&mut in_vals[..], &recv_counts[..], &rd[..]);
+            self.world.all_to_all_varcount_into(&send, &mut recv);
+        }
+        let me = self.rank();
+        let own_out = send_counts[me] as usize;
+        let own_in = recv_counts[me] as usize;
+        self.count(
+            12 * (ids.len() - own_out) + 4 * n,
+            12 * (total_in - own_in) + 4 * n,
+        );
+        in_ids.into_iter().zip(in_vals).collect()
+    }
+
+    fn all_sum_u64(&self, value: u64) -> u64 {
+        let mut sum = 0u64;
+        self.world
+            .all_reduce_into(&value, &mut sum, mpi::collective::SystemOperation::sum());
+        sum
+    }
+
+    fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
+        let root = self.world.process_at_rank(0);
+        let mut counts = vec![0 as Count; self.size()];
+        self.world
+            .all_gather_into(&(local.len() as Count), &mut counts[..]);
+        if self.rank() == 0 {
+            let displs = Self::displacements(&counts);
+            let total: usize = counts.iter().map(|&c| c as usize).sum();
+            let mut buf = vec![0.0f64; total];
+            {
+                let mut part = PartitionMut::new(&mut buf[..], &counts[..], &displs[..]);
+                root.gather_varcount_into_root(local, &mut part);
+            }
+            Some(
+                counts
+                    .iter()
+                    .zip(&displs)
+                    .map(|(&c, &d)| buf[d as usize..(d + c) as usize].to_vec())
+                    .collect(),
+            )
+        } else {
+            root.gather_varcount_into(local);
+            None
+        }
+    }
+
+    fn all_ok(&self, ok: Result<(), String>) -> Result<(), Vec<(usize, String)>> {
+        let msg: Vec<u32> = match &ok {
+            Ok(()) => Vec::new(),
+            Err(m) => m.bytes().map(u32::from).chain(std::iter::once(0)).collect(),
+        };
+        // Message bytes travel as u32 so the exchange reuses the varcount gather.
+        let all = self.all_gather_u32(&msg);
+        let failed: Vec<(usize, String)> = all
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| !m.is_empty())
+            .map(|(r, m)| {
+                (
+                    r,
+                    String::from_utf8_lossy(
+                        &m.iter()
+                            .take_while(|&&b| b != 0)
+                            .map(|&b| b as u8)
+                            .collect::<Vec<u8>>(),
+                    )
+                    .into_owned(),
+                )
+            })
+            .collect();
+        // The check is not form-factor traffic.
+        let t = self.traffic.get();
+        self.traffic.set(Traffic {
+            sent: t.sent - 4 * msg.len() as u64 * (self.size() as u64 - 1),
+            received: t.received - 4 * (all.iter().map(Vec::len).sum::<usize>() - msg.len()) as u64,
+        });
+        if failed.is_empty() {
+            Ok(())
+        } else if self.rank() == 0 {
+            Err(failed)
+        } else {
+            Err(Vec::new())
+        }
+    }
+
+    fn traffic(&self) -> Traffic {
+        self.traffic.get()
+    }
+
+    fn abort(&self, code: i32) -> ! {
+        self.world.abort(code)
+    }
+}
