@@ -6,5 +6,6 @@ mod bad_input;
 mod common;
 mod determinism;
 mod furnace;
+mod mpi;
 mod shaders;
 mod traps;

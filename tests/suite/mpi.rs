@@ -1,0 +1,160 @@
+//! The same solve on 1 to 4 MPI ranks (oversubscribed), with every exchange
+//! and several tile sizes: bitwise identical reports and images, and the
+//! paper's traffic formulas.
+
+use std::path::Path;
+use std::process::Command;
+
+fn mpirun(ranks: usize, dir: &Path, tag: &str, extra: &[&str]) -> serde_json::Value {
+    let report = dir.join(format!("{tag}.json"));
+    let image = dir.join(format!("{tag}.exr"));
+    let mut cmd = Command::new("mpirun");
+    cmd.args(["--oversubscribe", "-n", &ranks.to_string()])
+        .arg(env!("CARGO_BIN_EXE_radiosity"))
+        .args(["render", "cornell", "--max-shots", "25", "--width", "48"])
+        .arg("--report")
+        .arg(&report)
+        .arg("--image")
+        .arg(&image)
+        .args(extra)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_btl", "self,vader,tcp");
+    let out = cmd.output().unwrap_or_else(|e| {
+        panic!("cannot run mpirun ({e}): install openmpi-bin (scripts/setup.sh does)")
+    });
+    assert!(
+        out.status.success(),
+        "mpirun -n {ranks} {extra:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&report).expect("report written")).expect("json")
+}
+
+fn same_result(a: &serde_json::Value, b: &serde_json::Value, what: &str) {
+    for key in ["surfaces", "shots", "unshot_fraction"] {
+        assert_eq!(a[key], b[key], "{what}: '{key}' differs");
+    }
+}
+
+#[test]
+fn every_rank_count_exchange_and_tile_gives_identical_results() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let base = mpirun(1, dir.path(), "base", &[]);
+    let base_image = std::fs::read(dir.path().join("base.exr")).expect("image");
+    for ranks in [2, 3, 4] {
+        for exchange in ["hemispheres", "form-factors", "sparse"] {
+            let tag = format!("n{ranks}-{exchange}");
+            let r = mpirun(ranks, dir.path(), &tag, &["--exchange", exchange]);
+            same_result(&base, &r, &tag);
+            assert_eq!(r["parallel"]["ranks"], ranks);
+            let image = std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+            assert!(image == base_image, "{tag}: image differs");
+        }
+    }
+    for tile in ["8x4", "3x5", "512x128"] {
+        let tag = format!("tile-{tile}");
+        let r = mpirun(4, dir.path(), &tag, &["--tile", tile]);
+        same_result(&base, &r, &tag);
+    }
+}
+
+#[test]
+fn bytes_exchanged_match_the_formulas() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    // 4 ranks on a 2 x 2 grid with 1 x 1 tiles split 128 x 512 evenly.
+    let h = mpirun(4, dir.path(), "h", &["--exchange", "hemispheres"]);
+    let cells = 128.0 * 512.0;
+    assert_eq!(
+        h["parallel"]["formula_bytes_per_shot"].as_f64(),
+        Some(4.0 * cells * 3.0 / 4.0)
+    );
+    assert_eq!(
+        h["parallel"]["measured_bytes_per_shot"].as_f64(),
+        Some(4.0 * cells * 3.0 / 4.0)
+    );
+    // Form factors: every rank receives the whole dense array, 8 bytes per element.
+    let f = mpirun(4, dir.path(), "f", &["--exchange", "form-factors"]);
+    let elements = f["counts"]["elements"].as_f64().expect("count");
+    assert_eq!(
+        f["parallel"]["measured_bytes_per_shot"].as_f64(),
+        Some(8.0 * elements)
+    );
+    // Sparse sends no more than the dense array would.
+    let s = mpirun(4, dir.path(), "s", &["--exchange", "sparse"]);
+    let sparse = s["parallel"]["measured_bytes_per_shot"]
+        .as_f64()
+        .expect("bytes");
+    assert!(sparse > 0.0 && sparse < 12.0 * elements, "sparse {sparse}");
+    for r in [&h, &f, &s] {
+        let lb = &r["parallel"]["load_balance"];
+        let (min, mean, max) = (
+            lb["min"].as_f64().expect("min"),
+            lb["mean"].as_f64().expect("mean"),
+            lb["max"].as_f64().expect("max"),
+        );
+        assert!(
+            0.0 < min && min <= mean && mean <= max && max <= 1.0,
+            "load balance {lb}"
+        );
+    }
+}
+
+#[test]
+fn a_failure_on_one_rank_ends_every_rank_with_a_message_from_rank_zero() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bin = env!("CARGO_BIN_EXE_radiosity");
+    let out_dir = dir.path().to_str().expect("utf-8");
+    // MPMD launch: rank 1 gets no Vulkan driver.
+    let mut child = Command::new("mpirun")
+        .args([
+            "--oversubscribe",
+            "-n",
+            "1",
+            bin,
+            "render",
+            "cornell",
+            "--out-dir",
+            out_dir,
+            ":",
+            "-n",
+            "1",
+        ])
+        .args([
+            "-x",
+            "VK_ICD_FILENAMES=/nonexistent/icd.json",
+            "-x",
+            "VK_DRIVER_FILES=/nonexistent/icd.json",
+        ])
+        .args([bin, "render", "cornell", "--out-dir", out_dir])
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("mpirun (install openmpi-bin)");
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            break s;
+        }
+        if start.elapsed() > std::time::Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("ranks still running after 120 s: a failure on one rank must end them all");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().expect("stderr"), &mut stderr)
+        .expect("read");
+    assert!(!status.success(), "should fail: {stderr}");
+    assert!(
+        stderr.contains("error: rank 1:") && stderr.contains("mesa-vulkan-drivers"),
+        "rank 0 should name rank 1 and the package: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !dir.path().join("cornell.json").exists(),
+        "no report on failure"
+    );
+}
