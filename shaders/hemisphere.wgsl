@@ -22,7 +22,7 @@ const EDGE_TOL: f32 = 1.0e-6;
 struct Shot {
     res: vec4<u32>,    // rows (R_phi), cols (R_theta), unused, unused
     tiles: vec4<u32>,  // tile width, tile height, ranks along theta (px), along phi (py)
-    own: vec4<u32>,    // this rank's grid coordinates (x, y), unused, unused
+    own: vec4<u32>,    // this rank's grid coordinates (x, y); z = 1: lattice mode (1 x 1 tiles)
     depth: vec4<f32>,  // x: 1 / far (depth = distance / far)
 }
 
@@ -51,8 +51,15 @@ struct VsOut {
 // One instance per rectangle; four vertices as a triangle strip.
 @vertex
 fn vs(@builtin(vertex_index) vi: u32, r: Rect) -> VsOut {
-    let x = mix(r.rect.x, r.rect.y, f32(vi & 1u));
-    let y = mix(r.rect.z, r.rect.w, f32(vi >> 1u));
+    var x = mix(r.rect.x, r.rect.y, f32(vi & 1u));
+    var y = mix(r.rect.z, r.rect.w, f32(vi >> 1u));
+    if (shot.own.z == 1u) {
+        // Lattice mode: this rank's cells (t, p) = (c px + x0, r py + y0) are
+        // packed into pixels (c, r); the map is affine, so rectangles stay rectangles.
+        let grid = vec2<f32>(f32(shot.tiles.z), f32(shot.tiles.w));
+        x = (x - f32(shot.own.x) - 0.5) / grid.x + 0.5;
+        y = (y - f32(shot.own.y) - 0.5) / grid.y + 0.5;
+    }
     var out: VsOut;
     out.pos = vec4<f32>(x / f32(shot.res.y) * 2.0 - 1.0, 1.0 - y / f32(shot.res.x) * 2.0, 0.5, 1.0);
     out.e0 = r.e0;
@@ -71,14 +78,21 @@ struct FsOut {
 
 @fragment
 fn fs(in: VsOut) -> FsOut {
-    let cell = vec2<u32>(in.pos.xy);
-    let owner = vec2<u32>((cell.x / shot.tiles.x) % shot.tiles.z, (cell.y / shot.tiles.y) % shot.tiles.w);
-    if (any(owner != shot.own.xy)) {
-        discard;
+    var cell = vec2<u32>(in.pos.xy);
+    if (shot.own.z == 1u) {
+        cell = cell * shot.tiles.zw + shot.own.xy;
+        if (cell.x >= shot.res.y || cell.y >= shot.res.x) {
+            discard;
+        }
+    } else {
+        let owner = vec2<u32>((cell.x / shot.tiles.x) % shot.tiles.z, (cell.y / shot.tiles.y) % shot.tiles.w);
+        if (any(owner != shot.own.xy)) {
+            discard;
+        }
     }
-    // Cell-centre direction in the shooter's frame (pos.xy is the cell centre).
-    let theta = in.pos.x * TWO_PI / f32(shot.res.y);
-    let phi = in.pos.y * HALF_PI / f32(shot.res.x);
+    // Cell-centre direction in the shooter's frame.
+    let theta = (f32(cell.x) + 0.5) * TWO_PI / f32(shot.res.y);
+    let phi = (f32(cell.y) + 0.5) * HALF_PI / f32(shot.res.x);
     let sp = sin(phi);
     let dir = vec3<f32>(sp * cos(theta), sp * sin(theta), cos(phi));
     if (dot(dir, in.e0) < -EDGE_TOL || dot(dir, in.e1) < -EDGE_TOL || dot(dir, in.e2) < -EDGE_TOL || dot(dir, in.e3) < -EDGE_TOL) {

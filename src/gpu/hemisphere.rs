@@ -248,7 +248,7 @@ impl HemisphereRasterizer {
     /// see, in proxy order (so the draw order, and with it every depth tie, is
     /// the same on every run), seam copies right after their originals. Large
     /// scenes split the polygons between threads and join the lists in order.
-    fn collect_rects(&mut self, shooter: &ShooterFrame) {
+    fn collect_rects(&mut self, shooter: &ShooterFrame, lattice: Option<Lattice>) {
         self.instances.clear();
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
@@ -269,7 +269,7 @@ impl HemisphereRasterizer {
                 let n = shooter.to_local(poly.normal);
                 for i in poly.proxies.clone() {
                     let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                    push_piece(out, &d, n, element[i as usize], res, far);
+                    push_piece(out, &d, n, element[i as usize], res, far, lattice);
                 }
             }
         };
@@ -324,7 +324,18 @@ impl HemisphereRasterizer {
         items: &mut Vec<u32>,
     ) -> Result<RasterStats, GpuError> {
         let start = Instant::now();
-        self.collect_rects(shooter);
+        // With 1 x 1 tiles over several ranks, draw only this rank's cells,
+        // packed (see the shader); otherwise draw all and discard others' cells.
+        let lattice = layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1;
+        self.collect_rects(
+            shooter,
+            lattice.then_some(Lattice {
+                px: layout.px as f32,
+                py: layout.py as f32,
+                x0: own.0 as f32,
+                y0: own.1 as f32,
+            }),
+        );
         let bounds = start.elapsed();
         let u = ShotUniform {
             res: [self.res.rows, self.res.cols, 0, 0],
@@ -334,7 +345,7 @@ impl HemisphereRasterizer {
                 layout.px.max(1),
                 layout.py.max(1),
             ],
-            own: [own.0, own.1, 0, 0],
+            own: [own.0, own.1, lattice as u32, 0],
             depth: [1.0 / self.far, 0.0, 0.0, 0.0],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
@@ -365,15 +376,38 @@ impl HemisphereRasterizer {
         self.target.copy_out(&mut enc);
         let submission = queue.submit([enc.finish()]);
         items.clear();
-        items.reserve(self.res.cells());
         let mut waited = None;
-        self.target.read_rows(device, submission, |_, row| {
-            waited.get_or_insert_with(Instant::now);
-            items.extend(
-                row.chunks_exact(4)
-                    .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        let word = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        if lattice {
+            // Unpack this rank's cells to their places; the rest stay EMPTY.
+            items.resize(self.res.cells(), EMPTY);
+            let (cols, rows) = (self.res.cols as usize, self.res.rows as usize);
+            let (px, py, x0, y0) = (
+                layout.px as usize,
+                layout.py as usize,
+                own.0 as usize,
+                own.1 as usize,
             );
-        })?;
+            self.target.read_rows(device, submission, |r, row| {
+                waited.get_or_insert_with(Instant::now);
+                let p = r * py + y0;
+                if p < rows {
+                    for (c, b) in row
+                        .chunks_exact(4)
+                        .enumerate()
+                        .take_while(|(c, _)| c * px + x0 < cols)
+                    {
+                        items[p * cols + c * px + x0] = word(b);
+                    }
+                }
+            })?;
+        } else {
+            items.reserve(self.res.cells());
+            self.target.read_rows(device, submission, |_, row| {
+                waited.get_or_insert_with(Instant::now);
+                items.extend(row.chunks_exact(4).map(word));
+            })?;
+        }
         let read_start = waited.unwrap_or_else(Instant::now);
         let rasterise = read_start - start - bounds;
         Ok(RasterStats {
@@ -389,7 +423,27 @@ impl HemisphereRasterizer {
 const PARALLEL_PROXIES: usize = 8192;
 
 /// Adds the rectangle(s) of one planar quad `d` (corners in the shooter's frame)
-/// of element `element` on a plane with normal `n`.
+/// of element `element` on a plane with normal `n`; with a `lattice`, only
+/// rectangles that hold one of this rank's cells.
+/// This rank's cells under 1 x 1 tiles: columns x0 + k px, rows y0 + k py.
+#[derive(Clone, Copy)]
+struct Lattice {
+    px: f32,
+    py: f32,
+    x0: f32,
+    y0: f32,
+}
+
+impl Lattice {
+    /// Whether the cell rectangle holds the centre of one of this rank's cells.
+    fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
+        let any = |lo: f32, hi: f32, step: f32, first: f32| {
+            ((lo - 0.5 - first) / step).ceil() <= ((hi - 0.5 - first) / step).floor()
+        };
+        any(x0, x1, self.px, self.x0) && any(y0, y1, self.py, self.y0)
+    }
+}
+
 fn push_piece(
     out: &mut Vec<Instance>,
     d: &[Vec3; 4],
@@ -397,10 +451,20 @@ fn push_piece(
     element: u32,
     res: Resolution,
     far: f32,
+    lattice: Option<Lattice>,
 ) {
     let Some(r) = cell_bounds(d, res, far) else {
         return;
     };
+    let cols = res.cols as f32;
+    let mine = |x0: f32, x1: f32| lattice.is_none_or(|l| l.holds_own(x0, x1, r.y0, r.y1));
+    let (primary, wrapped) = (
+        mine(r.x0, r.x1),
+        r.x1 > cols && mine(r.x0 - cols, r.x1 - cols),
+    );
+    if !primary && !wrapped {
+        return;
+    }
     // The shooter is in front when it is on the side n points to.
     let offset = n.dot(d[0]);
     let back = offset >= 0.0;
@@ -416,9 +480,10 @@ fn push_piece(
         item: [element, back as u32],
         _pad: [0; 2],
     };
-    out.push(inst);
-    let cols = res.cols as f32;
-    if r.x1 > cols {
+    if primary {
+        out.push(inst);
+    }
+    if wrapped {
         out.push(Instance {
             rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
             ..inst
