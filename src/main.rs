@@ -100,7 +100,8 @@ impl SolveArgs {
 #[derive(Args)]
 struct RenderArgs {
     /// A .gltf/.glb file, or a built-in scene: cornell, cubes-N (N^3 cubes in a
-    /// lit room), cubes-b1, cubes-b2, cubes-b3 (the paper's benchmark scenes).
+    /// lit room), cubes-b1, cubes-b2, cubes-b3, classroom-c1, classroom-c2,
+    /// classroom-c3 (the paper's benchmark scenes).
     scene: String,
     /// Output EXR path (linear radiance); the PNG preview goes beside it.
     /// Default: OUT_DIR/<scene>.exr.

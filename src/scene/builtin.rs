@@ -7,7 +7,16 @@ use glam::{Quat, Vec3};
 
 /// Names accepted by [`builtin_gltf`] (`cubes-N` takes any N from 1 to 40).
 pub fn builtin_names() -> Vec<&'static str> {
-    vec!["cornell", "cubes-N", "cubes-b1", "cubes-b2", "cubes-b3"]
+    vec![
+        "cornell",
+        "cubes-N",
+        "cubes-b1",
+        "cubes-b2",
+        "cubes-b3",
+        "classroom-c1",
+        "classroom-c2",
+        "classroom-c3",
+    ]
 }
 
 /// The glTF text of a built-in scene, or `None` for an unknown name.
@@ -18,6 +27,10 @@ pub fn builtin_gltf(name: &str) -> Option<String> {
         "cubes-b1" => Some(cubes(16)),
         "cubes-b2" => Some(cubes(20)),
         "cubes-b3" => Some(cubes(26)),
+        // The paper's classroom scenes C1-C3: 36, 54 and 90 seats.
+        "classroom-c1" => Some(classroom(6, 6)),
+        "classroom-c2" => Some(classroom(6, 9)),
+        "classroom-c3" => Some(classroom(9, 10)),
         _ => {
             let n: u32 = name.strip_prefix("cubes-")?.parse().ok()?;
             (1..=40).contains(&n).then(|| cubes(n))
@@ -362,4 +375,168 @@ fn cornell() -> String {
         1.0,
     );
     write_gltf(&surfaces, Some(camera))
+}
+
+/// The parts of a classroom, each a glTF node holding that part of every
+/// desk, chair or fitting, with one subdivision.
+struct Parts {
+    surfaces: Vec<GltfSurface>,
+}
+
+impl Parts {
+    fn part(&mut self, name: &str, reflectance: [f32; 3], emission: [f32; 3], grid: Grid) -> usize {
+        let subdivision = Some(Subdivision {
+            patches: grid.0,
+            elements: grid.1,
+        });
+        self.surfaces.push(GltfSurface {
+            name: name.into(),
+            polygons: Vec::new(),
+            reflectance,
+            emission,
+            double_sided: false,
+            subdivision,
+        });
+        self.surfaces.len() - 1
+    }
+
+    /// A box with all six faces.
+    fn solid(&mut self, part: usize, lo: Vec3, hi: Vec3) {
+        self.surfaces[part].polygons.extend(box_faces(lo, hi, true));
+    }
+
+    /// A leg or post: the four sides only (its ends touch other surfaces).
+    fn post(&mut self, part: usize, lo: Vec3, hi: Vec3) {
+        let faces = box_faces(lo, hi, true);
+        self.surfaces[part].polygons.extend(
+            faces
+                .into_iter()
+                .enumerate()
+                .filter(|(k, _)| *k != 2 && *k != 3)
+                .map(|(_, f)| f),
+        );
+    }
+}
+
+/// A desk at `o` (its back-left-bottom corner), facing -z.
+fn desk(p: &mut Parts, ids: &[usize; 5], o: Vec3) {
+    let v = |x: f32, y: f32, z: f32| o + Vec3::new(x, y, z);
+    p.solid(ids[0], v(0.0, 0.70, 0.0), v(1.0, 0.74, 0.5));
+    for (x, z) in [(0.02, 0.02), (0.94, 0.02), (0.02, 0.44), (0.94, 0.44)] {
+        p.post(ids[1], v(x, 0.0, z), v(x + 0.04, 0.70, z + 0.04));
+    }
+    p.solid(ids[2], v(0.06, 0.35, 0.0), v(0.94, 0.68, 0.02));
+    p.solid(ids[3], v(0.06, 0.55, 0.05), v(0.94, 0.57, 0.45));
+    p.solid(ids[4], v(0.06, 0.10, 0.03), v(0.94, 0.13, 0.06));
+    p.solid(ids[4], v(0.06, 0.10, 0.44), v(0.94, 0.13, 0.47));
+}
+
+/// A chair at `o` (its front-left-bottom corner), backrest towards +z.
+fn chair(p: &mut Parts, ids: &[usize; 4], o: Vec3) {
+    let v = |x: f32, y: f32, z: f32| o + Vec3::new(x, y, z);
+    p.solid(ids[0], v(0.0, 0.42, 0.0), v(0.42, 0.45, 0.42));
+    p.solid(ids[1], v(0.0, 0.62, 0.39), v(0.42, 0.85, 0.42));
+    for (x, z) in [(0.01, 0.01), (0.38, 0.01), (0.01, 0.38), (0.38, 0.38)] {
+        p.post(ids[2], v(x, 0.0, z), v(x + 0.03, 0.42, z + 0.03));
+    }
+    for x in [0.03, 0.36] {
+        p.post(ids[3], v(x, 0.45, 0.395), v(x + 0.03, 0.62, 0.415));
+    }
+}
+
+/// A classroom (DESIGN.md section 4, C1-C3): `rows` x `cols` seats (desk and
+/// chair), a teacher's desk and chair, a blackboard, cabinets, ceiling lights
+/// and windows. The counts per part are chosen so the scene's polygons,
+/// patches and elements land near the paper's Table 2.
+fn classroom(rows: u32, cols: u32) -> String {
+    let (pitch_x, pitch_z) = (1.3f32, 1.2f32);
+    let (w, d, h) = (
+        cols as f32 * pitch_x + 2.0,
+        rows as f32 * pitch_z + 4.0,
+        3.0f32,
+    );
+    let mut p = Parts {
+        surfaces: Vec::new(),
+    };
+    let wood = [0.55, 0.4, 0.25];
+    let metal = [0.35, 0.35, 0.38];
+    let desk_ids = [
+        p.part("desk_tops", wood, [0.0; 3], ([2, 2], [2, 1])),
+        p.part("desk_legs", metal, [0.0; 3], ([1, 1], [1, 3])),
+        p.part("desk_panels", wood, [0.0; 3], ([3, 1], [2, 2])),
+        p.part("desk_shelves", wood, [0.0; 3], ([1, 1], [2, 2])),
+        p.part("desk_bars", metal, [0.0; 3], ([1, 1], [1, 1])),
+    ];
+    let chair_ids = [
+        p.part("chair_seats", [0.3, 0.35, 0.5], [0.0; 3], ([2, 2], [1, 2])),
+        p.part("chair_backs", [0.3, 0.35, 0.5], [0.0; 3], ([2, 2], [1, 2])),
+        p.part("chair_legs", metal, [0.0; 3], ([1, 1], [1, 3])),
+        p.part("chair_posts", metal, [0.0; 3], ([1, 1], [1, 2])),
+    ];
+    for r in 0..rows {
+        for c in 0..cols {
+            let o = Vec3::new(1.0 + c as f32 * pitch_x, 0.0, 3.0 + r as f32 * pitch_z);
+            desk(&mut p, &desk_ids, o);
+            chair(&mut p, &chair_ids, o + Vec3::new(0.29, 0.0, 0.55));
+        }
+    }
+    // The teacher's desk and chair at the front, facing the class.
+    desk(&mut p, &desk_ids, Vec3::new(w / 2.0 - 0.5, 0.0, 1.2));
+    chair(&mut p, &chair_ids, Vec3::new(w / 2.0 - 0.21, 0.0, 0.6));
+    let room = p.part("room", [0.7, 0.7, 0.65], [0.0; 3], ([8, 8], [3, 3]));
+    p.surfaces[room].polygons = box_faces(Vec3::ZERO, Vec3::new(w, h, d), false);
+    let board = p.part("blackboard", [0.08, 0.15, 0.1], [0.0; 3], ([4, 2], [2, 2]));
+    p.solid(
+        board,
+        Vec3::new(w / 2.0 - 2.0, 0.9, 0.0),
+        Vec3::new(w / 2.0 + 2.0, 2.1, 0.04),
+    );
+    let cabinets = p.part("cabinets", wood, [0.0; 3], ([2, 2], [2, 2]));
+    let count = 8;
+    for k in 0..count {
+        let x = 0.5 + k as f32 * (w - 1.0) / count as f32;
+        p.solid(
+            cabinets,
+            Vec3::new(x, 0.0, d - 0.5),
+            Vec3::new(x + 0.8 * (w - 1.0) / count as f32, 1.2, d - 0.02),
+        );
+    }
+    // Fluorescent fittings under the ceiling: a grid of 4 x 3 boxes.
+    let lights = p.part(
+        "ceiling_lights",
+        [0.8; 3],
+        [25.0, 24.0, 22.0],
+        ([2, 1], [1, 2]),
+    );
+    for i in 0..4 {
+        for j in 0..3 {
+            let (x, z) = ((i as f32 + 0.5) * w / 4.0, (j as f32 + 0.5) * d / 3.0);
+            p.solid(
+                lights,
+                Vec3::new(x - 0.6, h - 0.12, z - 0.15),
+                Vec3::new(x + 0.6, h - 0.02, z + 0.15),
+            );
+        }
+    }
+    // Windows along the +x wall: daylight panes 1 cm in front of the wall.
+    let windows = p.part("windows", [0.1; 3], [6.0, 7.0, 9.0], ([2, 2], [2, 2]));
+    for k in 0..6 {
+        let z = 1.0 + k as f32 * (d - 2.0) / 6.0;
+        let (z0, z1, y0, y1) = (z + 0.1, z + (d - 2.0) / 6.0 - 0.1, 0.9, 2.6);
+        let x = w - 0.01;
+        p.surfaces[windows].polygons.push(vec![
+            Vec3::new(x, y0, z0),
+            Vec3::new(x, y0, z1),
+            Vec3::new(x, y1, z1),
+            Vec3::new(x, y1, z0),
+        ]);
+    }
+    // From the back corner, looking at the blackboard.
+    let camera = (
+        Vec3::new(w * 0.5, 2.2, d - 0.6),
+        glam::Quat::from_rotation_x(-0.25),
+        1.1f32,
+        1.5f32,
+    );
+    write_gltf(&p.surfaces, Some(camera))
 }

@@ -124,3 +124,25 @@ fn shipped_cornell_file_matches_the_built_in_scene() {
     assert_eq!(scene.nodes.len(), 8);
     assert!(scene.camera.is_some());
 }
+
+#[test]
+fn classroom_counts_are_near_the_paper() {
+    // DESIGN.md section 4, Table 2: (polygons, patches, elements) within 10 %.
+    for (name, expected) in [
+        ("classroom-c1", [3159.0, 6344.0, 17402.0]),
+        ("classroom-c2", [4629.0, 9236.0, 24342.0]),
+        ("classroom-c3", [7592.0, 14941.0, 37127.0]),
+    ] {
+        let scene = radiosity::scene::open(name).expect("built-in");
+        let mesh = radiosity::mesh::Mesh::build(&scene, &Default::default());
+        let got = [
+            scene.polygons.len() as f64,
+            mesh.patches.len() as f64,
+            mesh.elements.len() as f64,
+        ];
+        eprintln!("{name}: {got:?} vs {expected:?}");
+        for (g, e) in got.iter().zip(expected) {
+            assert!(rel(*g, e) < 0.10, "{name}: {got:?} vs {expected:?}");
+        }
+    }
+}
