@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Installs what the renderer needs on Debian 12, only what is missing:
 # lavapipe (Mesa's software Vulkan driver) and the Vulkan loader, Open MPI and
-# libclang (for the MPI crate), pkgconf and Xvfb (for the viewer's tests).
+# libclang (for the MPI crate), pkgconf and Xvfb (for the viewer's tests),
+# fontconfig and DejaVu fonts (benchmark charts).
 # Safe to run again. Sourced by render.sh and test.sh.
 set -euo pipefail
 
-packages=(mesa-vulkan-drivers libvulkan1 libopenmpi-dev openmpi-bin libclang-dev pkgconf xvfb)
+packages=(mesa-vulkan-drivers libvulkan1 libopenmpi-dev openmpi-bin libclang-dev pkgconf xvfb libfontconfig1-dev fonts-dejavu-core)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -91,3 +91,274 @@ pub fn run(args: BenchArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// Options of `radiosity bench-report`.
+#[derive(Args)]
+pub struct ReportArgs {
+    /// Report JSON files from `radiosity render` runs (see scripts/bench-mpi.sh).
+    #[arg(required = true)]
+    reports: Vec<PathBuf>,
+    /// Directory for results.csv and the charts.
+    #[arg(long, default_value = "docs/bench")]
+    out: PathBuf,
+}
+
+/// One run, flattened for the CSV and the charts.
+struct Run {
+    scene: String,
+    ranks: f64,
+    exchange: String,
+    tile: String,
+    resolution: String,
+    shots: f64,
+    ms_per_shot: f64,
+    bytes_per_shot: f64,
+    formula_bytes: Option<f64>,
+    eps: [f64; 3],
+}
+
+fn run_of(path: &std::path::Path) -> Result<Run> {
+    use anyhow::Context;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a report", path.display()))?;
+    let p = &v["parallel"];
+    let num = |x: &serde_json::Value| {
+        x.as_f64()
+            .with_context(|| format!("{}: missing number", path.display()))
+    };
+    let shots = num(&v["shots"])?;
+    let res = &v["settings"]["resolution"];
+    Ok(Run {
+        scene: v["scene"].as_str().unwrap_or("?").to_string(),
+        ranks: num(&p["ranks"])?,
+        exchange: p["exchange"].as_str().unwrap_or("?").to_string(),
+        tile: format!("{}x{}", p["tile"][0], p["tile"][1]),
+        resolution: format!("{}x{}", res["rows"], res["cols"]),
+        shots,
+        ms_per_shot: num(&v["timings"]["solve"])? / shots.max(1.0) * 1e3,
+        bytes_per_shot: num(&p["measured_bytes_per_shot"])?,
+        formula_bytes: p["formula_bytes_per_shot"].as_f64(),
+        eps: [
+            num(&p["load_balance"]["mean"])?,
+            num(&p["load_balance"]["max"])?,
+            num(&p["load_balance"]["min"])?,
+        ],
+    })
+}
+
+type Series = Vec<(String, Vec<(f64, f64)>)>;
+
+fn draw_chart<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    axes: (&str, &str),
+    series: &Series,
+    log_y: bool,
+) -> Result<(), String> {
+    use plotters::prelude::*;
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let pts = series.iter().flat_map(|s| s.1.iter());
+    let x1 = pts.clone().map(|p| p.0).fold(1.0f64, f64::max);
+    let (y0, y1) = pts
+        .map(|p| p.1)
+        .fold((f64::MAX, 0.0f64), |(a, b), y| (a.min(y), b.max(y)));
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let mut builder = ChartBuilder::on(&root);
+    builder
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70);
+    let x_range = 0.0..x1 * 1.05;
+    macro_rules! body {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            chart
+                .configure_mesh()
+                .x_desc(axes.0)
+                .y_desc(axes.1)
+                .draw()
+                .map_err(|x| e(&x))?;
+            for (i, (name, points)) in series.iter().enumerate() {
+                let color = Palette99::pick(i).mix(0.95);
+                chart
+                    .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+                    .map_err(|x| e(&x))?
+                    .label(name.as_str())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                    });
+                chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                    .map_err(|x| e(&x))?;
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|x| e(&x))?;
+        }};
+    }
+    if log_y && y0 > 0.0 {
+        body!(builder
+            .build_cartesian_2d(x_range, (y0 * 0.8..y1 * 1.25).log_scale())
+            .map_err(|x| e(&x))?);
+    } else {
+        body!(builder
+            .build_cartesian_2d(x_range, 0.0..y1.max(1e-9) * 1.1)
+            .map_err(|x| e(&x))?);
+    }
+    root.present().map_err(|x| e(&x))
+}
+
+/// Writes `<stem>.svg` and `<stem>.png`.
+fn chart(
+    out: &std::path::Path,
+    stem: &str,
+    title: &str,
+    axes: (&str, &str),
+    series: &Series,
+    log_y: bool,
+) -> Result<()> {
+    use plotters::prelude::*;
+    if series.iter().all(|s| s.1.is_empty()) {
+        return Ok(());
+    }
+    let svg = out.join(format!("{stem}.svg"));
+    draw_chart(
+        SVGBackend::new(&svg, (900, 540)).into_drawing_area(),
+        title,
+        axes,
+        series,
+        log_y,
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
+    let png = out.join(format!("{stem}.png"));
+    draw_chart(
+        BitMapBackend::new(&png, (900, 540)).into_drawing_area(),
+        title,
+        axes,
+        series,
+        log_y,
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+    Ok(())
+}
+
+/// Turns render reports into docs/bench/results.csv and charts (the paper's
+/// figures 8-12 for this machine).
+pub fn report(args: ReportArgs) -> Result<()> {
+    let mut runs = args
+        .reports
+        .iter()
+        .map(|p| run_of(p))
+        .collect::<Result<Vec<_>>>()?;
+    runs.sort_by(|a, b| {
+        (
+            &a.scene,
+            &a.exchange,
+            a.ranks as u64,
+            &a.resolution,
+            &a.tile,
+        )
+            .cmp(&(
+                &b.scene,
+                &b.exchange,
+                b.ranks as u64,
+                &b.resolution,
+                &b.tile,
+            ))
+    });
+    std::fs::create_dir_all(&args.out)?;
+    let mut csv = String::from("scene,ranks,exchange,tile,resolution,shots,ms_per_shot,bytes_per_shot,formula_bytes_per_shot,eps_mean,eps_max,eps_min\n");
+    for r in &runs {
+        csv += &format!(
+            "{},{},{},{},{},{},{:.3},{:.0},{},{:.4},{:.4},{:.4}\n",
+            r.scene,
+            r.ranks,
+            r.exchange,
+            r.tile,
+            r.resolution,
+            r.shots,
+            r.ms_per_shot,
+            r.bytes_per_shot,
+            r.formula_bytes.map_or(String::new(), |f| format!("{f:.0}")),
+            r.eps[0],
+            r.eps[1],
+            r.eps[2]
+        );
+    }
+    output::write_atomic(&args.out.join("results.csv"), csv.as_bytes())?;
+    let default = |r: &&Run| r.resolution == "128x512" && r.tile == "1x1";
+    let mut scenes: Vec<&str> = runs.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    for scene in scenes {
+        let of_scene: Vec<&Run> = runs
+            .iter()
+            .filter(|r| r.scene == scene)
+            .filter(default)
+            .collect();
+        let by_exchange = |value: &dyn Fn(&Run) -> f64, multi_only: bool| -> Series {
+            ["hemispheres", "form-factors", "sparse"]
+                .iter()
+                .map(|ex| {
+                    // One rank runs no exchange: its point belongs to every series.
+                    let pts = of_scene
+                        .iter()
+                        .filter(|r| r.exchange == *ex || (r.ranks == 1.0 && !multi_only))
+                        .map(|r| (r.ranks, value(r)))
+                        .collect();
+                    (ex.to_string(), pts)
+                })
+                .collect()
+        };
+        let name = scene.replace(['/', '.'], "_");
+        chart(
+            &args.out,
+            &format!("time-{name}"),
+            &format!("{scene}: time per shot"),
+            ("ranks", "ms per shot"),
+            &by_exchange(&|r| r.ms_per_shot, false),
+            false,
+        )?;
+        chart(
+            &args.out,
+            &format!("bytes-{name}"),
+            &format!("{scene}: bytes received per rank per shot"),
+            ("ranks", "bytes"),
+            &by_exchange(&|r| r.bytes_per_shot, true),
+            true,
+        )?;
+        let hemis: Vec<&&Run> = of_scene
+            .iter()
+            .filter(|r| r.exchange == "hemispheres")
+            .collect();
+        let eps: Series = ["mean", "max", "min"]
+            .iter()
+            .enumerate()
+            .map(|(k, n)| {
+                (
+                    format!("epsilon {n}"),
+                    hemis.iter().map(|r| (r.ranks, r.eps[k])).collect(),
+                )
+            })
+            .collect();
+        chart(
+            &args.out,
+            &format!("balance-{name}"),
+            &format!("{scene}: load balance (hemispheres)"),
+            ("ranks", "T_min / T_max"),
+            &eps,
+            false,
+        )?;
+    }
+    eprintln!(
+        "wrote {} runs to {}",
+        runs.len(),
+        args.out.join("results.csv").display()
+    );
+    Ok(())
+}

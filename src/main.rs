@@ -39,6 +39,8 @@ enum Command {
     },
     /// Time shots on the built-in scenes and print a table (see README "Performance").
     Bench(bench::BenchArgs),
+    /// Turn render reports (e.g. from scripts/bench-mpi.sh) into a CSV and charts.
+    BenchReport(bench::ReportArgs),
 }
 
 /// Settings shared by `render` and `bench`.
@@ -190,6 +192,7 @@ fn main() {
         Command::Render(args) => run_render(args),
         Command::Scene { name, out } => write_scene(&name, &out),
         Command::Bench(args) => bench::run(args),
+        Command::BenchReport(args) => bench::report(args),
     };
     if let Err(e) = result {
         if e.downcast_ref::<ReportedByRankZero>().is_none() {
