@@ -105,6 +105,8 @@ pub struct ReportArgs {
 
 /// One run, flattened for the CSV and the charts.
 struct Run {
+    /// File stem: runs named `sweep-*` are the resolution and tile sweeps.
+    tag: String,
     scene: String,
     ranks: f64,
     exchange: String,
@@ -131,6 +133,10 @@ fn run_of(path: &std::path::Path) -> Result<Run> {
     let shots = num(&v["shots"])?;
     let res = &v["settings"]["resolution"];
     Ok(Run {
+        tag: path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default(),
         scene: v["scene"].as_str().unwrap_or("?").to_string(),
         ranks: num(&p["ranks"])?,
         exchange: p["exchange"].as_str().unwrap_or("?").to_string(),
@@ -292,7 +298,11 @@ pub fn report(args: ReportArgs) -> Result<()> {
         );
     }
     output::write_atomic(&args.out.join("results.csv"), csv.as_bytes())?;
-    let default = |r: &&Run| r.resolution == "128x512" && r.tile == "1x1";
+    let default = |r: &&Run| {
+        !r.tag.starts_with("sweep-")
+            && r.resolution == "128x512"
+            && (r.tile == "1x1" || r.ranks == 1.0)
+    };
     let mut scenes: Vec<&str> = runs.iter().map(|r| r.scene.as_str()).collect();
     scenes.dedup();
     for scene in scenes {
@@ -306,11 +316,12 @@ pub fn report(args: ReportArgs) -> Result<()> {
                 .iter()
                 .map(|ex| {
                     // One rank runs no exchange: its point belongs to every series.
-                    let pts = of_scene
+                    let mut pts: Vec<(f64, f64)> = of_scene
                         .iter()
                         .filter(|r| r.exchange == *ex || (r.ranks == 1.0 && !multi_only))
                         .map(|r| (r.ranks, value(r)))
                         .collect();
+                    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
                     (ex.to_string(), pts)
                 })
                 .collect()
@@ -355,6 +366,45 @@ pub fn report(args: ReportArgs) -> Result<()> {
             false,
         )?;
     }
+    // The sweeps: load balance against resolution (R_phi) and tile size (cells).
+    let sweep = |prefix: &str, x: &dyn Fn(&Run) -> f64| -> Series {
+        let mut pts: Vec<&Run> = runs.iter().filter(|r| r.tag.starts_with(prefix)).collect();
+        pts.sort_by(|a, b| x(a).total_cmp(&x(b)));
+        ["mean", "max", "min"]
+            .iter()
+            .enumerate()
+            .map(|(k, n)| {
+                (
+                    format!("epsilon {n}"),
+                    pts.iter().map(|r| (x(r), r.eps[k])).collect(),
+                )
+            })
+            .collect()
+    };
+    let dims = |s: &str| -> (f64, f64) {
+        let mut it = s.split('x').map(|v| v.parse::<f64>().unwrap_or(0.0));
+        (it.next().unwrap_or(0.0), it.next().unwrap_or(0.0))
+    };
+    chart(
+        &args.out,
+        "balance-resolution",
+        "load balance against hemisphere resolution",
+        ("R_phi (R_theta = 4 R_phi)", "T_min / T_max"),
+        &sweep("sweep-res-", &|r| dims(&r.resolution).0),
+        false,
+    )?;
+    let tile_cells = |r: &Run| {
+        let (w, h) = dims(&r.tile);
+        w * h
+    };
+    chart(
+        &args.out,
+        "balance-tile",
+        "load balance against tile size",
+        ("cells per tile", "T_min / T_max"),
+        &sweep("sweep-tile-", &tile_cells),
+        false,
+    )?;
     eprintln!(
         "wrote {} runs to {}",
         runs.len(),
