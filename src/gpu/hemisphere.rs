@@ -248,7 +248,7 @@ impl HemisphereRasterizer {
     /// see, in proxy order (so the draw order, and with it every depth tie, is
     /// the same on every run), seam copies right after their originals. Large
     /// scenes split the polygons between threads and join the lists in order.
-    fn collect_rects(&mut self, shooter: &ShooterFrame, lattice: Option<Lattice>) {
+    fn collect_rects(&mut self, shooter: &ShooterFrame, ownership: Option<Ownership>) {
         self.instances.clear();
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
@@ -269,7 +269,7 @@ impl HemisphereRasterizer {
                 let n = shooter.to_local(poly.normal);
                 for i in poly.proxies.clone() {
                     let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                    push_piece(out, &d, n, element[i as usize], res, far, lattice);
+                    push_piece(out, &d, n, element[i as usize], res, far, ownership);
                 }
             }
         };
@@ -327,15 +327,14 @@ impl HemisphereRasterizer {
         // With 1 x 1 tiles over several ranks, draw only this rank's cells,
         // packed (see the shader); otherwise draw all and discard others' cells.
         let lattice = layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1;
-        self.collect_rects(
-            shooter,
-            lattice.then_some(Lattice {
-                px: layout.px as f32,
-                py: layout.py as f32,
-                x0: own.0 as f32,
-                y0: own.1 as f32,
-            }),
-        );
+        // Over several ranks, skip rectangles that hold none of this rank's cells.
+        let ownership = (layout.ranks() > 1).then_some(Ownership {
+            tile: [layout.tile_w as f32, layout.tile_h as f32],
+            grid: [layout.px as f32, layout.py as f32],
+            own: [own.0 as f32, own.1 as f32],
+            cells: [self.res.cols as f32, self.res.rows as f32],
+        });
+        self.collect_rects(shooter, ownership);
         let bounds = start.elapsed();
         let u = ShotUniform {
             res: [self.res.rows, self.res.cols, 0, 0],
@@ -423,24 +422,36 @@ impl HemisphereRasterizer {
 const PARALLEL_PROXIES: usize = 8192;
 
 /// Adds the rectangle(s) of one planar quad `d` (corners in the shooter's frame)
-/// of element `element` on a plane with normal `n`; with a `lattice`, only
-/// rectangles that hold one of this rank's cells.
-/// This rank's cells under 1 x 1 tiles: columns x0 + k px, rows y0 + k py.
+/// of element `element` on a plane with normal `n`; with an `ownership`, only
+/// rectangles that hold a cell of one of this rank's tiles.
+/// The tiles one rank of a grid owns: tile (p, t) of `tile_w` x `tile_h`
+/// cells with t mod px = ox and p mod py = oy.
 #[derive(Clone, Copy)]
-struct Lattice {
-    px: f32,
-    py: f32,
-    x0: f32,
-    y0: f32,
+struct Ownership {
+    tile: [f32; 2],
+    grid: [f32; 2],
+    own: [f32; 2],
+    cells: [f32; 2],
 }
 
-impl Lattice {
-    /// Whether the cell rectangle holds the centre of one of this rank's cells.
+impl Ownership {
+    /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
     fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
-        let any = |lo: f32, hi: f32, step: f32, first: f32| {
-            ((lo - 0.5 - first) / step).ceil() <= ((hi - 0.5 - first) / step).floor()
+        let any = |lo: f32, hi: f32, axis: usize| {
+            // Cells whose centres are inside, then the tiles holding them.
+            let (c0, c1) = (
+                (lo - 0.5).ceil().max(0.0),
+                (hi - 0.5).floor().min(self.cells[axis] - 1.0),
+            );
+            let (t0, t1) = (
+                (c0 / self.tile[axis]).floor(),
+                (c1 / self.tile[axis]).floor(),
+            );
+            c0 <= c1
+                && ((t0 - self.own[axis]) / self.grid[axis]).ceil()
+                    <= ((t1 - self.own[axis]) / self.grid[axis]).floor()
         };
-        any(x0, x1, self.px, self.x0) && any(y0, y1, self.py, self.y0)
+        any(x0, x1, 0) && any(y0, y1, 1)
     }
 }
 
@@ -451,13 +462,13 @@ fn push_piece(
     element: u32,
     res: Resolution,
     far: f32,
-    lattice: Option<Lattice>,
+    ownership: Option<Ownership>,
 ) {
     let Some(r) = cell_bounds(d, res, far) else {
         return;
     };
     let cols = res.cols as f32;
-    let mine = |x0: f32, x1: f32| lattice.is_none_or(|l| l.holds_own(x0, x1, r.y0, r.y1));
+    let mine = |x0: f32, x1: f32| ownership.is_none_or(|o| o.holds_own(x0, x1, r.y0, r.y1));
     let (primary, wrapped) = (
         mine(r.x0, r.x1),
         r.x1 > cols && mine(r.x0 - cols, r.x1 - cols),
