@@ -148,13 +148,6 @@ impl Collectives for MpiComm {
         in_ids.into_iter().zip(in_vals).collect()
     }
 
-    fn all_sum_u64(&self, value: u64) -> u64 {
-        let mut sum = 0u64;
-        self.world
-            .all_reduce_into(&value, &mut sum, mpi::collective::SystemOperation::sum());
-        sum
-    }
-
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
         let root = self.world.process_at_rank(0);
         let mut counts = vec![0 as Count; self.size()];

@@ -28,8 +28,6 @@ pub trait Collectives {
     fn reduce_broadcast_sum(&self, data: &mut [u64]);
     /// Sends `outgoing[r]` to rank r; returns everything sent to this rank, in rank order.
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)>;
-    /// The sum of `value` over ranks (exact: integers).
-    fn all_sum_u64(&self, value: u64) -> u64;
     /// Rank 0 gets every rank's `local`, in rank order; the others get `None`.
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>>;
     /// Whether every rank passed `ok`; when not, rank 0 gets the failing
@@ -63,9 +61,6 @@ impl Collectives for Single {
     fn reduce_broadcast_sum(&self, _data: &mut [u64]) {}
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
         outgoing.first().cloned().unwrap_or_default()
-    }
-    fn all_sum_u64(&self, value: u64) -> u64 {
-        value
     }
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
         Some(vec![local.to_vec()])

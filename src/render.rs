@@ -407,10 +407,9 @@ pub fn render_on(
     let mut unshot_fraction;
     loop {
         let shot_start = Instant::now();
-        unshot_fraction = comm.all_sum_u64(solver.local_unshot_fixed()) as f64 / UNSHOT_ONE;
-        if solver.done_at(&opts.stop, unshot_fraction) {
-            break;
-        }
+        // One collective per shot decides both the stop rule and the shooter:
+        // every rank's unshot power (fixed point, exact in f64 below 2^53) and
+        // its best patch.
         let local = solver
             .local_candidate()
             .map_or([-1.0, 0.0, 0.0, 0.0, 0.0], |c| {
@@ -422,15 +421,27 @@ pub fn render_on(
                     c.unshot[2],
                 ]
             });
-        let all = comm.all_gather_f64(&local);
+        let mine = [
+            solver.local_unshot_fixed() as f64,
+            local[0],
+            local[1],
+            local[2],
+            local[3],
+            local[4],
+        ];
+        let all = comm.all_gather_f64(&mine);
+        unshot_fraction = all.chunks_exact(6).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
+        if solver.done_at(&opts.stop, unshot_fraction) {
+            break;
+        }
         let best =
             Candidate::best(
-                all.chunks_exact(5)
-                    .filter(|c| c[0] >= 0.0)
+                all.chunks_exact(6)
+                    .filter(|c| c[1] >= 0.0)
                     .map(|c| Candidate {
-                        patch: c[0] as u32,
-                        power: c[1],
-                        unshot: [c[2], c[3], c[4]],
+                        patch: c[1] as u32,
+                        power: c[2],
+                        unshot: [c[3], c[4], c[5]],
                     }),
             );
         select += shot_start.elapsed();
