@@ -333,8 +333,9 @@ pub fn render(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Rendered, RenderError> {
     let single = Single::default();
-    render_on(gpu, scene, opts, &single, load_time, progress)
-        .map(|r| r.expect("rank 0 of one rank gets the result"))
+    // With one rank this process is rank 0, which always gets the result.
+    render_on(gpu, scene, opts, &single, load_time, progress)?
+        .ok_or_else(|| RenderError::Settings("no result on rank 0".into()))
 }
 
 fn stats_vector(
