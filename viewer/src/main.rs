@@ -1,0 +1,75 @@
+//! `radiosity-viewer`: watch a radiosity solve converge.
+
+mod app;
+mod solve;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use radiosity::hemisphere::Resolution;
+use std::path::PathBuf;
+
+/// Watch the radiosity of a scene converge, shot by shot.
+#[derive(Parser, Debug, Clone)]
+#[command(version, about)]
+pub struct Args {
+    /// A .gltf/.glb file or a built-in scene (cornell, cubes-N, classroom-c1, ...).
+    #[arg(default_value = "cornell")]
+    pub scene: String,
+    /// Hemisphere resolution R_phi x R_theta.
+    #[arg(long, default_value = "128x512")]
+    pub resolution: Resolution,
+    /// Stop when the unshot power is at most this fraction of the emitted power.
+    #[arg(long, default_value_t = 1e-3)]
+    pub threshold: f64,
+    /// Pause after this many shots (with --screenshot: then save and exit).
+    #[arg(long)]
+    pub shots: Option<u64>,
+    /// After --shots shots, save a PNG of the window here and exit.
+    #[arg(long, requires = "shots")]
+    pub screenshot: Option<PathBuf>,
+    /// Window size in logical pixels, WxH.
+    #[arg(long, default_value = "1280x760")]
+    pub size: String,
+}
+
+fn main() {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
+        .format_timestamp(None)
+        .init();
+    if let Err(e) = run(Args::parse()) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(args: Args) -> Result<()> {
+    // A bad scene is reported before any window opens.
+    let scene = radiosity::scene::open(&args.scene)?;
+    let (w, h) = args
+        .size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<f32>().ok()?, h.parse::<f32>().ok()?)))
+        .context("--size must be WxH, e.g. 1280x760")?;
+    let options = eframe::NativeOptions {
+        renderer: eframe::Renderer::Wgpu,
+        viewport: eframe::egui::ViewportBuilder::default()
+            .with_inner_size([w, h])
+            .with_title(format!("radiosity — {}", args.scene)),
+        ..Default::default()
+    };
+    let result = std::sync::Arc::new(std::sync::Mutex::new(Ok(())));
+    let app_result = result.clone();
+    eframe::run_native(
+        "radiosity-viewer",
+        options,
+        Box::new(move |cc| {
+            let app = app::Viewer::new(cc, args, scene, app_result).map_err(|e| -> Box<dyn std::error::Error + Send + Sync> { e.into() })?;
+            Ok(Box::new(app))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("cannot open the window: {e} (no display? run under Xvfb: xvfb-run -a radiosity-viewer ...; no Vulkan adapter? apt-get install mesa-vulkan-drivers)"))?;
+    let outcome = result
+        .lock()
+        .map_err(|_| anyhow::anyhow!("state lock poisoned"))?;
+    outcome.clone().map_err(|e| anyhow::anyhow!(e))
+}

@@ -1,0 +1,225 @@
+//! The solve, on a background thread: the library's solver and GPU form
+//! factors, driven by commands from the window and publishing snapshots.
+
+use radiosity::gpu::Gpu;
+use radiosity::mesh::Mesh;
+use radiosity::parallel::Single;
+use radiosity::render::{GpuFormFactors, RenderOptions};
+use radiosity::scene::Scene;
+use radiosity::solver::{FormFactorSource, Solver};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// What the window can ask of the solve.
+#[derive(Clone, Debug)]
+pub enum Command {
+    /// Stop shooting until resumed.
+    Pause,
+    /// Shoot until the stop rule is met.
+    Resume,
+    /// One shot, then pause.
+    Step,
+    /// Start again from B = E with new settings.
+    Restart(Settings),
+    /// End the thread.
+    Quit,
+}
+
+/// Settings a restart may change.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// Hemisphere resolution, subdivision and stop rule.
+    pub options: RenderOptions,
+    /// Pause after this many shots (for screenshots).
+    pub pause_at: Option<u64>,
+}
+
+/// The state the window shows.
+#[derive(Clone, Default)]
+pub struct Snapshot {
+    /// Bumped whenever the radiosities change.
+    pub version: u64,
+    /// The mesh being solved (replaced on restart).
+    pub mesh: Option<Arc<Mesh>>,
+    /// Display radiance per element (B plus ambient, over pi).
+    pub radiance: Vec<[f32; 3]>,
+    /// Shots so far.
+    pub shots: u64,
+    /// Unshot power fraction.
+    pub unshot_fraction: f64,
+    /// Solve time so far.
+    pub elapsed: Duration,
+    /// (shots, seconds, unshot fraction) after every shot.
+    pub history: Vec<(u64, f64, f64)>,
+    /// The last shot's item buffer and resolution (rows, cols), and its shooter patch.
+    pub items: Vec<u32>,
+    /// Hemisphere rows and columns.
+    pub resolution: (u32, u32),
+    /// The last shooter patch.
+    pub shooter: Option<u32>,
+    /// Paused (by the user, a step, or the stop rule).
+    pub paused: bool,
+    /// Whether the stop rule is met.
+    pub converged: bool,
+    /// A failure, shown in the window.
+    pub error: Option<String>,
+}
+
+/// Runs solves until told to quit. Publishes into `shared` and calls `wake` after each update.
+pub fn run(
+    gpu: Gpu,
+    scene: Scene,
+    mut settings: Settings,
+    commands: Receiver<Command>,
+    shared: Arc<Mutex<Snapshot>>,
+    wake: impl Fn(),
+) {
+    loop {
+        match solve(&gpu, &scene, &settings, &commands, &shared, &wake) {
+            Ok(Some(next)) => settings = next,
+            Ok(None) => return,
+            Err(e) => {
+                if let Ok(mut s) = shared.lock() {
+                    s.error = Some(e);
+                    s.paused = true;
+                }
+                wake();
+                // Wait for a restart or quit.
+                loop {
+                    match commands.recv() {
+                        Ok(Command::Restart(next)) => {
+                            settings = next;
+                            break;
+                        }
+                        Ok(Command::Quit) | Err(_) => return,
+                        Ok(_) => {}
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// One solve; returns the settings of a requested restart, or `None` on quit.
+fn solve(
+    gpu: &Gpu,
+    scene: &Scene,
+    settings: &Settings,
+    commands: &Receiver<Command>,
+    shared: &Mutex<Snapshot>,
+    wake: &impl Fn(),
+) -> Result<Option<Settings>, String> {
+    let opts = &settings.options;
+    let mesh = Arc::new(Mesh::build(scene, &opts.mesh));
+    let single = Single::default();
+    let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())
+        .map_err(|e| e.to_string())?;
+    let mut solver = Solver::new(&mesh);
+    let res = opts.resolution;
+    {
+        let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
+        *s = Snapshot {
+            mesh: Some(mesh.clone()),
+            version: s.version + 1,
+            resolution: (res.rows, res.cols),
+            ..Snapshot::default()
+        };
+        s.radiance = display(&solver);
+    }
+    wake();
+    let mut paused = false;
+    let mut steps_left: Option<u64> = None;
+    let mut ff = Vec::new();
+    let mut solve_time = Duration::ZERO;
+    let mut last_publish = Instant::now();
+    loop {
+        let done = solver.done(&opts.stop);
+        let at_pause = settings.pause_at.is_some_and(|n| solver.shots() >= n);
+        let idle = paused || done || at_pause || steps_left == Some(0);
+        let cmd = if idle {
+            match commands.recv_timeout(Duration::from_millis(100)) {
+                Ok(c) => Some(c),
+                Err(RecvTimeoutError::Timeout) => None,
+                Err(RecvTimeoutError::Disconnected) => return Ok(None),
+            }
+        } else {
+            commands.try_recv().ok()
+        };
+        match cmd {
+            Some(Command::Pause) => paused = true,
+            Some(Command::Resume) => {
+                paused = false;
+                steps_left = None;
+            }
+            Some(Command::Step) => {
+                paused = false;
+                steps_left = Some(1);
+            }
+            Some(Command::Restart(next)) => return Ok(Some(next)),
+            Some(Command::Quit) => return Ok(None),
+            None => {}
+        }
+        let shooting = !(paused || done || at_pause || steps_left == Some(0));
+        if shooting {
+            let t = Instant::now();
+            let Some(shooter) = solver.select_shooter() else {
+                paused = true;
+                continue;
+            };
+            source
+                .form_factors(shooter, &mut ff)
+                .map_err(|e| e.to_string())?;
+            solver.shoot(shooter, &ff);
+            solve_time += t.elapsed();
+            if let Some(n) = steps_left.as_mut() {
+                *n = n.saturating_sub(1);
+            }
+            let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
+            s.shots = solver.shots();
+            s.unshot_fraction = solver.unshot_fraction();
+            s.elapsed = solve_time;
+            let point = (s.shots, solve_time.as_secs_f64(), s.unshot_fraction);
+            s.history.push(point);
+            s.shooter = Some(shooter);
+            // Small scenes publish every shot; large ones at about 10 Hz.
+            if mesh.elements.len() < 20_000 || last_publish.elapsed() > Duration::from_millis(100) {
+                s.radiance = display(&solver);
+                s.items = source.last_items().to_vec();
+                s.version += 1;
+                last_publish = Instant::now();
+            }
+            drop(s);
+            wake();
+        }
+        let now_idle = !shooting
+            || solver.done(&opts.stop)
+            || settings.pause_at.is_some_and(|n| solver.shots() >= n)
+            || steps_left == Some(0);
+        if let Ok(mut s) = shared.lock() {
+            let converged = solver.done(&opts.stop);
+            if now_idle && (s.paused != now_idle || s.converged != converged) {
+                // Publish the final state of a run of shots.
+                s.radiance = display(&solver);
+                s.items = source.last_items().to_vec();
+                s.version += 1;
+                wake();
+            }
+            s.paused = now_idle;
+            s.converged = converged;
+        }
+    }
+}
+
+fn display(solver: &Solver) -> Vec<[f32; 3]> {
+    solver
+        .display_radiosity(true)
+        .iter()
+        .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
+        .collect()
+}
+
+/// Sends a command, ignoring a solve thread that has already ended.
+pub fn send(tx: &Sender<Command>, cmd: Command) {
+    let _ = tx.send(cmd);
+}

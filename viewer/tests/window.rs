@@ -1,0 +1,77 @@
+//! The viewer in a real window under Xvfb with lavapipe: it solves, draws and
+//! saves a screenshot; bad input is a clear error.
+
+use std::process::Command;
+
+fn viewer() -> Command {
+    let mut cmd = Command::new("xvfb-run");
+    cmd.args([
+        "-a",
+        "-s",
+        "-screen 0 1400x900x24",
+        env!("CARGO_BIN_EXE_radiosity-viewer"),
+    ]);
+    cmd
+}
+
+#[test]
+fn screenshot_shows_the_cornell_box_the_right_way_round() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = dir.path().join("viewer.png");
+    let out = viewer()
+        .args(["cornell", "--shots", "40", "--screenshot"])
+        .arg(&shot)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!("cannot run xvfb-run ({e}): install xvfb (scripts/setup.sh does)")
+        });
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "viewer failed: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let img = image::open(&shot).expect("a PNG screenshot").to_rgb8();
+    // Not blank: many distinct colours.
+    let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    colours.sort_unstable();
+    colours.dedup();
+    assert!(
+        colours.len() > 500,
+        "screenshot looks blank ({} colours)",
+        colours.len()
+    );
+    // The red wall left of the green wall: centroids of strongly red and green pixels.
+    let (mut red, mut green) = ((0u64, 0u64), (0u64, 0u64));
+    for (x, _, p) in img.enumerate_pixels() {
+        let [r, g, b] = p.0.map(u32::from);
+        if r > 120 && r > 2 * g && r > 2 * b {
+            red = (red.0 + x as u64, red.1 + 1);
+        }
+        if g > 100 && g > r + r / 4 && g > 2 * b {
+            green = (green.0 + x as u64, green.1 + 1);
+        }
+    }
+    assert!(
+        red.1 > 5000 && green.1 > 5000,
+        "walls not found: {} red, {} green pixels",
+        red.1,
+        green.1
+    );
+    assert!(
+        red.0 / red.1 < green.0 / green.1,
+        "the red wall must be on the left of the green one"
+    );
+}
+
+#[test]
+fn bad_scene_is_a_clear_error() {
+    let out = viewer()
+        .args(["/nonexistent/scene.gltf"])
+        .output()
+        .expect("xvfb-run (install xvfb)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("error:") && stderr.contains("/nonexistent/scene.gltf"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
