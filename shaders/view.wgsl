@@ -17,12 +17,16 @@ struct VsOut {
     @location(0) radiance: vec3<f32>,
 }
 
-@vertex
-fn vs(in: VsIn) -> VsOut {
+fn transform(in: VsIn) -> VsOut {
     var out: VsOut;
     out.pos = cam.view_proj * vec4<f32>(in.pos, 1.0);
     out.radiance = in.radiance;
     return out;
+}
+
+@vertex
+fn vs(in: VsIn) -> VsOut {
+    return transform(in);
 }
 
 @fragment
@@ -30,5 +34,19 @@ fn fs(in: VsOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     if (!front) {
         return vec4<f32>(0.0, 0.0, 0.0, 1.0);
     }
+    return vec4<f32>(in.radiance, 1.0);
+}
+
+// Wireframe: element edges, pulled slightly towards the camera so they are
+// not hidden by the faces they lie on.
+@vertex
+fn vs_line(in: VsIn) -> VsOut {
+    var out = transform(in);
+    out.pos.z = out.pos.z - 1.0e-4 * out.pos.w;
+    return out;
+}
+
+@fragment
+fn fs_line(in: VsOut) -> @location(0) vec4<f32> {
     return vec4<f32>(in.radiance, 1.0);
 }

@@ -124,6 +124,9 @@ struct RenderArgs {
     /// Shading of the image: smooth (interpolated) or flat (one value per element).
     #[arg(long, value_enum, default_value = "smooth")]
     shading: Shading,
+    /// Draw the element edges over the image.
+    #[arg(long)]
+    wireframe: bool,
     /// Leave the ambient term out of the image (it never enters the report).
     #[arg(long)]
     no_ambient: bool,
@@ -330,6 +333,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     opts.height = args.height;
     opts.shading = args.shading;
     opts.ambient = !args.no_ambient;
+    opts.wireframe = args.wireframe;
     opts.tile = args.tile;
     opts.exchange = args.exchange;
     let mut reporter = (rank == 0).then(|| Reporter::new(opts.stop.max_shots, opts.stop.threshold));

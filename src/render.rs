@@ -39,6 +39,8 @@ pub struct RenderOptions {
     pub shading: Shading,
     /// Add the ambient term to the image.
     pub ambient: bool,
+    /// Draw element edges over the image.
+    pub wireframe: bool,
 }
 
 impl Default for RenderOptions {
@@ -55,6 +57,7 @@ impl Default for RenderOptions {
             height: None,
             shading: Shading::Smooth,
             ambient: true,
+            wireframe: false,
         }
     }
 }
@@ -514,6 +517,7 @@ pub fn render_on(
             height,
             shading: opts.shading,
             supersample: 2,
+            wireframe: opts.wireframe,
         };
         Some((
             opts.width,

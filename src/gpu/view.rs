@@ -32,6 +32,8 @@ pub struct ViewSettings {
     pub shading: Shading,
     /// Samples per pixel along each axis (box-filtered).
     pub supersample: u32,
+    /// Draw every element's edges in black on top.
+    pub wireframe: bool,
 }
 
 #[repr(C)]
@@ -126,44 +128,81 @@ pub fn render_view(
         label: Some("view.wgsl"),
         source: wgpu::ShaderSource::Wgsl(SHADER.into()),
     });
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("view"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Vertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
-            })],
-        },
-        primitive: wgpu::PrimitiveState {
-            front_face: wgpu::FrontFace::Ccw,
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: wgpu::TextureFormat::Rgba32Float,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
+    let make_pipeline = |topology, vs: &str, fs: &str| {
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("view"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some(vs),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology,
+                front_face: wgpu::FrontFace::Ccw,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some(fs),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: wgpu::TextureFormat::Rgba32Float,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    };
+    let pipeline = make_pipeline(wgpu::PrimitiveTopology::TriangleList, "vs", "fs");
+    // Element edges, pulled a hair towards the camera in the shader so they win the depth test.
+    let lines: Vec<Vertex> = if settings.wireframe {
+        mesh.elements
+            .iter()
+            .flat_map(|e| {
+                let n = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
+                (0..n).flat_map(move |k| [e.corners[k], e.corners[(k + 1) % n]])
+            })
+            .map(|p| Vertex {
+                pos: p.to_array(),
+                radiance: [0.0; 3],
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let wire = (!lines.is_empty()).then(|| {
+        let pipeline = make_pipeline(wgpu::PrimitiveTopology::LineList, "vs_line", "fs_line");
+        let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("wireframe"),
+            contents: bytemuck::cast_slice(&lines),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("wireframe"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniform.as_entire_binding(),
+            }],
+        });
+        (pipeline, buffer, group)
     });
     let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("view"),
@@ -181,6 +220,12 @@ pub fn render_view(
         pass.set_bind_group(0, &group, &[]);
         pass.set_vertex_buffer(0, vbuf.slice(..));
         pass.draw(0..verts.len() as u32, 0..1);
+        if let Some((pipeline, buffer, group)) = &wire {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, group, &[]);
+            pass.set_vertex_buffer(0, buffer.slice(..));
+            pass.draw(0..lines.len() as u32, 0..1);
+        }
     }
     target.copy_out(&mut enc);
     let submission = queue.submit([enc.finish()]);

@@ -58,6 +58,7 @@ struct ViewKey {
     ev: f32,
     shading: Shading,
     highlight: bool,
+    wireframe: bool,
 }
 
 /// The viewer's state.
@@ -71,11 +72,14 @@ pub struct Viewer {
     ev: f32,
     shading: Shading,
     highlight: bool,
+    wireframe: bool,
     by_rank: bool,
     ranks: u32,
     plot_time: bool,
     rows: u32,
     threshold: f64,
+    /// Patch size for restarts, metres (0: the scene's extras or the automatic rule).
+    patch_size: f32,
     view: Option<(TextureHandle, ViewKey)>,
     hemi: Option<(TextureHandle, u64, bool, u32)>,
     status: String,
@@ -125,6 +129,7 @@ impl Viewer {
         Ok(Self {
             rows: args.resolution.rows,
             threshold: args.threshold,
+            patch_size: 0.0,
             args,
             gpu: gpu(),
             tx,
@@ -134,6 +139,7 @@ impl Viewer {
             ev: 0.0,
             shading: Shading::Smooth,
             highlight: true,
+            wireframe: false,
             by_rank: false,
             ranks: 4,
             plot_time: false,
@@ -158,6 +164,7 @@ impl Viewer {
             ..RenderOptions::default()
         };
         options.stop.threshold = self.threshold;
+        options.mesh.patch_size = (self.patch_size > 0.0).then_some(self.patch_size);
         solve::send(
             &self.tx,
             Command::Restart(Settings {
@@ -183,6 +190,7 @@ impl Viewer {
             ev: self.ev,
             shading: self.shading,
             highlight: self.highlight,
+            wireframe: self.wireframe,
         };
         if self.view.as_ref().is_some_and(|(_, k)| *k == key) || size[0] < 8 || size[1] < 8 {
             return;
@@ -208,6 +216,7 @@ impl Viewer {
             height: size[1],
             shading: self.shading,
             supersample: 1,
+            wireframe: self.wireframe,
         };
         match render_view(
             &self.gpu.device,
@@ -315,6 +324,7 @@ impl Viewer {
             height: 600,
             shading: self.shading,
             supersample: 2,
+            wireframe: self.wireframe,
         };
         let path = std::path::PathBuf::from("out").join(format!("viewer-{}.exr", snap.shots));
         self.status = match render_view(
@@ -377,6 +387,20 @@ impl Viewer {
                 });
         });
         ui.horizontal(|ui| {
+            ui.label("patch size");
+            ui.add(
+                egui::DragValue::new(&mut self.patch_size)
+                    .speed(0.005)
+                    .range(0.0..=10.0)
+                    .suffix(" m"),
+            );
+            ui.label(if self.patch_size > 0.0 {
+                ""
+            } else {
+                "(scene / automatic)"
+            });
+        });
+        ui.horizontal(|ui| {
             ui.label("stop at");
             ui.add(
                 egui::DragValue::new(&mut self.threshold)
@@ -395,6 +419,7 @@ impl Viewer {
             ui.radio_value(&mut self.shading, Shading::Flat, "flat (elements)");
         });
         ui.checkbox(&mut self.highlight, "highlight the shooter");
+        ui.checkbox(&mut self.wireframe, "element wireframe");
         if ui.button("Reset camera").clicked() {
             self.orbit = self.home;
         }

@@ -1,36 +1,8 @@
 //! `radiosity-viewer`: watch a radiosity solve converge.
 
-mod app;
-mod solve;
-
 use anyhow::{Context, Result};
 use clap::Parser;
-use radiosity::hemisphere::Resolution;
-use std::path::PathBuf;
-
-/// Watch the radiosity of a scene converge, shot by shot.
-#[derive(Parser, Debug, Clone)]
-#[command(version, about)]
-pub struct Args {
-    /// A .gltf/.glb file or a built-in scene (cornell, cubes-N, classroom-c1, ...).
-    #[arg(default_value = "cornell")]
-    pub scene: String,
-    /// Hemisphere resolution R_phi x R_theta.
-    #[arg(long, default_value = "128x512")]
-    pub resolution: Resolution,
-    /// Stop when the unshot power is at most this fraction of the emitted power.
-    #[arg(long, default_value_t = 1e-3)]
-    pub threshold: f64,
-    /// Pause after this many shots (with --screenshot: then save and exit).
-    #[arg(long)]
-    pub shots: Option<u64>,
-    /// After --shots shots, save a PNG of the window here and exit.
-    #[arg(long, requires = "shots")]
-    pub screenshot: Option<PathBuf>,
-    /// Window size in logical pixels, WxH.
-    #[arg(long, default_value = "1280x760")]
-    pub size: String,
-}
+use radiosity_viewer::{app, Args};
 
 fn main() {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))

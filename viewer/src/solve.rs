@@ -130,12 +130,14 @@ fn solve(
     wake();
     let mut paused = false;
     let mut steps_left: Option<u64> = None;
+    // The automatic pause applies once: a step or resume goes past it.
+    let mut pause_at = settings.pause_at;
     let mut ff = Vec::new();
     let mut solve_time = Duration::ZERO;
     let mut last_publish = Instant::now();
     loop {
         let done = solver.done(&opts.stop);
-        let at_pause = settings.pause_at.is_some_and(|n| solver.shots() >= n);
+        let at_pause = pause_at.is_some_and(|n| solver.shots() >= n);
         let idle = paused || done || at_pause || steps_left == Some(0);
         let cmd = if idle {
             match commands.recv_timeout(Duration::from_millis(100)) {
@@ -151,16 +153,21 @@ fn solve(
             Some(Command::Resume) => {
                 paused = false;
                 steps_left = None;
+                pause_at = None;
             }
             Some(Command::Step) => {
                 paused = false;
                 steps_left = Some(1);
+                pause_at = None;
             }
             Some(Command::Restart(next)) => return Ok(Some(next)),
             Some(Command::Quit) => return Ok(None),
             None => {}
         }
-        let shooting = !(paused || done || at_pause || steps_left == Some(0));
+        let shooting = !(paused
+            || done
+            || pause_at.is_some_and(|n| solver.shots() >= n)
+            || steps_left == Some(0));
         if shooting {
             let t = Instant::now();
             let Some(shooter) = solver.select_shooter() else {

@@ -1,0 +1,33 @@
+//! The radiosity viewer: an egui window that watches a solve converge. The
+//! binary is `radiosity-viewer`; the solve driver is a library module so its
+//! logic (pause, step, resume, restart) is tested without a window.
+
+pub mod app;
+pub mod solve;
+
+use radiosity::hemisphere::Resolution;
+use std::path::PathBuf;
+
+/// Watch the radiosity of a scene converge, shot by shot.
+#[derive(clap::Parser, Debug, Clone)]
+#[command(version, about)]
+pub struct Args {
+    /// A .gltf/.glb file or a built-in scene (cornell, cubes-N, classroom-c1, ...).
+    #[arg(default_value = "cornell")]
+    pub scene: String,
+    /// Hemisphere resolution R_phi x R_theta.
+    #[arg(long, default_value = "128x512")]
+    pub resolution: Resolution,
+    /// Stop when the unshot power is at most this fraction of the emitted power.
+    #[arg(long, default_value_t = 1e-3)]
+    pub threshold: f64,
+    /// Pause after this many shots (with --screenshot: then save and exit).
+    #[arg(long)]
+    pub shots: Option<u64>,
+    /// After --shots shots, save a PNG of the window here and exit.
+    #[arg(long, requires = "shots")]
+    pub screenshot: Option<PathBuf>,
+    /// Window size in logical pixels, WxH.
+    #[arg(long, default_value = "1280x760")]
+    pub size: String,
+}

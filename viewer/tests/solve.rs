@@ -1,0 +1,100 @@
+//! The viewer's solve logic without a window: pause at a shot count, step,
+//! resume, restart with new settings, quit.
+
+use radiosity::gpu::Gpu;
+use radiosity::hemisphere::Resolution;
+use radiosity::render::RenderOptions;
+use radiosity_viewer::solve::{self, Command, Settings, Snapshot};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Waits (bounded) until `cond` holds for the shared snapshot.
+fn wait_for(shared: &Mutex<Snapshot>, what: &str, cond: impl Fn(&Snapshot) -> bool) -> Snapshot {
+    let start = Instant::now();
+    loop {
+        let s = shared.lock().expect("lock").clone();
+        if cond(&s) {
+            return s;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "timed out waiting for {what}: {} shots, paused {}",
+            s.shots,
+            s.paused
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn pause_step_resume_restart_quit() {
+    let gpu = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let mut options = RenderOptions {
+        resolution: Resolution {
+            rows: 32,
+            cols: 128,
+        },
+        ..RenderOptions::default()
+    };
+    options.stop.threshold = 0.2;
+    let shared = Arc::new(Mutex::new(Snapshot::default()));
+    let (tx, rx) = std::sync::mpsc::channel();
+    let thread_shared = shared.clone();
+    let handle = std::thread::spawn(move || {
+        solve::run(
+            gpu,
+            scene,
+            Settings {
+                options,
+                pause_at: Some(5),
+            },
+            rx,
+            thread_shared,
+            || {},
+        )
+    });
+
+    // Pauses by itself after 5 shots, with the mesh, radiance and item buffer published.
+    let s = wait_for(&shared, "the automatic pause", |s| s.shots == 5 && s.paused);
+    assert_eq!(s.items.len(), 32 * 128);
+    assert_eq!(
+        s.radiance.len(),
+        s.mesh.as_ref().expect("mesh").elements.len()
+    );
+    assert_eq!(s.history.len(), 5);
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(shared.lock().expect("lock").shots, 5, "a pause holds");
+
+    // Step: exactly one more shot.
+    solve::send(&tx, Command::Step);
+    wait_for(&shared, "one step", |s| s.shots == 6 && s.paused);
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(shared.lock().expect("lock").shots, 6, "a step is one shot");
+
+    // Resume: runs to the stop rule.
+    solve::send(&tx, Command::Resume);
+    let s = wait_for(&shared, "convergence", |s| s.converged);
+    assert!(s.unshot_fraction <= 0.2 && s.shots > 6);
+
+    // Restart with another resolution: starts again from no shots.
+    let mut options = RenderOptions {
+        resolution: Resolution { rows: 16, cols: 64 },
+        ..RenderOptions::default()
+    };
+    options.stop.threshold = 0.5;
+    solve::send(
+        &tx,
+        Command::Restart(Settings {
+            options,
+            pause_at: Some(2),
+        }),
+    );
+    let s = wait_for(&shared, "the restart", |s| {
+        s.resolution == (16, 64) && s.shots == 2 && s.paused
+    });
+    assert_eq!(s.items.len(), 16 * 64);
+
+    solve::send(&tx, Command::Quit);
+    handle.join().expect("the solve thread ends cleanly");
+}
