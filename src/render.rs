@@ -555,7 +555,40 @@ pub fn render_on(
         per_rank,
         LoadBalance::from_busy(&busy),
     );
-    let report = Report {
+    let report = build_report(
+        scene,
+        &mesh,
+        opts,
+        &solver,
+        gpu,
+        [opts.width, height],
+        timings,
+        parallel,
+    );
+    let radiosity = solver.radiosity().to_vec();
+    drop(solver);
+    Ok(Some(Rendered {
+        mesh,
+        radiosity,
+        image,
+        report,
+    }))
+}
+
+/// The report of a (gathered) solution: settings, counts, progress and surfaces.
+#[allow(clippy::too_many_arguments)]
+pub fn build_report(
+    scene: &Scene,
+    mesh: &Mesh,
+    opts: &RenderOptions,
+    solver: &Solver,
+    gpu: &Gpu,
+    image_size: [u32; 2],
+    timings: Timings,
+    parallel: Parallel,
+) -> Report {
+    let unshot_fraction = solver.unshot_fraction();
+    Report {
         scene: scene.name.clone(),
         settings: Settings {
             resolution: opts.resolution,
@@ -563,7 +596,7 @@ pub fn render_on(
             max_shots: opts.stop.max_shots,
             mesh: opts.mesh,
             raster_split: opts.raster_split,
-            image_size: [opts.width, height],
+            image_size,
             shading: opts.shading,
             ambient: opts.ambient,
         },
@@ -573,23 +606,29 @@ pub fn render_on(
             patches: mesh.patches.len(),
             elements: mesh.elements.len(),
             cells: opts.resolution.cells(),
-            ranks,
+            ranks: parallel.ranks,
         },
-        shots,
+        shots: solver.shots(),
         unshot_fraction,
         converged: unshot_fraction <= opts.stop.threshold,
         emitted_power: solver.emitted_power(),
         timings,
         parallel,
-        surfaces: report::surfaces(&mesh, &scene.nodes, solver.radiosity()),
+        surfaces: report::surfaces(mesh, &scene.nodes, solver.radiosity()),
         warnings: scene.warnings.clone(),
-    };
-    let radiosity = solver.radiosity().to_vec();
-    drop(solver);
-    Ok(Some(Rendered {
-        mesh,
-        radiosity,
-        image,
-        report,
-    }))
+    }
+}
+
+/// The `parallel` section of a one-process solve.
+pub fn single_process(res: Resolution, elements: usize, shots: u64) -> Parallel {
+    Parallel::new(
+        1,
+        TileLayout::whole(res),
+        Exchange::Hemispheres,
+        res,
+        elements,
+        shots,
+        Vec::new(),
+        LoadBalance::default(),
+    )
 }

@@ -1,7 +1,7 @@
 //! The window: a 3-D view of the converging solution, the statistics and
 //! controls, and the last shot's hemisphere.
 
-use crate::solve::{self, Command, Settings, Snapshot};
+use crate::solve::{self, Command, SaveRequest, Settings, Snapshot};
 use crate::Args;
 use eframe::egui::{self, Color32, ColorImage, TextureHandle, TextureOptions};
 use glam::{EulerRot, Quat, Vec3};
@@ -315,33 +315,19 @@ impl Viewer {
         }
     }
 
-    fn save_image(&mut self, snap: &Snapshot) {
-        let Some(mesh) = &snap.mesh else { return };
-        let mut camera = self.orbit.camera();
-        camera.aspect = Some(4.0 / 3.0);
-        let settings = ViewSettings {
-            width: 800,
-            height: 600,
+    fn save(&mut self, snap: &Snapshot) {
+        let stem = std::path::Path::new(&self.args.scene)
+            .file_stem()
+            .map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned());
+        let req = SaveRequest {
+            camera: self.orbit.camera(),
             shading: self.shading,
-            supersample: 2,
             wireframe: self.wireframe,
+            ev: self.ev,
+            stem: std::path::PathBuf::from("out").join(format!("{stem}-{}", snap.shots)),
         };
-        let path = std::path::PathBuf::from("out").join(format!("viewer-{}.exr", snap.shots));
-        self.status = match render_view(
-            &self.gpu.device,
-            &self.gpu.queue,
-            mesh,
-            &snap.radiance,
-            &camera,
-            &settings,
-        )
-        .map_err(|e| e.to_string())
-        .and_then(|px| {
-            radiosity::output::write_image(&path, 800, 600, &px, self.ev).map_err(|e| e.to_string())
-        }) {
-            Ok(png) => format!("wrote {} and {}", path.display(), png.display()),
-            Err(e) => format!("save failed: {e}"),
-        };
+        solve::send(&self.tx, Command::Save(req));
+        self.status = "saving…".into();
     }
 
     fn side_panel(&mut self, ui: &mut egui::Ui, snap: &Snapshot) {
@@ -423,10 +409,10 @@ impl Viewer {
         if ui.button("Reset camera").clicked() {
             self.orbit = self.home;
         }
-        if ui.button("Save image (EXR + PNG)").clicked() {
-            self.save_image(snap);
+        if ui.button("Save image and report").clicked() {
+            self.save(snap);
         }
-        ui.label(&self.status);
+        ui.label(snap.saved.as_deref().unwrap_or(&self.status));
         ui.separator();
         ui.horizontal(|ui| {
             ui.heading("Convergence");

@@ -22,8 +22,25 @@ pub enum Command {
     Step,
     /// Start again from B = E with new settings.
     Restart(Settings),
+    /// Write the current image (EXR + PNG) and report, as `radiosity render` does.
+    Save(SaveRequest),
     /// End the thread.
     Quit,
+}
+
+/// What to save and how to draw it.
+#[derive(Clone, Debug)]
+pub struct SaveRequest {
+    /// The view to render.
+    pub camera: radiosity::scene::Camera,
+    /// Smooth or flat.
+    pub shading: radiosity::gpu::Shading,
+    /// Element edges on top.
+    pub wireframe: bool,
+    /// PNG exposure adjustment in stops.
+    pub ev: f32,
+    /// Output paths without extension (".exr", ".png", ".json" are added).
+    pub stem: std::path::PathBuf,
 }
 
 /// Settings a restart may change.
@@ -64,6 +81,8 @@ pub struct Snapshot {
     pub converged: bool,
     /// A failure, shown in the window.
     pub error: Option<String>,
+    /// The outcome of the last save.
+    pub saved: Option<String>,
 }
 
 /// Runs solves until told to quit. Publishes into `shared` and calls `wake` after each update.
@@ -161,6 +180,13 @@ fn solve(
                 pause_at = None;
             }
             Some(Command::Restart(next)) => return Ok(Some(next)),
+            Some(Command::Save(req)) => {
+                let outcome = save(gpu, scene, &mesh, opts, &solver, solve_time, &req);
+                if let Ok(mut s) = shared.lock() {
+                    s.saved = Some(outcome.unwrap_or_else(|e| format!("save failed: {e}")));
+                }
+                wake();
+            }
             Some(Command::Quit) => return Ok(None),
             None => {}
         }
@@ -216,6 +242,50 @@ fn solve(
             s.converged = converged;
         }
     }
+}
+
+/// Writes the image and the report of the current state.
+fn save(
+    gpu: &Gpu,
+    scene: &Scene,
+    mesh: &Mesh,
+    opts: &RenderOptions,
+    solver: &Solver,
+    solve_time: Duration,
+    req: &SaveRequest,
+) -> Result<String, String> {
+    let (w, h) = (800, 600);
+    let mut camera = req.camera;
+    camera.aspect = Some(w as f32 / h as f32);
+    let view = radiosity::gpu::ViewSettings {
+        width: w,
+        height: h,
+        shading: req.shading,
+        supersample: 2,
+        wireframe: req.wireframe,
+    };
+    let pixels = radiosity::gpu::render_view(
+        &gpu.device,
+        &gpu.queue,
+        mesh,
+        &display(solver),
+        &camera,
+        &view,
+    )
+    .map_err(|e| e.to_string())?;
+    let exr = req.stem.with_extension("exr");
+    radiosity::output::write_image(&exr, w, h, &pixels, req.ev).map_err(|e| e.to_string())?;
+    let timings = radiosity::report::Timings {
+        solve: solve_time.as_secs_f64(),
+        ..Default::default()
+    };
+    let parallel =
+        radiosity::render::single_process(opts.resolution, mesh.elements.len(), solver.shots());
+    let report =
+        radiosity::render::build_report(scene, mesh, opts, solver, gpu, [w, h], timings, parallel);
+    let json = req.stem.with_extension("json");
+    radiosity::output::write_json(&json, &report).map_err(|e| e.to_string())?;
+    Ok(format!("wrote {}, .png and .json", exr.display()))
 }
 
 fn display(solver: &Solver) -> Vec<[f32; 3]> {

@@ -2,9 +2,10 @@
 //! resume, restart with new settings, quit.
 
 use radiosity::gpu::Gpu;
+use radiosity::gpu::Shading;
 use radiosity::hemisphere::Resolution;
 use radiosity::render::RenderOptions;
-use radiosity_viewer::solve::{self, Command, Settings, Snapshot};
+use radiosity_viewer::solve::{self, Command, SaveRequest, Settings, Snapshot};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -76,6 +77,39 @@ fn pause_step_resume_restart_quit() {
     solve::send(&tx, Command::Resume);
     let s = wait_for(&shared, "convergence", |s| s.converged);
     assert!(s.unshot_fraction <= 0.2 && s.shots > 6);
+
+    // Save writes what `radiosity render` writes: EXR, PNG and a JSON report.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let stem = dir.path().join("saved");
+    let camera = radiosity::scene::open("cornell")
+        .expect("scene")
+        .camera
+        .expect("camera");
+    solve::send(
+        &tx,
+        Command::Save(SaveRequest {
+            camera,
+            shading: Shading::Flat,
+            wireframe: true,
+            ev: 0.0,
+            stem: stem.clone(),
+        }),
+    );
+    let s = wait_for(&shared, "the save", |s| s.saved.is_some());
+    assert!(
+        s.saved.as_deref().is_some_and(|m| m.starts_with("wrote")),
+        "{:?}",
+        s.saved
+    );
+    for ext in ["exr", "png", "json"] {
+        assert!(stem.with_extension(ext).exists(), "{ext} missing");
+    }
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(stem.with_extension("json")).expect("report"),
+    )
+    .expect("json");
+    assert_eq!(report["shots"].as_u64(), Some(s.shots));
+    assert_eq!(report["surfaces"].as_array().map(Vec::len), Some(8));
 
     // Restart with another resolution: starts again from no shots.
     let mut options = RenderOptions {
