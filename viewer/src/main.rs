@@ -22,8 +22,18 @@ fn run(args: Args) -> Result<()> {
         .split_once('x')
         .and_then(|(w, h)| Some((w.parse::<f32>().ok()?, h.parse::<f32>().ok()?)))
         .context("--size must be WxH, e.g. 1280x760")?;
+    // Vulkan only, like the renderer: its float render targets need it, and a
+    // missing driver must be an error rather than a fall-back to GL.
+    let mut setup = eframe::egui_wgpu::WgpuSetupCreateNew::without_display_handle();
+    setup.instance_descriptor.backends =
+        eframe::wgpu::Backends::from_env().unwrap_or(eframe::wgpu::Backends::VULKAN);
+    let wgpu_options = eframe::egui_wgpu::WgpuConfiguration {
+        wgpu_setup: eframe::egui_wgpu::WgpuSetup::CreateNew(setup),
+        ..Default::default()
+    };
     let options = eframe::NativeOptions {
         renderer: eframe::Renderer::Wgpu,
+        wgpu_options,
         viewport: eframe::egui::ViewportBuilder::default()
             .with_inner_size([w, h])
             .with_title(format!("radiosity — {}", args.scene)),
