@@ -99,6 +99,14 @@ fn srgb(x: f32) -> u8 {
     (v * 255.0 + 0.5) as u8
 }
 
+/// Linear pixels scaled by `exposure`, clipped and sRGB-encoded, as RGB bytes.
+pub fn tone_map(pixels: &[[f32; 3]], exposure: f32) -> Vec<u8> {
+    pixels
+        .iter()
+        .flat_map(|p| p.map(|c| srgb(c * exposure)))
+        .collect()
+}
+
 /// Tone-maps linear pixels (scaled by `exposure`, clipped, sRGB) into PNG bytes.
 pub fn encode_png(
     width: u32,
@@ -106,11 +114,7 @@ pub fn encode_png(
     pixels: &[[f32; 3]],
     exposure: f32,
 ) -> Result<Vec<u8>, String> {
-    let bytes: Vec<u8> = pixels
-        .iter()
-        .flat_map(|p| p.map(|c| srgb(c * exposure)))
-        .collect();
-    let img = image::RgbImage::from_raw(width, height, bytes)
+    let img = image::RgbImage::from_raw(width, height, tone_map(pixels, exposure))
         .ok_or("pixel count does not match the image size")?;
     let mut buf = Cursor::new(Vec::new());
     img.write_to(&mut buf, image::ImageFormat::Png)

@@ -229,10 +229,7 @@ impl Viewer {
             Ok(pixels) => {
                 let scale =
                     radiosity::output::auto_exposure(&snap.radiance_pixels_hint(&pixels), self.ev);
-                let bytes: Vec<u8> = pixels
-                    .iter()
-                    .flat_map(|p| p.map(|c| srgb(c * scale)))
-                    .collect();
+                let bytes = radiosity::output::tone_map(&pixels, scale);
                 let image = ColorImage::from_rgb([size[0] as usize, size[1] as usize], &bytes);
                 match &mut self.view {
                     Some((tex, k)) => {
@@ -509,20 +506,6 @@ impl HintExt for Snapshot {
             .copied()
             .collect()
     }
-}
-
-fn srgb(x: f32) -> u8 {
-    let x = if x.is_finite() {
-        x.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let v = if x <= 0.0031308 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (v * 255.0 + 0.5) as u8
 }
 
 /// A stable, bright colour per id.
