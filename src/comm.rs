@@ -68,8 +68,11 @@ impl Collectives for MpiComm {
         out
     }
 
-    fn all_gather_u32(&self, local: &[u32]) -> Vec<Vec<u32>> {
-        let counts = self.all_counts(local.len());
+    fn all_gather_u32(&self, local: &[u32], lengths: Option<&[usize]>) -> Vec<Vec<u32>> {
+        let counts = match lengths {
+            Some(l) => l.iter().map(|&n| n as Count).collect(),
+            None => self.all_counts(local.len()),
+        };
         let displs = Self::displacements(&counts);
         let total: usize = counts.iter().map(|&c| c as usize).sum();
         let mut buf = vec![0u32; total];
@@ -180,7 +183,7 @@ impl Collectives for MpiComm {
             Err(m) => m.bytes().map(u32::from).chain(std::iter::once(0)).collect(),
         };
         // Message bytes travel as u32 so the exchange reuses the varcount gather.
-        let all = self.all_gather_u32(&msg);
+        let all = self.all_gather_u32(&msg, None);
         let failed: Vec<(usize, String)> = all
             .iter()
             .enumerate()

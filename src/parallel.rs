@@ -22,8 +22,9 @@ pub trait Collectives {
     fn size(&self) -> usize;
     /// Every rank's `local` (the same length on every rank), concatenated in rank order.
     fn all_gather_f64(&self, local: &[f64]) -> Vec<f64>;
-    /// Every rank's `local` (any length), in rank order.
-    fn all_gather_u32(&self, local: &[u32]) -> Vec<Vec<u32>>;
+    /// Every rank's `local` (any length), in rank order. `lengths` gives every
+    /// rank's length when all ranks already know them, which saves a collective.
+    fn all_gather_u32(&self, local: &[u32], lengths: Option<&[usize]>) -> Vec<Vec<u32>>;
     /// Element-wise sum of `data` over ranks, reduced to rank 0 and broadcast back.
     fn reduce_broadcast_sum(&self, data: &mut [u64]);
     /// Sends `outgoing[r]` to rank r; returns everything sent to this rank, in rank order.
@@ -55,7 +56,7 @@ impl Collectives for Single {
     fn all_gather_f64(&self, local: &[f64]) -> Vec<f64> {
         local.to_vec()
     }
-    fn all_gather_u32(&self, local: &[u32]) -> Vec<Vec<u32>> {
+    fn all_gather_u32(&self, local: &[u32], _lengths: Option<&[usize]>) -> Vec<Vec<u32>> {
         vec![local.to_vec()]
     }
     fn reduce_broadcast_sum(&self, _data: &mut [u64]) {}

@@ -106,6 +106,10 @@ pub struct GpuFormFactors<'a> {
     element_rank: Vec<u32>,
     /// Cells (row-major indices) of each rank's tiles (hemisphere exchange).
     cells_of: Vec<Vec<u32>>,
+    /// How many cells each rank owns (known to all, so never exchanged).
+    cell_counts: Vec<usize>,
+    /// This rank's cell values, packed for the all-gather (reused every shot).
+    packed: Vec<u32>,
     acc: FormFactorAccumulator,
     dff: Vec<u64>,
     items: Vec<u32>,
@@ -171,6 +175,8 @@ impl<'a> GpuFormFactors<'a> {
             exchange: opts.exchange,
             owned,
             element_rank,
+            cell_counts: cells_of.iter().map(Vec::len).collect(),
+            packed: Vec::new(),
             cells_of,
             acc: FormFactorAccumulator::new(mesh.elements.len()),
             dff: res.delta_form_factors_fixed(),
@@ -220,12 +226,14 @@ impl<'a> GpuFormFactors<'a> {
         let mut exchange = Duration::ZERO;
         match self.exchange {
             Exchange::Hemispheres => {
-                let packed: Vec<u32> = self.cells_of[comm.rank()]
-                    .iter()
-                    .map(|&i| self.items[i as usize])
-                    .collect();
+                self.packed.clear();
+                self.packed.extend(
+                    self.cells_of[comm.rank()]
+                        .iter()
+                        .map(|&i| self.items[i as usize]),
+                );
                 let t = Instant::now();
-                let all = comm.all_gather_u32(&packed);
+                let all = comm.all_gather_u32(&self.packed, Some(&self.cell_counts));
                 exchange += t.elapsed();
                 for (cells, values) in self.cells_of.iter().zip(&all) {
                     for (&c, &v) in cells.iter().zip(values) {
