@@ -22,11 +22,16 @@ const EDGE_TOL: f32 = 1.0e-6;
 struct Shot {
     res: vec4<u32>,    // rows (R_phi), cols (R_theta), unused, unused
     tiles: vec4<u32>,  // tile width, tile height, ranks along theta (px), along phi (py)
-    own: vec4<u32>,    // this rank's grid coordinates (x, y); z = 1: lattice mode (1 x 1 tiles)
+    own: vec4<u32>,    // this rank's grid coordinates (x, y); z = 1: lattice mode (1 x 1 tiles);
+                       // w = 1: count coverage
     depth: vec4<f32>,  // x: 1 / far (depth = distance / far)
 }
 
 @group(0) @binding(0) var<uniform> shot: Shot;
+// Per element: cells whose ray hits its front, hidden or not (hybrid form
+// factors divide the visible cells by these, so aliasing cancels). The depth
+// test runs after this shader (it writes depth), so every hit is counted.
+@group(0) @binding(1) var<storage, read_write> coverage: array<atomic<u32>>;
 
 struct Rect {
     @location(0) rect: vec4<f32>,   // x0, x1, y0, y1 in cells
@@ -111,6 +116,9 @@ fn fs(in: VsOut) -> FsOut {
     } else {
         out.item = in.item.x;
         out.depth = min(t * shot.depth.x, 1.0);
+        if (shot.own.w == 1u) {
+            atomicAdd(&coverage[in.item.x], 1u);
+        }
     }
     return out;
 }

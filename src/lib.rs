@@ -3,6 +3,7 @@
 //!
 //! Layers, bottom up (see ARCHITECTURE.md):
 //! - [`hemisphere`]: cells, delta form factors, tiles (pure maths);
+//! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
 //! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
@@ -12,6 +13,7 @@
 //! - [`output`], [`report`]: files out.
 
 pub mod comm;
+pub mod formfactor;
 pub mod gpu;
 pub mod hemisphere;
 pub mod mesh;

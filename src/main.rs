@@ -8,7 +8,7 @@ use radiosity::gpu::{Gpu, Shading};
 use radiosity::hemisphere::Resolution;
 use radiosity::mesh::MeshSettings;
 use radiosity::parallel::{Collectives, Exchange, Single};
-use radiosity::render::{render_on, Progress, RenderOptions};
+use radiosity::render::{render_on, FormFactorMethod, Progress, RenderOptions};
 use radiosity::solver::StopRule;
 use radiosity::{output, scene};
 use std::io::IsTerminal;
@@ -49,6 +49,13 @@ pub struct SolveArgs {
     /// Hemisphere resolution R_phi x R_theta (polar rows x azimuth columns).
     #[arg(long, default_value = "128x512")]
     pub resolution: Resolution,
+    /// How form factors are evaluated: hybrid (receiver-side: Lambert's
+    /// contour integral from each element to the shooter patch, scaled by the
+    /// visible fraction of its hemisphere cells; Baum et al. 1989) or
+    /// hemisphere (the sum of the delta form factors of the cells that show
+    /// each element, a point shooter at the patch centre).
+    #[arg(long, value_enum, default_value = "hybrid")]
+    pub form_factor: FormFactorMethod,
     /// Stop when the unshot power is at most this fraction of the emitted power.
     #[arg(long, default_value_t = 1e-3)]
     threshold: f64,
@@ -82,6 +89,7 @@ impl SolveArgs {
     pub fn options(&self) -> RenderOptions {
         RenderOptions {
             resolution: self.resolution,
+            form_factor: self.form_factor,
             stop: StopRule {
                 threshold: self.threshold,
                 max_shots: self.max_shots,
@@ -127,7 +135,8 @@ struct RenderArgs {
     /// Draw the element edges over the image.
     #[arg(long)]
     wireframe: bool,
-    /// Leave the ambient term out of the image (it never enters the report).
+    /// Leave the ambient term (the estimate of the light not yet shot, Cohen
+    /// et al. 1988) out of the image and the report's radiosities.
     #[arg(long)]
     no_ambient: bool,
     /// Tile size WxH in hemisphere cells when running on several MPI ranks

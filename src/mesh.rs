@@ -85,6 +85,9 @@ pub struct Patch {
     pub area: f64,
     /// Its elements (contiguous).
     pub elements: Range<u32>,
+    /// Its outline, counter-clockwise (a triangle repeats its last corner):
+    /// what receiver-side analytic form factors integrate over.
+    pub corners: [Vec3; 4],
 }
 
 /// A receiving element: a small planar quad or triangle.
@@ -189,7 +192,7 @@ impl Mesh {
         });
     }
 
-    fn push_patch(&mut self, polygon: u32, first_element: u32) {
+    fn push_patch(&mut self, polygon: u32, first_element: u32, corners: [Vec3; 4]) {
         let els = &self.elements[first_element as usize..];
         let area: f64 = els.iter().map(|e| e.area).sum();
         let centre = els
@@ -202,6 +205,7 @@ impl Mesh {
             centre,
             area,
             elements: first_element..self.elements.len() as u32,
+            corners,
         });
         for e in &mut self.elements[first_element as usize..] {
             e.patch = patch;
@@ -247,7 +251,11 @@ impl Mesh {
                         self.push_element(polygon, corners, ids);
                     }
                 }
-                self.push_patch(polygon, first);
+                let (i0, j0) = (pi * eg[0], pj * eg[1]);
+                let (i1, j1) = (i0 + eg[0], j0 + eg[1]);
+                let outline = [id(i0, j0), id(i1, j0), id(i1, j1), id(i0, j1)]
+                    .map(|k| self.vertices[k as usize]);
+                self.push_patch(polygon, first, outline);
             }
         }
     }
@@ -296,7 +304,12 @@ impl Mesh {
                     }
                 }
             }
-            self.push_patch(polygon, first);
+            let outline = [pt(0, 0), pt(ne, 0), pt(0, ne)].map(|k| self.vertices[k as usize]);
+            self.push_patch(
+                polygon,
+                first,
+                [outline[0], outline[1], outline[2], outline[2]],
+            );
         }
     }
 
@@ -310,13 +323,21 @@ impl Mesh {
     }
 }
 
-/// Centroid of an element (vertex average of its distinct corners).
+/// Centroid (centre of area) of an element: for a quad, the area-weighted
+/// centroids of its two triangles (the vertex average is off for a kite or a
+/// trapezoid, and the receiver-side form factor is evaluated here).
 pub fn element_centre(e: &Element) -> Vec3 {
-    if e.corners[3] == e.corners[2] {
-        (e.corners[0] + e.corners[1] + e.corners[2]) / 3.0
-    } else {
-        (e.corners[0] + e.corners[1] + e.corners[2] + e.corners[3]) / 4.0
+    let c = e.corners;
+    let tri = (c[0] + c[1] + c[2]) / 3.0;
+    if c[3] == c[2] {
+        return tri;
     }
+    let a1 = (c[1] - c[0]).cross(c[2] - c[0]).length();
+    let a2 = (c[2] - c[0]).cross(c[3] - c[0]).length();
+    if a1 + a2 <= 0.0 {
+        return (c[0] + c[1] + c[2] + c[3]) / 4.0;
+    }
+    (tri * a1 + (c[0] + c[2] + c[3]) / 3.0 * a2) / (a1 + a2)
 }
 
 /// Patch edge length for every polygon under the automatic rule (or the fixed size).

@@ -6,16 +6,34 @@ use crate::gpu::{render_view, Gpu, GpuError, HemisphereRasterizer, Shading, View
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout};
 use crate::mesh::{Mesh, MeshSettings};
 use crate::parallel::{rank_grid, Collectives, Exchange, Single};
-use crate::report::{self, Counts, LoadBalance, Parallel, RankStats, Report, Settings, Timings};
+use crate::report::{
+    self, Counts, LoadBalance, Parallel, RankStats, Report, Settings, Timings, TracePoint,
+};
 use crate::scene::Scene;
 use crate::solver::{Candidate, FormFactorSource, Solver, StopRule, UNSHOT_ONE};
 use std::time::{Duration, Instant};
+
+/// How the form factor from a shooter to each element is evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FormFactorMethod {
+    /// Spencer's hemisphere alone: the sum of the delta form factors of the
+    /// cells that show each element (a point shooter at the patch centre).
+    Hemisphere,
+    /// Receiver-side (Baum, Rushmeier & Winget 1989): Lambert's contour
+    /// integral from each element's centre to the shooter patch, times the
+    /// fraction of the cells its projection covers that show it.
+    #[default]
+    Hybrid,
+}
 
 /// Everything a render can be told.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
     /// Hemisphere resolution.
     pub resolution: Resolution,
+    /// How form factors are evaluated.
+    pub form_factor: FormFactorMethod,
     /// When to stop.
     pub stop: StopRule,
     /// How to subdivide.
@@ -47,6 +65,7 @@ impl Default for RenderOptions {
     fn default() -> Self {
         Self {
             resolution: Resolution::default(),
+            form_factor: FormFactorMethod::default(),
             stop: StopRule::default(),
             mesh: MeshSettings::default(),
             raster_split: 1,
@@ -100,6 +119,10 @@ pub struct GpuFormFactors<'a> {
     raster: HemisphereRasterizer,
     layout: TileLayout,
     exchange: Exchange,
+    method: FormFactorMethod,
+    /// What one cell adds to the element it shows, per row: its delta form
+    /// factor in fixed point (hemisphere) or one visible cell (hybrid).
+    weights: Vec<u64>,
     /// Whether this rank owns each element.
     owned: Vec<bool>,
     /// Rank owning each element (sparse exchange).
@@ -111,7 +134,6 @@ pub struct GpuFormFactors<'a> {
     /// This rank's cell values, packed for the all-gather (reused every shot).
     packed: Vec<u32>,
     acc: FormFactorAccumulator,
-    dff: Vec<u64>,
     items: Vec<u32>,
     full: Vec<u32>,
     pairs: Vec<(u32, u64)>,
@@ -149,7 +171,15 @@ impl<'a> GpuFormFactors<'a> {
                 "tile layout {layout:?} has a zero size"
             )));
         }
-        let raster = HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_split, extent)?;
+        let mut raster =
+            HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_split, extent)?;
+        let hybrid = opts.form_factor == FormFactorMethod::Hybrid;
+        raster.set_count_coverage(hybrid);
+        let weights = if hybrid {
+            vec![crate::formfactor::VISIBLE_ONE; res.rows as usize]
+        } else {
+            res.delta_form_factors_fixed()
+        };
         let rank = comm.rank();
         let element_rank: Vec<u32> = mesh
             .elements
@@ -173,13 +203,14 @@ impl<'a> GpuFormFactors<'a> {
             raster,
             layout,
             exchange: opts.exchange,
+            method: opts.form_factor,
+            weights,
             owned,
             element_rank,
             cell_counts: cells_of.iter().map(Vec::len).collect(),
             packed: Vec::new(),
             cells_of,
             acc: FormFactorAccumulator::new(mesh.elements.len()),
-            dff: res.delta_form_factors_fixed(),
             items: Vec::new(),
             full: vec![crate::hemisphere::EMPTY; res.cells()],
             pairs: Vec::new(),
@@ -219,6 +250,23 @@ impl<'a> GpuFormFactors<'a> {
         Ok(())
     }
 
+    /// Adds this rank's cells of the last drawing to the accumulator: each
+    /// cell's weight to the element it shows and, for hybrid form factors,
+    /// every element's covered cells.
+    fn add_own(&mut self, cols: usize) {
+        self.acc
+            .add_cells(&self.items, cols, 0, &self.weights, None);
+        self.add_coverage();
+    }
+
+    fn add_coverage(&mut self) {
+        for (id, &c) in self.raster.coverage().iter().enumerate() {
+            if c > 0 {
+                self.acc.add(id as u32, c as u64);
+            }
+        }
+    }
+
     /// Adds this rank's cells to the accumulator, exchanges, and leaves the
     /// sums for this rank's elements in the accumulator.
     fn exchange(&mut self, cols: usize) -> Duration {
@@ -241,17 +289,32 @@ impl<'a> GpuFormFactors<'a> {
                     }
                 }
                 self.acc
-                    .add_cells(&self.full, cols, 0, &self.dff, Some(owned));
+                    .add_cells(&self.full, cols, 0, &self.weights, Some(owned));
+                if self.method == FormFactorMethod::Hybrid {
+                    // Coverage counts are per rank: send them to the owners.
+                    let mut outgoing = vec![Vec::new(); comm.size()];
+                    for (id, &c) in self.raster.coverage().iter().enumerate() {
+                        if c > 0 {
+                            outgoing[self.element_rank[id] as usize].push((id as u32, c as u64));
+                        }
+                    }
+                    let t = Instant::now();
+                    let incoming = comm.all_to_all_pairs(&outgoing);
+                    exchange += t.elapsed();
+                    for (id, v) in incoming {
+                        self.acc.add(id, v);
+                    }
+                }
             }
             Exchange::FormFactors => {
-                self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+                self.add_own(cols);
                 let t = Instant::now();
                 comm.reduce_broadcast_sum(self.acc.dense_mut());
                 exchange += t.elapsed();
-                self.acc.retouch(owned);
+                self.acc.retouch(&self.owned);
             }
             Exchange::Sparse => {
-                self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+                self.add_own(cols);
                 self.acc.drain_fixed(&mut self.pairs);
                 let mut outgoing = vec![Vec::new(); comm.size()];
                 for &(id, v) in &self.pairs {
@@ -282,13 +345,13 @@ impl FormFactorSource for GpuFormFactors<'_> {
             for ry in 0..self.layout.py {
                 for rx in 0..self.layout.px {
                     self.draw(&frame, (rx, ry))?;
-                    self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+                    self.add_own(cols);
                 }
             }
             Duration::ZERO
         } else if self.comm.size() == 1 {
             self.draw(&frame, (0, 0))?;
-            self.acc.add_cells(&self.items, cols, 0, &self.dff, None);
+            self.add_own(cols);
             Duration::ZERO
         } else {
             let rank = self.comm.rank() as u32;
@@ -296,12 +359,19 @@ impl FormFactorSource for GpuFormFactors<'_> {
             self.exchange(cols)
         };
         self.acc.drain_fixed(&mut self.pairs);
-        out.clear();
-        out.extend(
-            self.pairs
-                .iter()
-                .map(|&(id, v)| (id, v as f64 / crate::hemisphere::FIXED_ONE)),
-        );
+        match self.method {
+            FormFactorMethod::Hemisphere => {
+                out.clear();
+                out.extend(
+                    self.pairs
+                        .iter()
+                        .map(|&(id, v)| (id, v as f64 / crate::hemisphere::FIXED_ONE)),
+                );
+            }
+            FormFactorMethod::Hybrid => {
+                crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs, out);
+            }
+        }
         let total = start.elapsed();
         let drawn = self.timings.bounds + self.timings.rasterise + self.timings.read_back - before;
         self.timings.exchange += exchange;
@@ -412,6 +482,7 @@ pub fn render_on(
     let layout = source.layout();
 
     let mut solver = Solver::partitioned(&mesh, rank, ranks);
+    let mut trace = Trace::default();
     let mut ff = Vec::new();
     let mut shot_times = Vec::new();
     let (mut select, mut update) = (Duration::ZERO, Duration::ZERO);
@@ -467,6 +538,9 @@ pub fn render_on(
             *b += dt.as_secs_f64();
         }
         shot_times.push(shot_start.elapsed());
+        if trace.due(solver.shots()) {
+            trace.record(comm, &solver, &scene.nodes, opts.ambient, solve_start);
+        }
         if rank == 0 {
             progress(&Progress {
                 shots: solver.shots(),
@@ -475,7 +549,7 @@ pub fn render_on(
             });
         }
     }
-    timings.solve = solve_start.elapsed().as_secs_f64();
+    timings.solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
     let shots = solver.shots();
 
     // Gather the solution and every rank's statistics to rank 0.
@@ -563,7 +637,8 @@ pub fn render_on(
         per_rank,
         LoadBalance::from_busy(&busy),
     );
-    let report = build_report(
+    let solve_seconds = timings.solve;
+    let mut report = build_report(
         scene,
         &mesh,
         opts,
@@ -573,7 +648,8 @@ pub fn render_on(
         timings,
         parallel,
     );
-    let radiosity = solver.radiosity().to_vec();
+    report.convergence = trace.finish(&report, solve_seconds);
+    let radiosity = solver.display_radiosity(opts.ambient);
     drop(solver);
     Ok(Some(Rendered {
         mesh,
@@ -600,6 +676,7 @@ pub fn build_report(
         scene: scene.name.clone(),
         settings: Settings {
             resolution: opts.resolution,
+            form_factor: opts.form_factor,
             threshold: opts.stop.threshold,
             max_shots: opts.stop.max_shots,
             mesh: opts.mesh,
@@ -622,8 +699,91 @@ pub fn build_report(
         emitted_power: solver.emitted_power(),
         timings,
         parallel,
-        surfaces: report::surfaces(mesh, &scene.nodes, solver.radiosity()),
+        surfaces: report::surfaces(mesh, &scene.nodes, &solver.display_radiosity(opts.ambient)),
+        convergence: Vec::new(),
         warnings: scene.warnings.clone(),
+    }
+}
+
+/// The report's convergence trace as the solve goes: when to record, and the
+/// points so far (rank 0's; other ranks only take part in the gathers).
+#[derive(Default)]
+pub struct Trace {
+    /// Recorded points.
+    pub points: Vec<TracePoint>,
+    /// The next shot count to record after the first 32.
+    next: u64,
+    /// Time spent gathering and summarising (left out of the solve time).
+    pub spent: Duration,
+}
+
+impl Trace {
+    /// Whether a point is due after `shots` shots: every shot up to 32, then
+    /// at every power of two and at counts growing by 2^(1/4). The
+    /// same on every rank, since it depends on the shot count alone.
+    pub fn due(&mut self, shots: u64) -> bool {
+        if shots <= 32 || shots.is_power_of_two() {
+            return true;
+        }
+        if shots >= self.next.max(33) {
+            self.next = ((shots as f64) * 2f64.powf(0.25)).ceil() as u64;
+            return true;
+        }
+        false
+    }
+
+    /// Records the solution now. Every rank must call this at the same shot;
+    /// with several ranks the owners' radiosities are gathered to rank 0.
+    pub fn record(
+        &mut self,
+        comm: &dyn Collectives,
+        solver: &Solver,
+        nodes: &[String],
+        ambient: bool,
+        solve_start: Instant,
+    ) {
+        let t = Instant::now();
+        let seconds = (t - solve_start).saturating_sub(self.spent).as_secs_f64();
+        let summary = if comm.size() == 1 {
+            Some((
+                report::surfaces(solver.mesh(), nodes, &solver.display_radiosity(ambient)),
+                solver.unshot_fraction(),
+            ))
+        } else {
+            let (b, u) = solver.local_state();
+            let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
+            gb.zip(gu).map(|(gb, gu)| {
+                let mut whole = Solver::new(solver.mesh());
+                whole.assemble(&gb, &gu);
+                (
+                    report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),
+                    whole.unshot_fraction(),
+                )
+            })
+        };
+        if let Some((surfaces, unshot_fraction)) = summary {
+            self.points.push(TracePoint {
+                shots: solver.shots(),
+                seconds,
+                unshot_fraction,
+                surfaces,
+            });
+        }
+        self.spent += t.elapsed();
+    }
+
+    /// The trace with its last point made equal to the final result.
+    pub fn finish(mut self, report: &Report, seconds: f64) -> Vec<TracePoint> {
+        if self.points.last().is_some_and(|p| p.shots == report.shots) {
+            self.points.pop();
+        }
+        self.points.push(TracePoint {
+            shots: report.shots,
+            seconds,
+            unshot_fraction: report.unshot_fraction,
+            surfaces: report.surfaces.clone(),
+        });
+        self.points
     }
 }
 

@@ -27,8 +27,13 @@ pub struct Report {
     pub timings: Timings,
     /// Ranks, their grid and tiles, the exchange, per-rank phases and traffic, load balance.
     pub parallel: Parallel,
-    /// Per glTF node: area and area-weighted mean radiosity.
+    /// Per glTF node: area and area-weighted mean radiosity (with the
+    /// ambient term unless `settings.ambient` is false).
     pub surfaces: Vec<Surface>,
+    /// The solution as it converged: at every one of the first 32 shots,
+    /// then at every power of two and at shot counts growing by 2^(1/4),
+    /// and at the end (the last point equals `shots` and `surfaces`).
+    pub convergence: Vec<TracePoint>,
     /// Non-fatal problems met on the way.
     pub warnings: Vec<String>,
 }
@@ -38,6 +43,8 @@ pub struct Report {
 pub struct Settings {
     /// Hemisphere resolution (R_phi x R_theta).
     pub resolution: Resolution,
+    /// How form factors were evaluated.
+    pub form_factor: crate::render::FormFactorMethod,
     /// Stop at this unshot fraction.
     pub threshold: f64,
     /// Stop after this many shots.
@@ -50,8 +57,23 @@ pub struct Settings {
     pub image_size: [u32; 2],
     /// Smooth or flat.
     pub shading: crate::gpu::Shading,
-    /// Whether the ambient term was added to the image.
+    /// Whether the ambient term (the unshot light's estimate) is in the
+    /// image and in the reported radiosities.
     pub ambient: bool,
+}
+
+/// One point of the convergence trace.
+#[derive(Clone, Debug, PartialEq, Serialize, serde::Deserialize)]
+pub struct TracePoint {
+    /// Shots taken.
+    pub shots: u64,
+    /// Seconds of solve since the first shot (device set-up and the trace's
+    /// own gathering excluded).
+    pub seconds: f64,
+    /// Unshot power / emitted power.
+    pub unshot_fraction: f64,
+    /// Per node, exactly as the top-level `surfaces`.
+    pub surfaces: Vec<Surface>,
 }
 
 /// Problem sizes.

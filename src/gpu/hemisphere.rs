@@ -77,6 +77,15 @@ pub struct HemisphereRasterizer {
     pipeline: wgpu::RenderPipeline,
     group: wgpu::BindGroup,
     target: RenderTarget,
+    /// Per-element count of the cells each element covers, occluded or not
+    /// (hybrid form factors' visibility denominator), and its readback copy.
+    coverage_buf: wgpu::Buffer,
+    coverage_read: wgpu::Buffer,
+    /// Whether to count coverage this shot.
+    count_coverage: bool,
+    /// The last shot's coverage per element (empty unless counting).
+    coverage: Vec<u32>,
+    elements: usize,
 }
 
 impl HemisphereRasterizer {
@@ -157,6 +166,28 @@ impl HemisphereRasterizer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        // One u32 per element (at least one, as a binding may not be empty).
+        let coverage_bytes = 4 * mesh.elements.len().max(1) as u64;
+        if coverage_bytes > limits.max_storage_buffer_binding_size as u64 {
+            return Err(GpuError::TooLarge(format!(
+                "{} elements need {coverage_bytes} bytes of coverage counters",
+                mesh.elements.len()
+            )));
+        }
+        let coverage_buf = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("coverage"),
+            size: coverage_bytes,
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let coverage_read = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("coverage readback"),
+            size: coverage_bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("hemisphere.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
@@ -206,10 +237,16 @@ impl HemisphereRasterizer {
         let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("hemisphere"),
             layout: &pipeline.get_bind_group_layout(0),
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniform.as_entire_binding(),
-            }],
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: coverage_buf.as_entire_binding(),
+                },
+            ],
         });
         let target = RenderTarget::new(
             device,
@@ -231,7 +268,27 @@ impl HemisphereRasterizer {
             pipeline,
             group,
             target,
+            coverage_buf,
+            coverage_read,
+            count_coverage: false,
+            coverage: Vec::new(),
+            elements: mesh.elements.len(),
         })
+    }
+
+    /// Whether each shot also counts, per element, every cell whose ray hits
+    /// the element whether or not something nearer hides it (see [`HemisphereRasterizer::coverage`]).
+    pub fn set_count_coverage(&mut self, on: bool) {
+        self.count_coverage = on;
+        if !on {
+            self.coverage.clear();
+        }
+    }
+
+    /// The last shot's unoccluded cell count per element (this rank's cells
+    /// only); empty unless [`HemisphereRasterizer::set_count_coverage`] is on.
+    pub fn coverage(&self) -> &[u32] {
+        &self.coverage
     }
 
     /// The hemisphere resolution.
@@ -344,7 +401,7 @@ impl HemisphereRasterizer {
                 layout.px.max(1),
                 layout.py.max(1),
             ],
-            own: [own.0, own.1, lattice as u32, 0],
+            own: [own.0, own.1, lattice as u32, self.count_coverage as u32],
             depth: [1.0 / self.far, 0.0, 0.0, 0.0],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
@@ -355,6 +412,9 @@ impl HemisphereRasterizer {
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("shot"),
         });
+        if self.count_coverage {
+            enc.clear_buffer(&self.coverage_buf, 0, None);
+        }
         {
             let mut pass = self.target.begin_pass(
                 &mut enc,
@@ -373,6 +433,9 @@ impl HemisphereRasterizer {
             }
         }
         self.target.copy_out(&mut enc);
+        if self.count_coverage {
+            enc.copy_buffer_to_buffer(&self.coverage_buf, 0, &self.coverage_read, 0, None);
+        }
         let submission = queue.submit([enc.finish()]);
         items.clear();
         let mut waited = None;
@@ -387,25 +450,45 @@ impl HemisphereRasterizer {
                 own.0 as usize,
                 own.1 as usize,
             );
-            self.target.read_rows(device, submission, |r, row| {
-                waited.get_or_insert_with(Instant::now);
-                let p = r * py + y0;
-                if p < rows {
-                    for (c, b) in row
-                        .chunks_exact(4)
-                        .enumerate()
-                        .take_while(|(c, _)| c * px + x0 < cols)
-                    {
-                        items[p * cols + c * px + x0] = word(b);
+            self.target
+                .read_rows(device, submission.clone(), |r, row| {
+                    waited.get_or_insert_with(Instant::now);
+                    let p = r * py + y0;
+                    if p < rows {
+                        for (c, b) in row
+                            .chunks_exact(4)
+                            .enumerate()
+                            .take_while(|(c, _)| c * px + x0 < cols)
+                        {
+                            items[p * cols + c * px + x0] = word(b);
+                        }
                     }
-                }
-            })?;
+                })?;
         } else {
             items.reserve(self.res.cells());
-            self.target.read_rows(device, submission, |_, row| {
-                waited.get_or_insert_with(Instant::now);
-                items.extend(row.chunks_exact(4).map(word));
-            })?;
+            self.target
+                .read_rows(device, submission.clone(), |_, row| {
+                    waited.get_or_insert_with(Instant::now);
+                    items.extend(row.chunks_exact(4).map(word));
+                })?;
+        }
+        if self.count_coverage {
+            // The item buffer's wait covered this submission; this map is immediate.
+            super::map_read(device, &self.coverage_read, submission)?;
+            {
+                let view = self
+                    .coverage_read
+                    .slice(..)
+                    .get_mapped_range()
+                    .map_err(|e| GpuError::Failed(e.to_string()))?;
+                self.coverage.clear();
+                self.coverage.extend(
+                    view.chunks_exact(4)
+                        .take(self.elements)
+                        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+                );
+            }
+            self.coverage_read.unmap();
         }
         let read_start = waited.unwrap_or_else(Instant::now);
         let rasterise = read_start - start - bounds;

@@ -1,11 +1,13 @@
 //! Form factors through the whole pipeline (glTF file -> render -> report)
-//! against closed-form values (DESIGN.md section 5), automatic subdivision.
+//! against closed-form values (DESIGN.md section 5), automatic subdivision:
+//! the default (hybrid) method within 0.5 %, the pure hemisphere within 1 %.
 //!
 //! The emitter (L_e = 1, exitance pi, black) lights a white receiver (rho = 1)
 //! in empty space; nothing comes back, so the receiver's mean radiosity is
 //! pi * F_er * A_e / A_r and the form factor follows from the report.
 
 use crate::common::*;
+use radiosity::render::FormFactorMethod;
 use radiosity::report::Surface;
 
 fn form_factor(emitter: &Surface, receiver: &Surface) -> f64 {
@@ -20,16 +22,122 @@ fn check(name: &str, emitter: Vec<Vec<glam::Vec3>>, receiver: Vec<Vec<glam::Vec3
             surface("receiver", receiver, 1.0, 0.0),
         ],
     );
+    for (method, tolerance) in [
+        (FormFactorMethod::Hybrid, 0.005),
+        (FormFactorMethod::Hemisphere, 0.01),
+    ] {
+        let mut opts = tight(1e-9);
+        opts.form_factor = method;
+        let r = solve_file(&path, &opts);
+        let f = form_factor(node(&r, "emitter"), node(&r, "receiver"));
+        eprintln!(
+            "{name} ({method:?}): F = {f:.5} (expected {expected:.5}, {} patches, {:+.3} %)",
+            r.report.counts.patches,
+            100.0 * (f / expected - 1.0)
+        );
+        assert!(
+            rel(f, expected) < tolerance,
+            "{name} ({method:?}): F = {f}, expected {expected} within {tolerance}"
+        );
+    }
+}
+
+/// Form factor from the emitter (in z = 0, facing +z) to a polygon, by
+/// Lambert's formula at 32 x 32 midpoints of the emitter, averaged.
+fn emitter_to_polygon(emitter: [[f32; 2]; 2], poly: &[glam::Vec3]) -> f64 {
+    let n = 32;
+    let mut sum = 0.0;
+    for i in 0..n {
+        for j in 0..n {
+            let x = emitter[0][0] as f64
+                + (emitter[1][0] - emitter[0][0]) as f64 * (i as f64 + 0.5) / n as f64;
+            let y = emitter[0][1] as f64
+                + (emitter[1][1] - emitter[0][1]) as f64 * (j as f64 + 0.5) / n as f64;
+            let rel_poly: Vec<[f64; 3]> = poly
+                .iter()
+                .map(|p| [p.x as f64 - x, p.y as f64 - y, p.z as f64])
+                .collect();
+            sum += lambert(&rel_poly);
+        }
+    }
+    sum / (n * n) as f64
+}
+
+#[test]
+fn small_far_receiver() {
+    // A 0.1 m square 2.2 m from a 0.1 m emitter, off the axis: a few cells per
+    // element at 128 x 512, where the pure hemisphere aliases.
+    let receiver = rect(2, 1.8, [1.2, 0.3], [1.3, 0.4], false);
+    let expected = emitter_to_polygon([[0.0, 0.0], [0.1, 0.1]], &receiver);
+    let (_dir, path) = write_scene(
+        "far",
+        &[
+            surface(
+                "emitter",
+                vec![rect(2, 0.0, [0.0, 0.0], [0.1, 0.1], true)],
+                0.0,
+                1.0,
+            ),
+            surface("receiver", vec![receiver], 1.0, 0.0),
+        ],
+    );
     let r = solve_file(&path, &tight(1e-9));
     let f = form_factor(node(&r, "emitter"), node(&r, "receiver"));
-    eprintln!(
-        "{name}: F = {f:.5} (expected {expected}, {} patches)",
-        r.report.counts.patches
+    eprintln!("far: F = {f:.6e} (expected {expected:.6e})");
+    assert!(rel(f, expected) < 0.01, "far: F = {f}, expected {expected}");
+}
+
+#[test]
+fn trace_ends_at_the_report_and_its_error_falls() {
+    // Two facing unit squares, both reflecting 0.5: light bounces between
+    // them, so the solution converges over many shots.
+    let (_dir, path) = write_scene(
+        "bounce",
+        &[
+            surface(
+                "a",
+                vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+                0.5,
+                1.0,
+            ),
+            surface(
+                "b",
+                vec![rect(2, 0.5, [0.0, 0.0], [1.0, 1.0], false)],
+                0.5,
+                0.0,
+            ),
+        ],
     );
-    assert!(
-        rel(f, expected) < 0.01,
-        "{name}: F = {f}, expected {expected} within 1%"
-    );
+    let mut opts = tight(1e-7);
+    opts.ambient = false;
+    let r = solve_file(&path, &opts);
+    let trace = &r.report.convergence;
+    let last = trace.last().expect("a trace");
+    assert_eq!(last.shots, r.report.shots);
+    assert_eq!(last.surfaces, r.report.surfaces);
+    assert_eq!(last.unshot_fraction, r.report.unshot_fraction);
+    assert!(trace.len() >= 20, "{} points", trace.len());
+    // Every doubling of the shot count has a point.
+    let mut s = 1;
+    while s <= r.report.shots {
+        assert!(trace.iter().any(|p| p.shots == s), "no point at {s} shots");
+        s *= 2;
+    }
+    // Error against the final answer falls from first to last point
+    // (without the ambient term, radiosity only grows towards it).
+    let err = |p: &radiosity::report::TracePoint| {
+        p.surfaces
+            .iter()
+            .zip(&r.report.surfaces)
+            .map(|(a, b)| rel(a.radiosity[0], b.radiosity[0]))
+            .fold(0.0, f64::max)
+    };
+    let errors: Vec<f64> = trace.iter().map(err).collect();
+    for w in errors.windows(2) {
+        assert!(w[1] <= w[0] + 1e-12, "error rose: {errors:?}");
+    }
+    assert!(errors[0] > 0.01 && errors[errors.len() - 1] == 0.0);
+    assert!(trace.windows(2).all(|w| w[0].seconds <= w[1].seconds));
 }
 
 #[test]
