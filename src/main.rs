@@ -15,6 +15,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+mod accuracy;
 mod bench;
 
 /// Progressive radiosity with equal-angle hemisphere form factors rasterised by wgpu.
@@ -41,6 +42,14 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Turn render reports (e.g. from scripts/bench-mpi.sh) into a CSV and charts.
     BenchReport(bench::ReportArgs),
+    /// Chart error against solve time for every method option and resolution,
+    /// beside a path tracer (Mitsuba 3), to docs/bench/accuracy.
+    Accuracy {
+        #[command(flatten)]
+        args: accuracy::AccuracyArgs,
+        #[command(flatten)]
+        solve: SolveArgs,
+    },
 }
 
 /// Settings shared by `render` and `bench`.
@@ -205,6 +214,7 @@ fn main() {
         Command::Scene { name, out } => write_scene(&name, &out),
         Command::Bench(args) => bench::run(args),
         Command::BenchReport(args) => bench::report(args),
+        Command::Accuracy { args, solve } => accuracy::run(args, solve),
     };
     if let Err(e) = result {
         if e.downcast_ref::<ReportedByRankZero>().is_none() {

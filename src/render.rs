@@ -5,7 +5,7 @@
 use crate::gpu::{render_view, Gpu, GpuError, HemisphereRasterizer, Shading, ViewSettings};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout};
 use crate::mesh::{Mesh, MeshSettings};
-use crate::parallel::{rank_grid, Collectives, Exchange, Single};
+use crate::parallel::{rank_grid, Collectives, Exchange, Single, Traffic};
 use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Report, Settings, Timings, TracePoint,
 };
@@ -424,8 +424,12 @@ fn stats_vector(
     select: Duration,
     update: Duration,
     comm: &dyn Collectives,
+    trace: Traffic,
 ) -> Vec<f64> {
-    let traffic = comm.traffic();
+    let mut traffic = comm.traffic();
+    // The trace's gathers are bookkeeping, not the solve's exchange.
+    traffic.sent -= trace.sent.min(traffic.sent);
+    traffic.received -= trace.received.min(traffic.received);
     vec![
         select.as_secs_f64(),
         t.bounds.as_secs_f64(),
@@ -556,7 +560,7 @@ pub fn render_on(
     let (b, u) = solver.local_state();
     let gathered_b = comm.gather_f64(&b);
     let gathered_u = comm.gather_f64(&u);
-    let stats = comm.gather_f64(&stats_vector(&source.timings, select, update, comm));
+    let stats = comm.gather_f64(&stats_vector(&source.timings, select, update, comm, trace.traffic));
     let busy = comm.gather_f64(&source.busy);
     let timings_src = source.timings;
     drop(source);
@@ -715,6 +719,8 @@ pub struct Trace {
     next: u64,
     /// Time spent gathering and summarising (left out of the solve time).
     pub spent: Duration,
+    /// Bytes the trace's gathers moved (left out of the exchange's traffic).
+    pub traffic: Traffic,
 }
 
 impl Trace {
@@ -743,6 +749,7 @@ impl Trace {
         solve_start: Instant,
     ) {
         let t = Instant::now();
+        let before = comm.traffic();
         let seconds = (t - solve_start).saturating_sub(self.spent).as_secs_f64();
         let summary = if comm.size() == 1 {
             Some((
@@ -770,6 +777,9 @@ impl Trace {
             });
         }
         self.spent += t.elapsed();
+        let after = comm.traffic();
+        self.traffic.sent += after.sent - before.sent;
+        self.traffic.received += after.received - before.received;
     }
 
     /// The trace with its last point made equal to the final result.

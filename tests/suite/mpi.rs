@@ -35,6 +35,17 @@ fn same_result(a: &serde_json::Value, b: &serde_json::Value, what: &str) {
     for key in ["surfaces", "shots", "unshot_fraction"] {
         assert_eq!(a[key], b[key], "{what}: '{key}' differs");
     }
+    // The convergence trace too, point by point (its seconds are timings).
+    let (ta, tb) = (
+        a["convergence"].as_array().expect("trace"),
+        b["convergence"].as_array().expect("trace"),
+    );
+    assert_eq!(ta.len(), tb.len(), "{what}: trace lengths differ");
+    for (p, q) in ta.iter().zip(tb) {
+        for key in ["shots", "unshot_fraction", "surfaces"] {
+            assert_eq!(p[key], q[key], "{what}: trace '{key}' differs");
+        }
+    }
 }
 
 #[test]
@@ -63,7 +74,10 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
 fn bytes_exchanged_match_the_formulas() {
     let dir = tempfile::tempdir().expect("temp dir");
     // 4 ranks on a 2 x 2 grid with 1 x 1 tiles split 128 x 512 evenly.
-    let h = mpirun(4, dir.path(), "h", &["--exchange", "hemispheres"]);
+    // The formulas are for the pure hemisphere method; hybrid form factors
+    // also send per-element coverage counts to their owners (checked below).
+    let pure = ["--form-factor", "hemisphere"];
+    let h = mpirun(4, dir.path(), "h", &["--exchange", "hemispheres", pure[0], pure[1]]);
     let cells = 128.0 * 512.0;
     assert_eq!(
         h["parallel"]["formula_bytes_per_shot"].as_f64(),
@@ -74,18 +88,33 @@ fn bytes_exchanged_match_the_formulas() {
         Some(4.0 * cells * 3.0 / 4.0)
     );
     // Form factors: every rank receives the whole dense array, 8 bytes per element.
-    let f = mpirun(4, dir.path(), "f", &["--exchange", "form-factors"]);
+    let f = mpirun(4, dir.path(), "f", &["--exchange", "form-factors", pure[0], pure[1]]);
     let elements = f["counts"]["elements"].as_f64().expect("count");
     assert_eq!(
         f["parallel"]["measured_bytes_per_shot"].as_f64(),
         Some(8.0 * elements)
     );
     // Sparse sends no more than the dense array would.
-    let s = mpirun(4, dir.path(), "s", &["--exchange", "sparse"]);
+    let s = mpirun(4, dir.path(), "s", &["--exchange", "sparse", pure[0], pure[1]]);
     let sparse = s["parallel"]["measured_bytes_per_shot"]
         .as_f64()
         .expect("bytes");
     assert!(sparse > 0.0 && sparse < 12.0 * elements, "sparse {sparse}");
+    // Hybrid: the same dense array for form factors; hemispheres add at most
+    // one (element, count) pair of 12 bytes per element.
+    let hf = mpirun(4, dir.path(), "hf", &["--exchange", "form-factors"]);
+    assert_eq!(
+        hf["parallel"]["measured_bytes_per_shot"].as_f64(),
+        Some(8.0 * elements)
+    );
+    let hh = mpirun(4, dir.path(), "hh", &["--exchange", "hemispheres"]);
+    let hb = hh["parallel"]["measured_bytes_per_shot"]
+        .as_f64()
+        .expect("bytes");
+    assert!(
+        hb > 4.0 * cells * 3.0 / 4.0 && hb <= 4.0 * cells * 3.0 / 4.0 + 12.0 * elements + 16.0,
+        "hybrid hemispheres {hb}"
+    );
     for r in [&h, &f, &s] {
         let lb = &r["parallel"]["load_balance"];
         let (min, mean, max) = (

@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""Path-traced per-node radiosity with Mitsuba 3, for `radiosity accuracy`.
+
+Reads the scene that `radiosity accuracy` exports (JSON: per glTF node its
+world-space triangles, reflectance and emitted radiance), builds a Mitsuba
+scene with one-sided diffuse surfaces and area emitters (the renderer's
+conventions, DESIGN.md section 6), and estimates every node's irradiance with
+an `irradiancemeter` sensor attached to it (uniform over its area, cosine-
+weighted directions). Radiosity B = rho * E + pi * L_e per channel.
+
+It renders at sample counts that double from --min-spp to --max-spp and prints
+one JSON line per level: {"spp", "seconds", "surfaces": [{"node", "area",
+"radiosity"}]}, where seconds is the total render time over all nodes at that
+level (scene loading excluded, as device set-up is excluded on our side).
+
+Usage: pathtrace.py SCENE.json [--variant scalar_rgb] [--min-spp 4] [--max-spp 4096]
+Install: pip install mitsuba (llvm_ad_rgb needs Debian's libllvm19; scalar_rgb runs anywhere).
+"""
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scene")
+    ap.add_argument("--variant", default="scalar_rgb")
+    ap.add_argument("--min-spp", type=int, default=4)
+    ap.add_argument("--max-spp", type=int, default=4096)
+    ap.add_argument("--max-seconds", type=float, default=120.0,
+                    help="stop doubling once a level took longer than this")
+    args = ap.parse_args()
+
+    try:
+        import mitsuba as mi
+    except ImportError:
+        sys.exit("pathtrace.py: Mitsuba 3 is not installed: pip install mitsuba")
+    mi.set_variant(args.variant)
+
+    with open(args.scene) as f:
+        scene = json.load(f)
+
+    tmp = tempfile.mkdtemp(prefix="pathtrace-")
+    shapes = {}
+    for i, node in enumerate(scene["nodes"]):
+        tris = node["triangles"]
+        if not tris:
+            continue
+        path = os.path.join(tmp, f"n{i}.obj")
+        with open(path, "w") as obj:
+            for t in tris:
+                for v in t:
+                    obj.write(f"v {v[0]!r} {v[1]!r} {v[2]!r}\n")
+            for k in range(len(tris)):
+                obj.write(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}\n")
+        shape = {
+            "type": "obj",
+            "filename": path,
+            "face_normals": True,
+            "bsdf": {"type": "diffuse",
+                     "reflectance": {"type": "rgb", "value": node["reflectance"]}},
+        }
+        if any(e > 0 for e in node["emission"]):
+            shape["emitter"] = {"type": "area",
+                                "radiance": {"type": "rgb", "value": node["emission"]}}
+        shapes[i] = shape
+
+    def build(spp):
+        d = {"type": "scene", "integrator": {"type": "path", "max_depth": -1}}
+        for i, shape in shapes.items():
+            s = dict(shape)
+            s["sensor"] = {
+                "type": "irradiancemeter",
+                "film": {"type": "hdrfilm", "width": 1, "height": 1,
+                         "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                "sampler": {"type": "independent", "sample_count": spp},
+            }
+            d[f"n{i}"] = s
+        return mi.load_dict(d)
+
+    spp = args.min_spp
+    seed = 0
+    while spp <= args.max_spp:
+        sc = build(spp)
+        # Each sensor belongs to the shape it is nested in; shape ids are the dict keys.
+        by_id = {s.shape().id(): s for s in sc.sensors()}
+        surfaces = []
+        seconds = 0.0
+        for i in shapes:
+            node = scene["nodes"][i]
+            t = time.perf_counter()
+            img = mi.render(sc, sensor=by_id[f"n{i}"], spp=spp, seed=seed)
+            seconds += time.perf_counter() - t
+            e = [float(x) for x in list(mi.TensorXf(img).numpy().reshape(-1))[:3]]
+            rho, le = node["reflectance"], node["emission"]
+            b = [rho[c] * e[c] + 3.141592653589793 * le[c] for c in range(3)]
+            surfaces.append({"node": node["name"], "area": node["area"], "radiosity": b})
+        print(json.dumps({"spp": spp, "seconds": seconds, "surfaces": surfaces}), flush=True)
+        seed += 1
+        if seconds > args.max_seconds:
+            break
+        spp *= 2
+
+
+if __name__ == "__main__":
+    main()

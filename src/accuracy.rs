@@ -1,0 +1,490 @@
+//! `radiosity accuracy`: error against solve time, for every method option and
+//! hemisphere resolution, beside a path tracer (Mitsuba 3) on the same axes.
+//!
+//! Error is scored per glTF node against a reference: the area-weighted mean
+//! over nodes of the relative error of the node's mean radiosity (mean over
+//! RGB channels), and the worst node's. References are closed forms for the
+//! analytic case and, for the other scenes, a long fine run of this renderer
+//! (hybrid form factors, 256 x 1024, fine patches, unshot 1e-5), cached as
+//! `reference-<scene>.json` beside the charts; the path tracer's converged
+//! values check it independently.
+
+use crate::SolveArgs;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use radiosity::gpu::Gpu;
+use radiosity::hemisphere::Resolution;
+use radiosity::render::{render, FormFactorMethod, RenderOptions};
+use radiosity::report::Surface;
+use radiosity::scene::{self, GltfSurface, Scene};
+use radiosity::output;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Options of `radiosity accuracy`.
+#[derive(Args)]
+pub struct AccuracyArgs {
+    /// Scenes (built-in names or files; `squares` is the analytic pair of
+    /// parallel unit squares 1 apart), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "squares,cornell,cubes-4")]
+    scenes: Vec<String>,
+    /// Hemisphere resolutions to chart, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "64x256,128x512,256x1024")]
+    resolutions: Vec<Resolution>,
+    /// Patch sizes in metres to chart beside each scene's own subdivision
+    /// (hybrid form factors at 128 x 512), comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5")]
+    patch_sizes: Vec<f32>,
+    /// Where the CSV, the charts and the cached references go.
+    #[arg(long, default_value = "docs/bench/accuracy")]
+    out: PathBuf,
+    /// Recompute the references even when cached.
+    #[arg(long)]
+    recompute_reference: bool,
+    /// Each run stops at this unshot fraction.
+    #[arg(long, default_value_t = 1e-4)]
+    threshold: f64,
+    /// ... or after this many shots.
+    #[arg(long, default_value_t = 20_000)]
+    max_shots: u64,
+    /// The path tracer script (Mitsuba 3); empty to skip it.
+    #[arg(long, default_value = "scripts/pathtrace.py")]
+    pathtracer: String,
+    /// Python interpreter for the path tracer.
+    #[arg(long, default_value = "python3")]
+    python: String,
+    /// Mitsuba variant (scalar_rgb runs anywhere; llvm_ad_rgb needs libllvm19).
+    #[arg(long, default_value = "scalar_rgb")]
+    variant: String,
+    /// Largest samples per sensor for the path tracer.
+    #[arg(long, default_value_t = 4096)]
+    max_spp: u32,
+}
+
+/// A cached reference solution.
+#[derive(Serialize, Deserialize)]
+struct Reference {
+    scene: String,
+    how: String,
+    seconds: f64,
+    surfaces: Vec<Surface>,
+}
+
+/// One point of an error curve.
+#[derive(Clone, Copy)]
+struct Point {
+    seconds: f64,
+    mean: f64,
+    max: f64,
+    shots: u64,
+}
+
+/// One curve: a configuration's error against time.
+struct Curve {
+    label: String,
+    method: String,
+    resolution: String,
+    patches: usize,
+    elements: usize,
+    points: Vec<Point>,
+}
+
+/// Area-weighted mean and worst relative error of `s` against `reference`
+/// (nodes with a zero reference radiosity are skipped).
+fn error(s: &[Surface], reference: &[Surface]) -> (f64, f64) {
+    let (mut sum, mut area, mut worst) = (0.0, 0.0, 0.0f64);
+    for r in reference {
+        let Some(x) = s.iter().find(|x| x.node == r.node) else {
+            continue;
+        };
+        let mut e = 0.0;
+        let mut n = 0;
+        for c in 0..3 {
+            if r.radiosity[c] > 0.0 {
+                e += (x.radiosity[c] - r.radiosity[c]).abs() / r.radiosity[c];
+                n += 1;
+            }
+        }
+        if n == 0 {
+            continue;
+        }
+        let e = e / n as f64;
+        sum += e * r.area;
+        area += r.area;
+        worst = worst.max(e);
+    }
+    (if area > 0.0 { sum / area } else { 0.0 }, worst)
+}
+
+/// Seconds after which the curve's error stays at or below `level`.
+fn time_to(points: &[Point], level: f64, pick: fn(&Point) -> f64) -> Option<f64> {
+    let last_above = points.iter().rposition(|p| pick(p) > level);
+    match last_above {
+        None => points.first().map(|p| p.seconds),
+        Some(i) => points.get(i + 1).map(|p| p.seconds),
+    }
+}
+
+/// The analytic scene: parallel unit squares 1 apart, a black emitter of
+/// L_e = 1 and a white receiver; the receiver's radiosity is pi F.
+fn squares(dir: &Path) -> Result<(Scene, Vec<Surface>)> {
+    use glam::Vec3;
+    let sq = |z: f32, up: bool| {
+        let mut v = vec![
+            Vec3::new(0.0, 0.0, z),
+            Vec3::new(1.0, 0.0, z),
+            Vec3::new(1.0, 1.0, z),
+            Vec3::new(0.0, 1.0, z),
+        ];
+        if !up {
+            v.reverse();
+        }
+        v
+    };
+    let surfaces = [
+        GltfSurface {
+            name: "emitter".into(),
+            polygons: vec![sq(0.0, true)],
+            reflectance: [0.0; 3],
+            emission: [1.0; 3],
+            double_sided: false,
+            subdivision: None,
+        },
+        GltfSurface {
+            name: "receiver".into(),
+            polygons: vec![sq(1.0, false)],
+            reflectance: [1.0; 3],
+            emission: [0.0; 3],
+            double_sided: false,
+            subdivision: None,
+        },
+    ];
+    let path = dir.join("squares.gltf");
+    std::fs::write(&path, scene::write_gltf(&surfaces, None))?;
+    let mut s = scene::open(path.to_str().context("utf-8 path")?)?;
+    s.name = "squares".into();
+    let pi = std::f64::consts::PI;
+    let reference = vec![
+        Surface {
+            node: "emitter".into(),
+            area: 1.0,
+            radiosity: [pi; 3],
+        },
+        Surface {
+            node: "receiver".into(),
+            area: 1.0,
+            radiosity: [pi * 0.19982; 3],
+        },
+    ];
+    Ok((s, reference))
+}
+
+fn options(solve: &SolveArgs, args: &AccuracyArgs) -> RenderOptions {
+    let mut o = solve.options();
+    o.width = 0;
+    o.stop.threshold = args.threshold;
+    o.stop.max_shots = args.max_shots;
+    o
+}
+
+fn reference(gpu: &Gpu, scene: &Scene, base: &RenderOptions, args: &AccuracyArgs) -> Result<Vec<Surface>> {
+    let path = args.out.join(format!("reference-{}.json", scene.name));
+    if !args.recompute_reference {
+        if let Ok(text) = std::fs::read_to_string(&path) {
+            let r: Reference = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a reference", path.display()))?;
+            return Ok(r.surfaces);
+        }
+    }
+    let patch = scene.extent() / 48.0;
+    let mut o = base.clone();
+    o.form_factor = FormFactorMethod::Hybrid;
+    o.resolution = Resolution { rows: 256, cols: 1024 };
+    o.mesh.patch_size = Some(patch);
+    o.mesh.element_size = Some(patch / 2.0);
+    o.stop.threshold = 1e-5;
+    o.stop.max_shots = 1_000_000;
+    eprintln!("accuracy: computing the reference for {} (patches of {patch:.3} m)...", scene.name);
+    let r = render(gpu, scene, &o, Duration::ZERO, &mut |_| {})?;
+    let reference = Reference {
+        scene: scene.name.clone(),
+        how: format!(
+            "radiosity render --form-factor hybrid --resolution 256x1024 --patch-size {patch} --element-size {} --threshold 1e-5: {} patches, {} elements, {} shots",
+            patch / 2.0,
+            r.report.counts.patches,
+            r.report.counts.elements,
+            r.report.shots
+        ),
+        seconds: r.report.timings.solve,
+        surfaces: r.report.surfaces.clone(),
+    };
+    output::write_json(&path, &reference)?;
+    Ok(reference.surfaces)
+}
+
+fn run_curve(
+    gpu: &Gpu,
+    scene: &Scene,
+    o: &RenderOptions,
+    label: String,
+    reference: &[Surface],
+) -> Result<Curve> {
+    let r = render(gpu, scene, o, Duration::ZERO, &mut |_| {})?;
+    let points = r
+        .report
+        .convergence
+        .iter()
+        .map(|p| {
+            let (mean, max) = error(&p.surfaces, reference);
+            Point {
+                seconds: p.seconds,
+                mean,
+                max,
+                shots: p.shots,
+            }
+        })
+        .collect();
+    Ok(Curve {
+        label,
+        method: format!("{:?}", o.form_factor).to_lowercase(),
+        resolution: o.resolution.to_string(),
+        patches: r.report.counts.patches,
+        elements: r.report.counts.elements,
+        points,
+    })
+}
+
+/// Writes the scene as JSON for the path tracer: per node, world-space
+/// triangles, reflectance, emitted radiance, area.
+fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
+    let mut nodes: Vec<serde_json::Value> = Vec::new();
+    for (i, name) in scene.nodes.iter().enumerate() {
+        let polys: Vec<_> = scene.polygons.iter().filter(|p| p.node == i).collect();
+        let mut tris = Vec::new();
+        for p in &polys {
+            for k in 1..p.vertices.len() - 1 {
+                tris.push([
+                    p.vertices[0].to_array(),
+                    p.vertices[k].to_array(),
+                    p.vertices[k + 1].to_array(),
+                ]);
+            }
+        }
+        let (refl, emit) = polys
+            .first()
+            .map_or(([0.0; 3], [0.0; 3]), |p| (p.reflectance, p.emission));
+        nodes.push(serde_json::json!({
+            "name": name,
+            "triangles": tris,
+            "reflectance": refl,
+            "emission": emit,
+            "area": polys.iter().map(|p| p.area() as f64).sum::<f64>(),
+        }));
+    }
+    output::write_json(path, &serde_json::json!({ "nodes": nodes }))?;
+    Ok(())
+}
+
+fn path_tracer(scene: &Scene, args: &AccuracyArgs, reference: &[Surface], dir: &Path) -> Result<Curve> {
+    #[derive(Deserialize)]
+    struct Level {
+        spp: u64,
+        seconds: f64,
+        surfaces: Vec<Surface>,
+    }
+    let json = dir.join(format!("{}-pt.json", scene.name));
+    export_for_pathtracer(scene, &json)?;
+    eprintln!("accuracy: path tracing {} with Mitsuba 3 ({})...", scene.name, args.variant);
+    let out = std::process::Command::new(&args.python)
+        .arg(&args.pathtracer)
+        .arg(&json)
+        .args(["--variant", &args.variant, "--max-spp", &args.max_spp.to_string()])
+        .output()
+        .with_context(|| format!("cannot run {} {}", args.python, args.pathtracer))?;
+    if !out.status.success() {
+        bail!(
+            "{} failed: {}",
+            args.pathtracer,
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    let mut points = Vec::new();
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let l: Level = serde_json::from_str(line).with_context(|| format!("path tracer said '{line}'"))?;
+        let (mean, max) = error(&l.surfaces, reference);
+        points.push(Point {
+            seconds: l.seconds,
+            mean,
+            max,
+            shots: l.spp,
+        });
+    }
+    Ok(Curve {
+        label: format!("path tracer (Mitsuba 3 {}, spp doubling)", args.variant),
+        method: "pathtracer".into(),
+        resolution: String::new(),
+        patches: 0,
+        elements: 0,
+        points,
+    })
+}
+
+fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
+    use plotters::prelude::*;
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, plotters::coord::Shift>,
+        scene: &str,
+        curves: &[Curve],
+    ) -> Result<(), String> {
+        let e = |x: &dyn std::fmt::Display| x.to_string();
+        let pts = || curves.iter().flat_map(|c| c.points.iter()).filter(|p| p.seconds > 0.0 && p.mean > 0.0);
+        let (x0, x1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.seconds), b.max(p.seconds)));
+        let (y0, y1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.mean), b.max(p.mean)));
+        if x1 <= 0.0 || y1 <= 0.0 {
+            return Ok(());
+        }
+        root.fill(&WHITE).map_err(|x| e(&x))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("{scene}: area-weighted mean error per surface vs solve time"),
+                ("sans-serif", 22),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0 * 0.8..x1 * 1.25).log_scale(), (y0.min(0.005) * 0.8..y1 * 1.25).log_scale())
+            .map_err(|x| e(&x))?;
+        chart
+            .configure_mesh()
+            .x_desc("seconds (log)")
+            .y_desc("relative error (log)")
+            .draw()
+            .map_err(|x| e(&x))?;
+        chart
+            .draw_series(LineSeries::new([(x0 * 0.8, 0.01), (x1 * 1.25, 0.01)], BLACK.mix(0.5)))
+            .map_err(|x| e(&x))?
+            .label("1 %")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+        for (i, c) in curves.iter().enumerate() {
+            let color = if c.method == "pathtracer" {
+                BLACK.to_rgba()
+            } else {
+                Palette99::pick(i).to_rgba()
+            };
+            let points: Vec<(f64, f64)> = c
+                .points
+                .iter()
+                .filter(|p| p.seconds > 0.0 && p.mean > 0.0)
+                .map(|p| (p.seconds, p.mean))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+                .map_err(|x| e(&x))?
+                .label(c.label.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            chart
+                .draw_series(points.iter().map(|&p| Circle::new(p, 2, color.filled())))
+                .map_err(|x| e(&x))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|x| e(&x))?;
+        root.present().map_err(|x| e(&x))
+    }
+    let svg = out.join(format!("error-{scene}.svg"));
+    draw(SVGBackend::new(&svg, (1000, 620)).into_drawing_area(), scene, curves)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
+    let png = out.join(format!("error-{scene}.png"));
+    draw(BitMapBackend::new(&png, (1000, 620)).into_drawing_area(), scene, curves)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+    Ok(())
+}
+
+/// Runs the accuracy benchmark.
+pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
+    let gpu = Gpu::new()?;
+    std::fs::create_dir_all(&args.out)?;
+    let tmp = tempfile::tempdir()?;
+    let base = options(&solve, &args);
+    let mut csv = String::from(
+        "scene,curve,method,resolution,patches,elements,shots_or_spp,seconds,mean_error,max_error\n",
+    );
+    let mut summary = String::from(
+        "| scene | curve | patches | elements | seconds to 1 % (mean) | seconds to 1 % (every surface) | final mean error | final seconds |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for name in &args.scenes {
+        let (scene, closed_form) = if name == "squares" {
+            let (s, r) = squares(tmp.path())?;
+            (s, Some(r))
+        } else {
+            (scene::open(name)?, None)
+        };
+        let reference = match closed_form {
+            Some(r) => r,
+            None => reference(&gpu, &scene, &base, &args)?,
+        };
+        let mut curves = Vec::new();
+        for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
+            for &res in &args.resolutions {
+                let mut o = base.clone();
+                o.form_factor = method;
+                o.resolution = res;
+                eprintln!("accuracy: {} {method:?} {res}", scene.name);
+                let label = format!("{} {res}", format!("{method:?}").to_lowercase());
+                curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+            }
+        }
+        for &p in &args.patch_sizes {
+            for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
+                let mut o = base.clone();
+                o.form_factor = method;
+                o.mesh.patch_size = Some(p);
+                eprintln!("accuracy: {} {method:?} patches {p} m", scene.name);
+                let label = format!("{} 128x512, {p} m patches", format!("{method:?}").to_lowercase());
+                curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+            }
+        }
+        if !args.pathtracer.is_empty() {
+            match path_tracer(&scene, &args, &reference, tmp.path()) {
+                Ok(c) => curves.push(c),
+                Err(e) => eprintln!("accuracy: no path-tracer curve for {}: {e:#}", scene.name),
+            }
+        }
+        for c in &mut curves {
+            if c.method != "pathtracer" {
+                c.label = format!("{} ({} patches, {} elements)", c.label, c.patches, c.elements);
+            }
+        }
+        for c in &curves {
+            for p in &c.points {
+                csv += &format!(
+                    "{},\"{}\",{},{},{},{},{},{:.6},{:.6e},{:.6e}\n",
+                    scene.name, c.label, c.method, c.resolution, c.patches, c.elements, p.shots, p.seconds, p.mean, p.max
+                );
+            }
+            let fmt = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3}"));
+            let last = c.points.last().copied().unwrap_or(Point { seconds: 0.0, mean: f64::NAN, max: f64::NAN, shots: 0 });
+            summary += &format!(
+                "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.3} |\n",
+                scene.name,
+                c.label,
+                c.patches,
+                c.elements,
+                fmt(time_to(&c.points, 0.01, |p| p.mean)),
+                fmt(time_to(&c.points, 0.01, |p| p.max)),
+                100.0 * last.mean,
+                last.seconds
+            );
+        }
+        chart(&args.out, &scene.name, &curves)?;
+    }
+    output::write_atomic(&args.out.join("accuracy.csv"), csv.as_bytes())?;
+    output::write_atomic(&args.out.join("summary.md"), summary.as_bytes())?;
+    println!("device: {}\n\n{summary}", gpu.describe());
+    Ok(())
+}
