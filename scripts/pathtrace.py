@@ -80,14 +80,16 @@ def main():
                 "sampler": {"type": "independent", "sample_count": spp},
             }
             d[f"n{i}"] = s
-        return mi.load_dict(d)
+        # optimize=False: the parser would otherwise merge the identical
+        # sensor dictionaries into one sensor shared by every shape.
+        return mi.load_dict(d, optimize=False)
 
     spp = args.min_spp
     seed = 0
     while spp <= args.max_spp:
         sc = build(spp)
         # Each sensor belongs to the shape it is nested in; shape ids are the dict keys.
-        by_id = {s.shape().id(): s for s in sc.sensors()}
+        by_id = {sh.id(): sh.sensor() for sh in sc.shapes() if sh.sensor() is not None}
         surfaces = []
         seconds = 0.0
         for i in shapes:
@@ -95,7 +97,9 @@ def main():
             t = time.perf_counter()
             img = mi.render(sc, sensor=by_id[f"n{i}"], spp=spp, seed=seed)
             seconds += time.perf_counter() - t
-            e = [float(x) for x in list(mi.TensorXf(img).numpy().reshape(-1))[:3]]
+            # A 1 x 1 RGB film: the tensor's first three values.
+            flat = mi.TensorXf(img).array
+            e = [float(flat[c]) for c in range(3)]
             rho, le = node["reflectance"], node["emission"]
             b = [rho[c] * e[c] + 3.141592653589793 * le[c] for c in range(3)]
             surfaces.append({"node": node["name"], "area": node["area"], "radiosity": b})

@@ -5,7 +5,7 @@
 //! over nodes of the relative error of the node's mean radiosity (mean over
 //! RGB channels), and the worst node's. References are closed forms for the
 //! analytic case and, for the other scenes, a long fine run of this renderer
-//! (hybrid form factors, 256 x 1024, fine patches, unshot 1e-5), cached as
+//! (hybrid form factors, 256 x 1024, patches of 1/24 of the scene's extent, unshot 1e-5), cached as
 //! `reference-<scene>.json` beside the charts; the path tracer's converged
 //! values check it independently.
 
@@ -42,12 +42,12 @@ pub struct AccuracyArgs {
     /// Recompute the references even when cached.
     #[arg(long)]
     recompute_reference: bool,
-    /// Each run stops at this unshot fraction.
+    /// Each charted run stops at this unshot fraction (overrides --threshold).
     #[arg(long, default_value_t = 1e-4)]
-    threshold: f64,
-    /// ... or after this many shots.
+    run_threshold: f64,
+    /// ... or after this many shots (overrides --max-shots).
     #[arg(long, default_value_t = 20_000)]
-    max_shots: u64,
+    run_max_shots: u64,
     /// The path tracer script (Mitsuba 3); empty to skip it.
     #[arg(long, default_value = "scripts/pathtrace.py")]
     pathtracer: String,
@@ -57,8 +57,9 @@ pub struct AccuracyArgs {
     /// Mitsuba variant (scalar_rgb runs anywhere; llvm_ad_rgb needs libllvm19).
     #[arg(long, default_value = "scalar_rgb")]
     variant: String,
-    /// Largest samples per sensor for the path tracer.
-    #[arg(long, default_value_t = 4096)]
+    /// Largest samples per sensor for the path tracer (it also stops once a
+    /// level takes more than a minute).
+    #[arg(long, default_value_t = 1 << 20)]
     max_spp: u32,
 }
 
@@ -183,8 +184,8 @@ fn squares(dir: &Path) -> Result<(Scene, Vec<Surface>)> {
 fn options(solve: &SolveArgs, args: &AccuracyArgs) -> RenderOptions {
     let mut o = solve.options();
     o.width = 0;
-    o.stop.threshold = args.threshold;
-    o.stop.max_shots = args.max_shots;
+    o.stop.threshold = args.run_threshold;
+    o.stop.max_shots = args.run_max_shots;
     o
 }
 
@@ -197,7 +198,7 @@ fn reference(gpu: &Gpu, scene: &Scene, base: &RenderOptions, args: &AccuracyArgs
             return Ok(r.surfaces);
         }
     }
-    let patch = scene.extent() / 48.0;
+    let patch = scene.extent() / 24.0;
     let mut o = base.clone();
     o.form_factor = FormFactorMethod::Hybrid;
     o.resolution = Resolution { rows: 256, cols: 1024 };
@@ -300,6 +301,7 @@ fn path_tracer(scene: &Scene, args: &AccuracyArgs, reference: &[Surface], dir: &
         .arg(&args.pathtracer)
         .arg(&json)
         .args(["--variant", &args.variant, "--max-spp", &args.max_spp.to_string()])
+        .args(["--max-seconds", "60"])
         .output()
         .with_context(|| format!("cannot run {} {}", args.python, args.pathtracer))?;
     if !out.status.success() {

@@ -91,6 +91,11 @@ pub struct SolveArgs {
     /// large elements tighter bounds (less fill) at the cost of more vertices.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
     raster_split: u32,
+    /// Do not keep the form-factor rows of patches that have shot (by default
+    /// a patch that shoots again reuses its row instead of rasterising; the
+    /// results are identical, only the time changes).
+    #[arg(long)]
+    no_cache: bool,
 }
 
 impl SolveArgs {
@@ -111,6 +116,7 @@ impl SolveArgs {
                 ..MeshSettings::default()
             },
             raster_split: self.raster_split,
+            cache_rows: !self.no_cache,
             ..RenderOptions::default()
         }
     }

@@ -55,8 +55,11 @@ pub struct RenderOptions {
     pub height: Option<u32>,
     /// Smooth or flat shading.
     pub shading: Shading,
-    /// Add the ambient term to the image.
+    /// Add the ambient term to the image and the reported radiosities.
     pub ambient: bool,
+    /// Keep form-factor rows of patches that have shot, so a patch that
+    /// shoots again costs no rasterisation (results are identical either way).
+    pub cache_rows: bool,
     /// Draw element edges over the image.
     pub wireframe: bool,
 }
@@ -76,6 +79,7 @@ impl Default for RenderOptions {
             height: None,
             shading: Shading::Smooth,
             ambient: true,
+            cache_rows: true,
             wireframe: false,
         }
     }
@@ -107,7 +111,14 @@ pub struct PhaseTimes {
     pub sum: Duration,
     /// Rectangles drawn.
     pub rects: u64,
+    /// Shots answered from the form-factor row cache (no rasterisation).
+    pub cached: u64,
 }
+
+/// Memory the form-factor row cache may use per rank, in bytes (counted
+/// against the worst case of a row with every element, so the decision to
+/// cache is the same on every rank).
+pub const ROW_CACHE_BYTES: usize = 1 << 30;
 
 /// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
 /// exchanging them between ranks as DESIGN.md section 3 describes. Returns
@@ -141,6 +152,11 @@ pub struct GpuFormFactors<'a> {
     pub timings: PhaseTimes,
     /// This rank's busy time (everything but waiting in collectives) per shot.
     pub busy: Vec<f64>,
+    /// Form-factor rows of patches that have shot, for when they shoot again
+    /// (the same shooter gives the same row, so a hit changes no result).
+    cache: std::collections::HashMap<u32, Vec<(u32, f64)>>,
+    /// How many rows the cache may hold: the same number on every rank.
+    cache_rows: usize,
 }
 
 impl<'a> GpuFormFactors<'a> {
@@ -216,6 +232,12 @@ impl<'a> GpuFormFactors<'a> {
             pairs: Vec::new(),
             timings: PhaseTimes::default(),
             busy: Vec::new(),
+            cache: Default::default(),
+            cache_rows: if opts.cache_rows {
+                ROW_CACHE_BYTES / (12 * mesh.elements.len().max(1))
+            } else {
+                0
+            },
         })
     }
 
@@ -337,6 +359,14 @@ impl FormFactorSource for GpuFormFactors<'_> {
 
     fn form_factors(&mut self, shooter: u32, out: &mut Vec<(u32, f64)>) -> Result<(), GpuError> {
         let start = Instant::now();
+        if let Some(row) = self.cache.get(&shooter) {
+            out.clear();
+            out.extend_from_slice(row);
+            self.timings.cached += 1;
+            self.timings.sum += start.elapsed();
+            self.busy.push(start.elapsed().as_secs_f64());
+            return Ok(());
+        }
         let frame = self.mesh.shooter_frame(shooter);
         let cols = self.raster.resolution().cols as usize;
         let before = self.timings.bounds + self.timings.rasterise + self.timings.read_back;
@@ -371,6 +401,9 @@ impl FormFactorSource for GpuFormFactors<'_> {
             FormFactorMethod::Hybrid => {
                 crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs, out);
             }
+        }
+        if self.cache.len() < self.cache_rows {
+            self.cache.insert(shooter, out.clone());
         }
         let total = start.elapsed();
         let drawn = self.timings.bounds + self.timings.rasterise + self.timings.read_back - before;
@@ -576,6 +609,7 @@ pub fn render_on(
     timings.update = update.as_secs_f64();
     timings.bounds = timings_src.bounds.as_secs_f64();
     timings.rects_per_shot = timings_src.rects as f64 / shots.max(1) as f64;
+    timings.cached_shots = timings_src.cached;
     timings.rasterise = timings_src.rasterise.as_secs_f64();
     timings.read_back = timings_src.read_back.as_secs_f64();
     timings.exchange = timings_src.exchange.as_secs_f64();

@@ -108,6 +108,8 @@ pub struct Timings {
     pub bounds: f64,
     /// Mean rectangles drawn per shot.
     pub rects_per_shot: f64,
+    /// Shots whose form factors came from the row cache (a patch shooting again).
+    pub cached_shots: u64,
     /// Drawing hemispheres on the GPU and waiting for them (summed over shots).
     pub rasterise: f64,
     /// Reading item buffers back (summed over shots).
