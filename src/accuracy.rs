@@ -14,10 +14,10 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use radiosity::gpu::Gpu;
 use radiosity::hemisphere::Resolution;
+use radiosity::output;
 use radiosity::render::{render, FormFactorMethod, RenderOptions};
 use radiosity::report::Surface;
 use radiosity::scene::{self, GltfSurface, Scene};
-use radiosity::output;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -189,7 +189,12 @@ fn options(solve: &SolveArgs, args: &AccuracyArgs) -> RenderOptions {
     o
 }
 
-fn reference(gpu: &Gpu, scene: &Scene, base: &RenderOptions, args: &AccuracyArgs) -> Result<Vec<Surface>> {
+fn reference(
+    gpu: &Gpu,
+    scene: &Scene,
+    base: &RenderOptions,
+    args: &AccuracyArgs,
+) -> Result<Vec<Surface>> {
     let path = args.out.join(format!("reference-{}.json", scene.name));
     if !args.recompute_reference {
         if let Ok(text) = std::fs::read_to_string(&path) {
@@ -201,12 +206,18 @@ fn reference(gpu: &Gpu, scene: &Scene, base: &RenderOptions, args: &AccuracyArgs
     let patch = scene.extent() / 24.0;
     let mut o = base.clone();
     o.form_factor = FormFactorMethod::Hybrid;
-    o.resolution = Resolution { rows: 256, cols: 1024 };
+    o.resolution = Resolution {
+        rows: 256,
+        cols: 1024,
+    };
     o.mesh.patch_size = Some(patch);
     o.mesh.element_size = Some(patch / 2.0);
     o.stop.threshold = 1e-5;
     o.stop.max_shots = 1_000_000;
-    eprintln!("accuracy: computing the reference for {} (patches of {patch:.3} m)...", scene.name);
+    eprintln!(
+        "accuracy: computing the reference for {} (patches of {patch:.3} m)...",
+        scene.name
+    );
     let r = render(gpu, scene, &o, Duration::ZERO, &mut |_| {})?;
     let reference = Reference {
         scene: scene.name.clone(),
@@ -287,7 +298,12 @@ fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
     Ok(())
 }
 
-fn path_tracer(scene: &Scene, args: &AccuracyArgs, reference: &[Surface], dir: &Path) -> Result<Curve> {
+fn path_tracer(
+    scene: &Scene,
+    args: &AccuracyArgs,
+    reference: &[Surface],
+    dir: &Path,
+) -> Result<Curve> {
     #[derive(Deserialize)]
     struct Level {
         spp: u64,
@@ -296,11 +312,19 @@ fn path_tracer(scene: &Scene, args: &AccuracyArgs, reference: &[Surface], dir: &
     }
     let json = dir.join(format!("{}-pt.json", scene.name));
     export_for_pathtracer(scene, &json)?;
-    eprintln!("accuracy: path tracing {} with Mitsuba 3 ({})...", scene.name, args.variant);
+    eprintln!(
+        "accuracy: path tracing {} with Mitsuba 3 ({})...",
+        scene.name, args.variant
+    );
     let out = std::process::Command::new(&args.python)
         .arg(&args.pathtracer)
         .arg(&json)
-        .args(["--variant", &args.variant, "--max-spp", &args.max_spp.to_string()])
+        .args([
+            "--variant",
+            &args.variant,
+            "--max-spp",
+            &args.max_spp.to_string(),
+        ])
         .args(["--max-seconds", "60"])
         .output()
         .with_context(|| format!("cannot run {} {}", args.python, args.pathtracer))?;
@@ -313,7 +337,8 @@ fn path_tracer(scene: &Scene, args: &AccuracyArgs, reference: &[Surface], dir: &
     }
     let mut points = Vec::new();
     for line in String::from_utf8_lossy(&out.stdout).lines() {
-        let l: Level = serde_json::from_str(line).with_context(|| format!("path tracer said '{line}'"))?;
+        let l: Level =
+            serde_json::from_str(line).with_context(|| format!("path tracer said '{line}'"))?;
         let (mean, max) = error(&l.surfaces, reference);
         points.push(Point {
             seconds: l.seconds,
@@ -340,9 +365,18 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
         curves: &[Curve],
     ) -> Result<(), String> {
         let e = |x: &dyn std::fmt::Display| x.to_string();
-        let pts = || curves.iter().flat_map(|c| c.points.iter()).filter(|p| p.seconds > 0.0 && p.mean > 0.0);
-        let (x0, x1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.seconds), b.max(p.seconds)));
-        let (y0, y1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| (a.min(p.mean), b.max(p.mean)));
+        let pts = || {
+            curves
+                .iter()
+                .flat_map(|c| c.points.iter())
+                .filter(|p| p.seconds > 0.0 && p.mean > 0.0)
+        };
+        let (x0, x1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| {
+            (a.min(p.seconds), b.max(p.seconds))
+        });
+        let (y0, y1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| {
+            (a.min(p.mean), b.max(p.mean))
+        });
         if x1 <= 0.0 || y1 <= 0.0 {
             return Ok(());
         }
@@ -355,7 +389,10 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d((x0 * 0.8..x1 * 1.25).log_scale(), (y0.min(0.005) * 0.8..y1 * 1.25).log_scale())
+            .build_cartesian_2d(
+                (x0 * 0.8..x1 * 1.25).log_scale(),
+                (y0.min(0.005) * 0.8..y1 * 1.25).log_scale(),
+            )
             .map_err(|x| e(&x))?;
         chart
             .configure_mesh()
@@ -364,7 +401,10 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
             .draw()
             .map_err(|x| e(&x))?;
         chart
-            .draw_series(LineSeries::new([(x0 * 0.8, 0.01), (x1 * 1.25, 0.01)], BLACK.mix(0.5)))
+            .draw_series(LineSeries::new(
+                [(x0 * 0.8, 0.01), (x1 * 1.25, 0.01)],
+                BLACK.mix(0.5),
+            ))
             .map_err(|x| e(&x))?
             .label("1 %")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
@@ -384,7 +424,9 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
                 .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
                 .map_err(|x| e(&x))?
                 .label(c.label.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
             chart
                 .draw_series(points.iter().map(|&p| Circle::new(p, 2, color.filled())))
                 .map_err(|x| e(&x))?;
@@ -399,11 +441,19 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
         root.present().map_err(|x| e(&x))
     }
     let svg = out.join(format!("error-{scene}.svg"));
-    draw(SVGBackend::new(&svg, (1000, 620)).into_drawing_area(), scene, curves)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
+    draw(
+        SVGBackend::new(&svg, (1000, 620)).into_drawing_area(),
+        scene,
+        curves,
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
     let png = out.join(format!("error-{scene}.png"));
-    draw(BitMapBackend::new(&png, (1000, 620)).into_drawing_area(), scene, curves)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+    draw(
+        BitMapBackend::new(&png, (1000, 620)).into_drawing_area(),
+        scene,
+        curves,
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
     Ok(())
 }
 
@@ -447,7 +497,10 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 o.form_factor = method;
                 o.mesh.patch_size = Some(p);
                 eprintln!("accuracy: {} {method:?} patches {p} m", scene.name);
-                let label = format!("{} 128x512, {p} m patches", format!("{method:?}").to_lowercase());
+                let label = format!(
+                    "{} 128x512, {p} m patches",
+                    format!("{method:?}").to_lowercase()
+                );
                 curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
             }
         }
@@ -459,18 +512,35 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
         }
         for c in &mut curves {
             if c.method != "pathtracer" {
-                c.label = format!("{} ({} patches, {} elements)", c.label, c.patches, c.elements);
+                c.label = format!(
+                    "{} ({} patches, {} elements)",
+                    c.label, c.patches, c.elements
+                );
             }
         }
         for c in &curves {
             for p in &c.points {
                 csv += &format!(
                     "{},\"{}\",{},{},{},{},{},{:.6},{:.6e},{:.6e}\n",
-                    scene.name, c.label, c.method, c.resolution, c.patches, c.elements, p.shots, p.seconds, p.mean, p.max
+                    scene.name,
+                    c.label,
+                    c.method,
+                    c.resolution,
+                    c.patches,
+                    c.elements,
+                    p.shots,
+                    p.seconds,
+                    p.mean,
+                    p.max
                 );
             }
             let fmt = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3}"));
-            let last = c.points.last().copied().unwrap_or(Point { seconds: 0.0, mean: f64::NAN, max: f64::NAN, shots: 0 });
+            let last = c.points.last().copied().unwrap_or(Point {
+                seconds: 0.0,
+                mean: f64::NAN,
+                max: f64::NAN,
+                shots: 0,
+            });
             summary += &format!(
                 "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.3} |\n",
                 scene.name,

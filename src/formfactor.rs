@@ -19,24 +19,77 @@ pub fn unpack(v: u64) -> (u64, u64) {
     (v >> 32, v & 0xffff_ffff)
 }
 
+/// Shooter patches with at most this many elements keep one form factor per
+/// element (so each element can shoot its own share); larger ones shoot as a whole.
+pub const MAX_SHOOTER_COLUMNS: usize = 16;
+
+/// One shooter's form factors to the receivers it reaches: for each receiver,
+/// one value per shooter element (`columns` of them; 1 when the patch shoots
+/// as a whole). The form factor for a given spread of the shooter's unshot
+/// radiosity over its elements is the weighted sum (see [`Row::combine`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Row {
+    /// Values per receiver.
+    pub columns: usize,
+    /// Receiving elements, sorted.
+    pub ids: Vec<u32>,
+    /// `columns` values per receiver, receiver-major.
+    pub values: Vec<f64>,
+}
+
+impl Row {
+    /// (element, F_ij) pairs for shooter-element weights `weights` (see
+    /// [`crate::solver::ShotRegion::weights`]; empty: all 1).
+    pub fn combine(&self, weights: &[f64], out: &mut Vec<(u32, f64)>) {
+        out.clear();
+        let m = self.columns.max(1);
+        let uniform = weights.len() != m;
+        for (&id, v) in self.ids.iter().zip(self.values.chunks_exact(m)) {
+            let f = if uniform {
+                v.iter().sum()
+            } else {
+                v.iter().zip(weights).map(|(a, w)| a * w).sum()
+            };
+            if f > 0.0 {
+                out.push((id, f));
+            }
+        }
+    }
+
+    /// Bytes this row holds.
+    pub fn bytes(&self) -> usize {
+        4 * self.ids.len() + 8 * self.values.len()
+    }
+}
+
 /// Receiver-side form factors of one shot (Baum, Rushmeier & Winget 1989):
-/// for each element j of a patch that the hemisphere saw,
+/// for each element j of a patch that the hemisphere saw and each element k
+/// of the shooter patch i,
 ///
-/// F_ij = V_j * F(dA_j -> patch i) * A_j / A_i,
+/// F_ij,k = V_j * F(dA_j -> A_k) * A_j / A_i,
 ///
-/// where F(dA_j -> patch i) is Lambert's contour integral from j's centre to the
-/// shooter patch's outline (exact when nothing is in between) and the
-/// visibility V_j = visible cells / covered cells comes from the same
-/// hemisphere, so cell-sampling error (aliasing) cancels. An element that no
-/// cell centre hit takes its patch's visibility, so small receivers are not
-/// lost between cell centres. `counts` holds (element, packed count) pairs
-/// sorted by element (see [`VISIBLE_ONE`]); `out` gets (element, F_ij) pairs
-/// sorted by element.
-pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)], out: &mut Vec<(u32, f64)>) {
-    out.clear();
+/// where F(dA_j -> A_k) is Lambert's contour integral from j's centre to k's
+/// outline (exact when nothing is in between; the whole patch's outline when
+/// it has more than [`MAX_SHOOTER_COLUMNS`] elements) and the visibility
+/// V_j = visible cells / covered cells comes from the same hemisphere, so
+/// cell-sampling error (aliasing) cancels. An element that no cell centre hit
+/// takes its patch's visibility, so small receivers are not lost between cell
+/// centres. `counts` holds (element, packed count) pairs sorted by element
+/// (see [`VISIBLE_ONE`]).
+pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
     let sp = &mesh.patches[shooter as usize];
     let spoly = &mesh.polygons[sp.polygon as usize];
-    let (outline, n) = outline(&sp.corners);
+    let own = sp.elements.clone();
+    let outlines: Vec<([DVec3; 4], usize)> = if own.len() <= MAX_SHOOTER_COLUMNS {
+        own.map(|k| outline(&mesh.elements[k as usize].corners))
+            .collect()
+    } else {
+        vec![outline(&sp.corners)]
+    };
+    let mut row = Row {
+        columns: outlines.len(),
+        ..Row::default()
+    };
     let (s_normal, s_origin) = (spoly.normal.as_dvec3(), sp.centre.as_dvec3());
     let mut k = 0;
     while k < counts.len() {
@@ -79,12 +132,21 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)], out: &mut Ve
                 continue;
             }
             let normal = mesh.polygons[e.polygon as usize].normal.as_dvec3();
-            let f = point_to_polygon(x, normal, &outline[..n]);
-            if f > 0.0 {
-                out.push((j, v * f * e.area / sp.area));
+            let scale = v * e.area / sp.area;
+            let start = row.values.len();
+            row.values.extend(
+                outlines
+                    .iter()
+                    .map(|(o, n)| scale * point_to_polygon(x, normal, &o[..*n])),
+            );
+            if row.values[start..].iter().any(|&f| f > 0.0) {
+                row.ids.push(j);
+            } else {
+                row.values.truncate(start);
             }
         }
     }
+    row
 }
 
 /// Form factor from a differential area at `x` with unit normal `n` to the

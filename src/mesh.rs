@@ -489,8 +489,13 @@ impl ShooterFrame {
 impl Mesh {
     /// The hemisphere frame of patch `patch`.
     pub fn shooter_frame(&self, patch: u32) -> ShooterFrame {
+        self.shooter_frame_at(patch, self.patches[patch as usize].centre)
+    }
+
+    /// The hemisphere frame of patch `patch` placed at `centre` (a point of its plane).
+    pub fn shooter_frame_at(&self, patch: u32, centre: Vec3) -> ShooterFrame {
         let p = &self.patches[patch as usize];
         let poly = &self.polygons[p.polygon as usize];
-        ShooterFrame::new(p.centre, poly.normal, poly.tangent, p.polygon)
+        ShooterFrame::new(centre, poly.normal, poly.tangent, p.polygon)
     }
 }

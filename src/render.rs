@@ -2,6 +2,7 @@
 //! progressive refinement -> image and report. Used by the `radiosity` binary,
 //! the tests and the viewer; it joins the modules but adds no maths of its own.
 
+use crate::formfactor::Row;
 use crate::gpu::{render_view, Gpu, GpuError, HemisphereRasterizer, Shading, ViewSettings};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout};
 use crate::mesh::{Mesh, MeshSettings};
@@ -10,7 +11,7 @@ use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Report, Settings, Timings, TracePoint,
 };
 use crate::scene::Scene;
-use crate::solver::{Candidate, FormFactorSource, Solver, StopRule, UNSHOT_ONE};
+use crate::solver::{Candidate, FormFactorSource, ShotRegion, Solver, StopRule, UNSHOT_ONE};
 use std::time::{Duration, Instant};
 
 /// How the form factor from a shooter to each element is evaluated.
@@ -154,7 +155,7 @@ pub struct GpuFormFactors<'a> {
     pub busy: Vec<f64>,
     /// Form-factor rows of patches that have shot, for when they shoot again
     /// (the same shooter gives the same row, so a hit changes no result).
-    cache: std::collections::HashMap<u32, Vec<(u32, f64)>>,
+    cache: std::collections::HashMap<(u32, [u32; 3]), Row>,
     /// How many rows the cache may hold: the same number on every rank.
     cache_rows: usize,
 }
@@ -234,7 +235,9 @@ impl<'a> GpuFormFactors<'a> {
             busy: Vec::new(),
             cache: Default::default(),
             cache_rows: if opts.cache_rows {
-                ROW_CACHE_BYTES / (12 * mesh.elements.len().max(1))
+                ROW_CACHE_BYTES
+                    / ((4 + 8 * crate::formfactor::MAX_SHOOTER_COLUMNS)
+                        * mesh.elements.len().max(1))
             } else {
                 0
             },
@@ -357,17 +360,23 @@ impl<'a> GpuFormFactors<'a> {
 impl FormFactorSource for GpuFormFactors<'_> {
     type Error = GpuError;
 
-    fn form_factors(&mut self, shooter: u32, out: &mut Vec<(u32, f64)>) -> Result<(), GpuError> {
+    fn form_factors(
+        &mut self,
+        shooter: u32,
+        region: &ShotRegion,
+        out: &mut Vec<(u32, f64)>,
+    ) -> Result<(), GpuError> {
         let start = Instant::now();
-        if let Some(row) = self.cache.get(&shooter) {
-            out.clear();
-            out.extend_from_slice(row);
+        let centre = region.centre;
+        let key = (shooter, centre.to_array().map(f32::to_bits));
+        if let Some(row) = self.cache.get(&key) {
+            row.combine(&region.weights, out);
             self.timings.cached += 1;
             self.timings.sum += start.elapsed();
             self.busy.push(start.elapsed().as_secs_f64());
             return Ok(());
         }
-        let frame = self.mesh.shooter_frame(shooter);
+        let frame = self.mesh.shooter_frame_at(shooter, centre);
         let cols = self.raster.resolution().cols as usize;
         let before = self.timings.bounds + self.timings.rasterise + self.timings.read_back;
         let exchange = if self.comm.size() == 1 && self.layout.ranks() > 1 {
@@ -389,21 +398,23 @@ impl FormFactorSource for GpuFormFactors<'_> {
             self.exchange(cols)
         };
         self.acc.drain_fixed(&mut self.pairs);
-        match self.method {
-            FormFactorMethod::Hemisphere => {
-                out.clear();
-                out.extend(
-                    self.pairs
-                        .iter()
-                        .map(|&(id, v)| (id, v as f64 / crate::hemisphere::FIXED_ONE)),
-                );
-            }
+        let row = match self.method {
+            FormFactorMethod::Hemisphere => Row {
+                columns: 1,
+                ids: self.pairs.iter().map(|p| p.0).collect(),
+                values: self
+                    .pairs
+                    .iter()
+                    .map(|p| p.1 as f64 / crate::hemisphere::FIXED_ONE)
+                    .collect(),
+            },
             FormFactorMethod::Hybrid => {
-                crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs, out);
+                crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs)
             }
-        }
+        };
+        row.combine(&region.weights, out);
         if self.cache.len() < self.cache_rows {
-            self.cache.insert(shooter, out.clone());
+            self.cache.insert(key, row);
         }
         let total = start.elapsed();
         let drawn = self.timings.bounds + self.timings.rasterise + self.timings.read_back - before;
@@ -530,43 +541,62 @@ pub fn render_on(
         // One collective per shot decides both the stop rule and the shooter:
         // every rank's unshot power (fixed point, exact in f64 below 2^53) and
         // its best patch.
-        let local = solver
-            .local_candidate()
-            .map_or([-1.0, 0.0, 0.0, 0.0, 0.0], |c| {
-                [
-                    c.patch as f64,
-                    c.power,
-                    c.unshot[0],
-                    c.unshot[1],
-                    c.unshot[2],
-                ]
-            });
-        let mine = [
-            solver.local_unshot_fixed() as f64,
-            local[0],
-            local[1],
-            local[2],
-            local[3],
-            local[4],
-        ];
+        const W: usize = 10;
+        let mine: [f64; W] = match solver.local_candidate() {
+            Some(c) => [
+                solver.local_unshot_fixed() as f64,
+                c.patch as f64,
+                c.power,
+                c.unshot[0],
+                c.unshot[1],
+                c.unshot[2],
+                c.centre.x as f64,
+                c.centre.y as f64,
+                c.centre.z as f64,
+                c.weighted as u8 as f64,
+            ],
+            None => {
+                let mut v = [0.0; W];
+                v[0] = solver.local_unshot_fixed() as f64;
+                v[1] = -1.0;
+                v
+            }
+        };
         let all = comm.all_gather_f64(&mine);
-        unshot_fraction = all.chunks_exact(6).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
+        unshot_fraction = all.chunks_exact(W).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
         if solver.done_at(&opts.stop, unshot_fraction) {
             break;
         }
-        let best =
-            Candidate::best(
-                all.chunks_exact(6)
-                    .filter(|c| c[1] >= 0.0)
-                    .map(|c| Candidate {
-                        patch: c[1] as u32,
-                        power: c[2],
-                        unshot: [c[3], c[4], c[5]],
-                    }),
-            );
+        let best = Candidate::best(all.chunks_exact(W).filter(|c| c[1] >= 0.0).map(|c| {
+            Candidate {
+                patch: c[1] as u32,
+                power: c[2],
+                unshot: [c[3], c[4], c[5]],
+                // f32 -> f64 -> f32 is exact, so every rank gets the owner's point.
+                centre: glam::Vec3::new(c[6] as f32, c[7] as f32, c[8] as f32),
+                weighted: c[9] != 0.0,
+            }
+        }));
         select += shot_start.elapsed();
         let Some(best) = best else { break };
-        source.form_factors(best.patch, &mut ff)?;
+        let mut region = ShotRegion {
+            centre: best.centre,
+            weights: Vec::new(),
+        };
+        if best.weighted {
+            // Only the owner knows how the unshot radiosity is spread over the
+            // shooter's elements: it tells the others (all know how many).
+            let owner = best.patch as usize % ranks;
+            let m = mesh.patches[best.patch as usize].elements.len();
+            let mine = if rank == owner {
+                solver.shooting_region(best.patch).weights
+            } else {
+                vec![0.0; m]
+            };
+            let all = comm.all_gather_f64(&mine);
+            region.weights = all[owner * m..(owner + 1) * m].to_vec();
+        }
+        source.form_factors(best.patch, &region, &mut ff)?;
         let t = Instant::now();
         solver.shoot_candidate(&best, &ff);
         let dt = t.elapsed();
@@ -593,7 +623,13 @@ pub fn render_on(
     let (b, u) = solver.local_state();
     let gathered_b = comm.gather_f64(&b);
     let gathered_u = comm.gather_f64(&u);
-    let stats = comm.gather_f64(&stats_vector(&source.timings, select, update, comm, trace.traffic));
+    let stats = comm.gather_f64(&stats_vector(
+        &source.timings,
+        select,
+        update,
+        comm,
+        trace.traffic,
+    ));
     let busy = comm.gather_f64(&source.busy);
     let timings_src = source.timings;
     drop(source);

@@ -16,8 +16,28 @@ use crate::mesh::Mesh;
 pub trait FormFactorSource {
     /// The error a shot can fail with.
     type Error;
-    /// Fills `out` with (element, F_ij) pairs for shooter patch `shooter`, sorted by element.
-    fn form_factors(&mut self, shooter: u32, out: &mut Vec<(u32, f64)>) -> Result<(), Self::Error>;
+    /// Fills `out` with (element, F_ij) pairs for shooter patch `shooter`,
+    /// shooting from `region` (see [`Solver::shooting_region`]), sorted by element.
+    fn form_factors(
+        &mut self,
+        shooter: u32,
+        region: &ShotRegion,
+        out: &mut Vec<(u32, f64)>,
+    ) -> Result<(), Self::Error>;
+}
+
+/// How a shooter patch shoots: where its hemisphere goes, and how its unshot
+/// radiosity is spread over its elements.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ShotRegion {
+    /// The hemisphere's centre (a point of the patch).
+    pub centre: glam::Vec3,
+    /// Per element of the patch (in order), its unshot radiosity over the
+    /// patch's (summed over RGB): the patch shoots each element's own share,
+    /// so a coarse shooter keeps the detail its elements received (hidden
+    /// elements shoot nothing). Empty when all are equal (the whole patch
+    /// shoots uniformly).
+    pub weights: Vec<f64>,
 }
 
 /// When to stop shooting.
@@ -58,6 +78,10 @@ pub struct Candidate {
     pub power: f64,
     /// Its unshot radiosity dB.
     pub unshot: [f64; 3],
+    /// Where its hemisphere goes (see [`Solver::shooting_region`]).
+    pub centre: glam::Vec3,
+    /// Whether its elements' unshot radiosities differ (see [`ShotRegion::weights`]).
+    pub weighted: bool,
 }
 
 impl Candidate {
@@ -89,6 +113,9 @@ pub struct Solver<'m> {
     radiosity: Vec<[f64; 3]>,
     /// Unshot radiosity dB per patch.
     unshot: Vec<[f64; 3]>,
+    /// Unshot radiosity per element (this rank's elements): how the patch's
+    /// unshot radiosity is spread over it.
+    element_unshot: Vec<[f64; 3]>,
     emitted_power: f64,
     shots: u64,
     ff: Vec<(u32, f64)>,
@@ -106,7 +133,7 @@ impl<'m> Solver<'m> {
 
     /// The share of rank `rank` of `ranks` (it holds every patch but updates only its own).
     pub fn partitioned(mesh: &'m Mesh, rank: usize, ranks: usize) -> Self {
-        let radiosity = mesh
+        let radiosity: Vec<[f64; 3]> = mesh
             .elements
             .iter()
             .map(|e| mesh.polygons[e.polygon as usize].exitance)
@@ -125,6 +152,7 @@ impl<'m> Solver<'m> {
             mesh,
             rank,
             ranks: ranks.max(1),
+            element_unshot: radiosity.clone(),
             radiosity,
             unshot,
             emitted_power,
@@ -199,8 +227,50 @@ impl<'m> Solver<'m> {
                 patch: i as u32,
                 power: w,
                 unshot: self.unshot[i],
+                centre: glam::Vec3::ZERO,
+                weighted: false,
             })
         }))
+        .map(|c| {
+            let region = self.shooting_region(c.patch);
+            Candidate {
+                centre: region.centre,
+                weighted: !region.weights.is_empty(),
+                ..c
+            }
+        })
+    }
+
+    /// How patch `patch` shoots. The hemisphere sits at the patch's centre,
+    /// unless some of its elements have no radiosity at all (hidden, e.g. under
+    /// an object resting on the patch's polygon): then at the area-weighted
+    /// centre of the others, since a hemisphere at a hidden point would see
+    /// nothing. Each element shoots its own unshot radiosity (the weights).
+    /// Needs this rank to own `patch`.
+    pub fn shooting_region(&self, patch: u32) -> ShotRegion {
+        let p = &self.mesh.patches[patch as usize];
+        let total: f64 = self.unshot[patch as usize].iter().sum();
+        let share = |j: u32| self.element_unshot[j as usize].iter().sum::<f64>() / total;
+        let first = share(p.elements.start);
+        let weights = if total > 0.0 && p.elements.clone().any(|j| share(j) != first) {
+            p.elements.clone().map(share).collect()
+        } else {
+            Vec::new()
+        };
+        let lit = |j: &u32| self.radiosity[*j as usize].iter().any(|&b| b > 0.0);
+        let mut centre = p.centre;
+        if !p.elements.clone().all(|j| lit(&j)) {
+            let (mut sum, mut area) = (glam::Vec3::ZERO, 0.0f64);
+            for j in p.elements.clone().filter(lit) {
+                let e = &self.mesh.elements[j as usize];
+                sum += crate::mesh::element_centre(e) * e.area as f32;
+                area += e.area;
+            }
+            if area > 0.0 {
+                centre = sum / area as f32;
+            }
+        }
+        ShotRegion { centre, weights }
     }
 
     /// The patch with the largest unshot power (one rank).
@@ -215,6 +285,9 @@ impl<'m> Solver<'m> {
         let i = shooter.patch as usize;
         if self.owns(shooter.patch) {
             self.unshot[i] = [0.0; 3];
+            for k in mesh.patches[i].elements.clone() {
+                self.element_unshot[k as usize] = [0.0; 3];
+            }
         }
         let (db, area) = (shooter.unshot, mesh.patches[i].area);
         let mut form_factor_sum = 0.0;
@@ -230,6 +303,7 @@ impl<'m> Solver<'m> {
             for c in 0..3 {
                 let d = rho[c] * db[c] * scale;
                 self.radiosity[j as usize][c] += d;
+                self.element_unshot[j as usize][c] += d;
                 self.unshot[el.patch as usize][c] += d * patch_share;
             }
         }
@@ -290,6 +364,8 @@ impl<'m> Solver<'m> {
             patch: shooter,
             power: power(&unshot, self.mesh.patches[i].area),
             unshot,
+            centre: glam::Vec3::ZERO,
+            weighted: false,
         };
         self.shoot_candidate(&c, ff)
     }
@@ -300,7 +376,7 @@ impl<'m> Solver<'m> {
             return Ok(None);
         };
         let mut ff = std::mem::take(&mut self.ff);
-        source.form_factors(shooter, &mut ff)?;
+        source.form_factors(shooter, &self.shooting_region(shooter), &mut ff)?;
         let shot = self.shoot(shooter, &ff);
         self.ff = ff;
         Ok(Some(shot))

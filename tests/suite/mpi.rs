@@ -77,7 +77,12 @@ fn bytes_exchanged_match_the_formulas() {
     // The formulas are for the pure hemisphere method; hybrid form factors
     // also send per-element coverage counts to their owners (checked below).
     let pure = ["--form-factor", "hemisphere"];
-    let h = mpirun(4, dir.path(), "h", &["--exchange", "hemispheres", pure[0], pure[1]]);
+    let h = mpirun(
+        4,
+        dir.path(),
+        "h",
+        &["--exchange", "hemispheres", pure[0], pure[1]],
+    );
     let cells = 128.0 * 512.0;
     assert_eq!(
         h["parallel"]["formula_bytes_per_shot"].as_f64(),
@@ -88,14 +93,24 @@ fn bytes_exchanged_match_the_formulas() {
         Some(4.0 * cells * 3.0 / 4.0)
     );
     // Form factors: every rank receives the whole dense array, 8 bytes per element.
-    let f = mpirun(4, dir.path(), "f", &["--exchange", "form-factors", pure[0], pure[1]]);
+    let f = mpirun(
+        4,
+        dir.path(),
+        "f",
+        &["--exchange", "form-factors", pure[0], pure[1]],
+    );
     let elements = f["counts"]["elements"].as_f64().expect("count");
     assert_eq!(
         f["parallel"]["measured_bytes_per_shot"].as_f64(),
         Some(8.0 * elements)
     );
     // Sparse sends no more than the dense array would.
-    let s = mpirun(4, dir.path(), "s", &["--exchange", "sparse", pure[0], pure[1]]);
+    let s = mpirun(
+        4,
+        dir.path(),
+        "s",
+        &["--exchange", "sparse", pure[0], pure[1]],
+    );
     let sparse = s["parallel"]["measured_bytes_per_shot"]
         .as_f64()
         .expect("bytes");

@@ -201,7 +201,7 @@ fn solve(
                 continue;
             };
             source
-                .form_factors(shooter, &mut ff)
+                .form_factors(shooter, &solver.shooting_region(shooter), &mut ff)
                 .map_err(|e| e.to_string())?;
             solver.shoot(shooter, &ff);
             solve_time += t.elapsed();
