@@ -40,7 +40,14 @@ struct Rect {
     @location(3) e2: vec3<f32>,
     @location(4) e3: vec3<f32>,
     @location(5) plane: vec4<f32>,  // proxy plane: normal, offset (n . corner)
-    @location(6) item: vec2<u32>,   // element id, back-facing flag
+    @location(6) item: vec2<u32>,   // element id (first element of a quad grid), back-facing flag
+    // A piece of a quad polygon: its bilinear map p = o + u e1 + v e2 + u v g
+    // in a 2-D basis of its plane (x along e1, y = normal x x), for finding
+    // the element at the hit point. grid = (0, ...): the piece is one element.
+    @location(7) origin: vec4<f32>,   // o (shooter frame), g.y
+    @location(8) axis: vec4<f32>,     // x axis (shooter frame)
+    @location(9) bilinear: vec4<f32>, // |e1|, e2.x, e2.y, g.x
+    @location(10) grid: vec4<u32>,    // elements along u, along v; per patch along u, along v
 }
 
 struct VsOut {
@@ -51,6 +58,10 @@ struct VsOut {
     @location(3) @interpolate(flat) e3: vec3<f32>,
     @location(4) @interpolate(flat) plane: vec4<f32>,
     @location(5) @interpolate(flat) item: vec2<u32>,
+    @location(6) @interpolate(flat) origin: vec4<f32>,
+    @location(7) @interpolate(flat) axis: vec4<f32>,
+    @location(8) @interpolate(flat) bilinear: vec4<f32>,
+    @location(9) @interpolate(flat) grid: vec4<u32>,
 }
 
 // One instance per rectangle; four vertices as a triangle strip.
@@ -73,7 +84,55 @@ fn vs(@builtin(vertex_index) vi: u32, r: Rect) -> VsOut {
     out.e3 = r.e3;
     out.plane = r.plane;
     out.item = r.item;
+    out.origin = r.origin;
+    out.axis = r.axis;
+    out.bilinear = r.bilinear;
+    out.grid = r.grid;
     return out;
+}
+
+fn cross2(a: vec2<f32>, b: vec2<f32>) -> f32 {
+    return a.x * b.y - a.y * b.x;
+}
+
+// (u, v) of the point h of a planar quad p(u, v) = u e + v f + u v g, e = (ex, 0)
+// (Quilez's inverse bilinear map; the root inside the quad).
+fn inverse_bilinear(h: vec2<f32>, ex: f32, f: vec2<f32>, g: vec2<f32>) -> vec2<f32> {
+    let e = vec2<f32>(ex, 0.0);
+    let k2 = cross2(g, f);
+    let k1 = cross2(e, f) + cross2(h, g);
+    let k0 = cross2(h, e);
+    var v: f32;
+    if (abs(k2) <= 1.0e-6 * abs(k1)) {
+        v = -k0 / k1;
+    } else {
+        let w = sqrt(max(k1 * k1 - 4.0 * k0 * k2, 0.0));
+        v = (-k1 - w) / (2.0 * k2);
+        if (v < -0.01 || v > 1.01) {
+            v = (-k1 + w) / (2.0 * k2);
+        }
+    }
+    let u = (h.x - f.x * v) / (ex + g.x * v);
+    return vec2<f32>(u, v);
+}
+
+// The element of a quad grid at the hit point p (shooter frame).
+fn grid_element(in: VsOut, p: vec3<f32>) -> u32 {
+    let x = in.axis.xyz;
+    let y = cross(in.plane.xyz, x);
+    let q = p - in.origin.xyz;
+    let uv = inverse_bilinear(
+        vec2<f32>(dot(q, x), dot(q, y)),
+        in.bilinear.x,
+        in.bilinear.yz,
+        vec2<f32>(in.bilinear.w, in.origin.w),
+    );
+    let n = in.grid.xy;
+    let iu = min(u32(max(uv.x, 0.0) * f32(n.x)), n.x - 1u);
+    let iv = min(u32(max(uv.y, 0.0) * f32(n.y)), n.y - 1u);
+    let per = in.grid.zw;
+    let cell_patch = (iv / per.y) * (n.x / per.x) + iu / per.x;
+    return in.item.x + cell_patch * per.x * per.y + (iv % per.y) * per.x + iu % per.x;
 }
 
 struct FsOut {
@@ -114,10 +173,14 @@ fn fs(in: VsOut) -> FsOut {
         out.item = BLOCKED;
         out.depth = min(t * shot.depth.x * (1.0 + 1.0e-5), 1.0);
     } else {
-        out.item = in.item.x;
+        var id = in.item.x;
+        if (in.grid.x != 0u) {
+            id = grid_element(in, dir * t);
+        }
+        out.item = id;
         out.depth = min(t * shot.depth.x, 1.0);
         if (shot.own.w == 1u) {
-            atomicAdd(&coverage[in.item.x], 1u);
+            atomicAdd(&coverage[id], 1u);
         }
     }
     return out;

@@ -86,11 +86,14 @@ pub struct SolveArgs {
     /// Cap on patches along one polygon edge (automatic subdivision).
     #[arg(long, default_value_t = 32)]
     max_patches_per_edge: u32,
-    /// Tessellation control: cut each element into N x N pieces for
-    /// rasterisation. The per-cell test is exact at any N; larger N gives near,
-    /// large elements tighter bounds (less fill) at the cost of more vertices.
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=16))]
-    raster_split: u32,
+    /// What the hemisphere rasteriser draws: every quad polygon as at most
+    /// N x N pieces (never more than its elements), the fragment shader
+    /// finding the element at each hit point; 0 draws every element on its own
+    /// (the old way). Triangles are drawn per element. The per-cell test is
+    /// exact at any N, so results do not depend on it; larger N gives tighter
+    /// rectangles (less fill) for more of them.
+    #[arg(long, default_value_t = radiosity::render::DEFAULT_RASTER_PIECES, value_parser = clap::value_parser!(u32).range(0..=64))]
+    raster_pieces: u32,
     /// Do not keep the form-factor rows of patches that have shot (by default
     /// a patch that shoots again reuses its row instead of rasterising; the
     /// results are identical, only the time changes).
@@ -115,7 +118,7 @@ impl SolveArgs {
                 max_patches_per_edge: self.max_patches_per_edge,
                 ..MeshSettings::default()
             },
-            raster_split: self.raster_split,
+            raster_pieces: self.raster_pieces,
             cache_rows: !self.no_cache,
             ..RenderOptions::default()
         }

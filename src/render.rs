@@ -28,6 +28,10 @@ pub enum FormFactorMethod {
     Hybrid,
 }
 
+/// Pieces per quad polygon edge the hemisphere rasteriser draws by default
+/// (chosen by `radiosity bench`; see README "Performance").
+pub const DEFAULT_RASTER_PIECES: u32 = 1;
+
 /// Everything a render can be told.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
@@ -39,8 +43,9 @@ pub struct RenderOptions {
     pub stop: StopRule,
     /// How to subdivide.
     pub mesh: MeshSettings,
-    /// Rasterisation proxies per element edge (tessellation control).
-    pub raster_split: u32,
+    /// What the hemisphere rasteriser draws: quad polygons as at most N x N
+    /// pieces (the element is found per fragment), or every element (0).
+    pub raster_pieces: u32,
     /// How the hemisphere is tiled and over which rank grid. Under MPI the
     /// grid comes from the rank count and only the tile size is used; in one
     /// process every rank's tiles are drawn in turn (one tile by default).
@@ -72,7 +77,7 @@ impl Default for RenderOptions {
             form_factor: FormFactorMethod::default(),
             stop: StopRule::default(),
             mesh: MeshSettings::default(),
-            raster_split: 1,
+            raster_pieces: DEFAULT_RASTER_PIECES,
             layout: None,
             tile: (1, 1),
             exchange: Exchange::Hemispheres,
@@ -189,7 +194,7 @@ impl<'a> GpuFormFactors<'a> {
             )));
         }
         let mut raster =
-            HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_split, extent)?;
+            HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_pieces, extent)?;
         let hybrid = opts.form_factor == FormFactorMethod::Hybrid;
         raster.set_count_coverage(hybrid);
         let weights = if hybrid {
@@ -754,7 +759,7 @@ pub fn build_report(
             threshold: opts.stop.threshold,
             max_shots: opts.stop.max_shots,
             mesh: opts.mesh,
-            raster_split: opts.raster_split,
+            raster_pieces: opts.raster_pieces,
             image_size,
             shading: opts.shading,
             ambient: opts.ambient,

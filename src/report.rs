@@ -51,8 +51,8 @@ pub struct Settings {
     pub max_shots: u64,
     /// Subdivision settings.
     pub mesh: crate::mesh::MeshSettings,
-    /// Rasterisation proxies per element edge.
-    pub raster_split: u32,
+    /// Pieces per quad polygon edge drawn by the hemisphere rasteriser (0: every element).
+    pub raster_pieces: u32,
     /// Image size.
     pub image_size: [u32; 2],
     /// Smooth or flat.

@@ -37,7 +37,10 @@ struct Instance {
     edges: [[f32; 3]; 4],
     plane: [f32; 4],
     item: [u32; 2],
-    _pad: [u32; 2],
+    origin: [f32; 4],
+    axis: [f32; 4],
+    bilinear: [f32; 4],
+    grid: [u32; 4],
 }
 
 /// Time spent in the phases of one rasterisation.
@@ -59,6 +62,64 @@ struct PolygonProxies {
     normal: Vec3,
     centre: Vec3,
     radius: f32,
+    /// Its bilinear element grid, when it is drawn in pieces (an index into `quads`).
+    quad: Option<u32>,
+}
+
+/// A quad polygon drawn in pieces: its corners (world space) and element
+/// grid (elements along u and v, elements per patch along u and v), from
+/// which the fragment shader finds the element at a hit point.
+struct QuadGrid {
+    corners: [Vec3; 4],
+    grid: [u32; 4],
+}
+
+/// The outline of a quad polygon (its patches' outer corners), or `None` for
+/// a triangle.
+fn polygon_outline(mesh: &Mesh, poly: &crate::mesh::MeshPolygon) -> Option<[Vec3; 4]> {
+    let patches = &mesh.patches[poly.patches.start as usize..poly.patches.end as usize];
+    let first = patches.first()?;
+    if first.corners[3] == first.corners[2] {
+        return None;
+    }
+    let [pu, pv] = poly.patch_grid;
+    let at = |i: u32, j: u32| &patches[(j * pu + i) as usize];
+    Some([
+        at(0, 0).corners[0],
+        at(pu - 1, 0).corners[1],
+        at(pu - 1, pv - 1).corners[2],
+        at(0, pv - 1).corners[3],
+    ])
+}
+
+/// What the fragment shader needs to find the element of a piece of a quad
+/// polygon at a hit point, in the shooter's frame: the polygon's bilinear map
+/// p = o + u e1 + v e2 + u v g written in a 2-D basis of its plane (x along e1).
+#[derive(Clone, Copy, Default)]
+struct Lookup {
+    /// o (shooter frame), and g's y coordinate.
+    origin: [f32; 4],
+    /// The plane's x axis (shooter frame).
+    axis: [f32; 4],
+    /// |e1|, e2.x, e2.y, g.x.
+    bilinear: [f32; 4],
+    /// Elements along u, along v, per patch along u, per patch along v (all 0: a single element).
+    grid: [u32; 4],
+}
+
+impl Lookup {
+    fn new(q: &QuadGrid, shooter: &ShooterFrame, n: Vec3) -> Self {
+        let c = q.corners.map(|p| shooter.to_local(p - shooter.centre));
+        let (e1, e2, g) = (c[1] - c[0], c[3] - c[0], c[0] - c[1] + c[2] - c[3]);
+        let x = e1.normalize_or_zero();
+        let y = n.cross(x);
+        Self {
+            origin: [c[0].x, c[0].y, c[0].z, g.dot(y)],
+            axis: [x.x, x.y, x.z, 0.0],
+            bilinear: [e1.length(), e2.dot(x), e2.dot(y), g.dot(x)],
+            grid: q.grid,
+        }
+    }
 }
 
 /// Pipelines, buffers and scene geometry for hemisphere rendering, created once.
@@ -67,8 +128,10 @@ pub struct HemisphereRasterizer {
     far: f32,
     /// Corners of every rasterisation proxy (world space).
     corners: Vec<[Vec3; 4]>,
-    /// Element each proxy belongs to.
+    /// Element each proxy belongs to (the polygon's first element for a piece of a quad grid).
     element: Vec<u32>,
+    /// Quad polygons drawn in pieces.
+    quads: Vec<QuadGrid>,
     polygons: Vec<PolygonProxies>,
     /// Rectangles of the current shot, CPU side (reused).
     instances: Vec<Instance>,
@@ -89,17 +152,20 @@ pub struct HemisphereRasterizer {
 }
 
 impl HemisphereRasterizer {
-    /// Builds the pipeline and the per-shot buffers for `mesh`. `split` cuts
-    /// each element into split x split proxies for tighter rectangles (results
-    /// are exact either way). `extent` bounds every distance in the scene.
+    /// Builds the pipeline and the per-shot buffers for `mesh`. `pieces`
+    /// says what is drawn: with N >= 1 every quad polygon is drawn as at most
+    /// N x N pieces (never more than its element grid) and the fragment
+    /// shader finds the element from the hit point's (u, v), so a shot costs
+    /// what the visible geometry costs; with 0 every element is drawn on its
+    /// own. Triangles are always drawn per element. Results are the same
+    /// either way. `extent` bounds every distance in the scene.
     pub fn new(
         device: &wgpu::Device,
         mesh: &Mesh,
         res: Resolution,
-        split: u32,
+        pieces: u32,
         extent: f32,
     ) -> Result<Self, GpuError> {
-        let split = split.max(1);
         let limits = device.limits();
         if res.cols > limits.max_texture_dimension_2d || res.rows > limits.max_texture_dimension_2d
         {
@@ -108,42 +174,61 @@ impl HemisphereRasterizer {
                 limits.max_texture_dimension_2d
             )));
         }
-        let mut corners = Vec::with_capacity(mesh.elements.len() * (split * split) as usize);
-        let mut element = Vec::with_capacity(corners.capacity());
+        let mut corners = Vec::new();
+        let mut element = Vec::new();
+        let mut quads = Vec::new();
         let mut polygons = Vec::with_capacity(mesh.polygons.len());
         for poly in &mesh.polygons {
             let first = corners.len() as u32;
             let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);
             for id in poly.elements.clone() {
-                let c = mesh.elements[id as usize].corners;
-                for p in c {
+                for p in mesh.elements[id as usize].corners {
                     lo = lo.min(p);
                     hi = hi.max(p);
                 }
-                let at = |u: f32, v: f32| {
-                    c[0] * (1.0 - u) * (1.0 - v)
-                        + c[1] * u * (1.0 - v)
-                        + c[2] * u * v
-                        + c[3] * (1.0 - u) * v
-                };
-                for j in 0..split {
-                    for i in 0..split {
-                        let (u0, u1) = (i as f32 / split as f32, (i + 1) as f32 / split as f32);
-                        let (v0, v1) = (j as f32 / split as f32, (j + 1) as f32 / split as f32);
-                        corners.push(if split == 1 {
-                            c
-                        } else {
-                            [at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)]
-                        });
+            }
+            let outline = polygon_outline(mesh, poly);
+            let quad = match outline {
+                Some(c) if pieces > 0 => {
+                    let (nu, nv) = (
+                        poly.patch_grid[0] * poly.element_grid[0],
+                        poly.patch_grid[1] * poly.element_grid[1],
+                    );
+                    let (su, sv) = (pieces.min(nu), pieces.min(nv));
+                    let at = |u: f32, v: f32| {
+                        c[0] * (1.0 - u) * (1.0 - v)
+                            + c[1] * u * (1.0 - v)
+                            + c[2] * u * v
+                            + c[3] * (1.0 - u) * v
+                    };
+                    for j in 0..sv {
+                        for i in 0..su {
+                            let (u0, u1) = (i as f32 / su as f32, (i + 1) as f32 / su as f32);
+                            let (v0, v1) = (j as f32 / sv as f32, (j + 1) as f32 / sv as f32);
+                            corners.push([at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)]);
+                            element.push(poly.elements.start);
+                        }
+                    }
+                    quads.push(QuadGrid {
+                        corners: c,
+                        grid: [nu, nv, poly.element_grid[0], poly.element_grid[1]],
+                    });
+                    Some(quads.len() as u32 - 1)
+                }
+                _ => {
+                    for id in poly.elements.clone() {
+                        corners.push(mesh.elements[id as usize].corners);
                         element.push(id);
                     }
+                    None
                 }
-            }
+            };
             polygons.push(PolygonProxies {
                 proxies: first..corners.len() as u32,
                 normal: poly.normal,
                 centre: 0.5 * (lo + hi),
                 radius: 0.5 * (hi - lo).length(),
+                quad,
             });
         }
         let max_instances = 2 * corners.len().max(1) as u64;
@@ -204,7 +289,8 @@ impl HemisphereRasterizer {
                     step_mode: wgpu::VertexStepMode::Instance,
                     attributes: &wgpu::vertex_attr_array![
                         0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
-                        4 => Float32x3, 5 => Float32x4, 6 => Uint32x2
+                        4 => Float32x3, 5 => Float32x4, 6 => Uint32x2, 7 => Float32x4,
+                        8 => Float32x4, 9 => Float32x4, 10 => Uint32x4
                     ],
                 })],
             },
@@ -262,6 +348,7 @@ impl HemisphereRasterizer {
             instances: Vec::with_capacity(corners.len()),
             corners,
             element,
+            quads,
             polygons,
             instance_buf,
             uniform,
@@ -296,7 +383,7 @@ impl HemisphereRasterizer {
         self.res
     }
 
-    /// Number of rasterisation proxies (elements times split squared).
+    /// Number of rasterisation proxies (pieces of quad polygons, elements of triangles).
     pub fn proxy_count(&self) -> usize {
         self.corners.len()
     }
@@ -314,7 +401,13 @@ impl HemisphereRasterizer {
                 .map_or(1, |n| n.get())
                 .min(8)
         };
-        let (res, far, corners, element) = (self.res, self.far, &self.corners, &self.element);
+        let (res, far, corners, element, quads) = (
+            self.res,
+            self.far,
+            &self.corners,
+            &self.element,
+            &self.quads,
+        );
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
             for (k, poly) in polys.iter().enumerate() {
                 // The shooter never sees its own polygon; skip polygons wholly below its plane.
@@ -324,9 +417,21 @@ impl HemisphereRasterizer {
                     continue;
                 }
                 let n = shooter.to_local(poly.normal);
+                let lookup = poly.quad.map_or_else(Lookup::default, |q| {
+                    Lookup::new(&quads[q as usize], shooter, n)
+                });
                 for i in poly.proxies.clone() {
                     let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                    push_piece(out, &d, n, element[i as usize], res, far, ownership);
+                    push_piece(
+                        out,
+                        &d,
+                        n,
+                        element[i as usize],
+                        &lookup,
+                        res,
+                        far,
+                        ownership,
+                    );
                 }
             }
         };
@@ -538,11 +643,13 @@ impl Ownership {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn push_piece(
     out: &mut Vec<Instance>,
     d: &[Vec3; 4],
     n: Vec3,
     element: u32,
+    lookup: &Lookup,
     res: Resolution,
     far: f32,
     ownership: Option<Ownership>,
@@ -572,7 +679,10 @@ fn push_piece(
         edges,
         plane: [n.x, n.y, n.z, offset],
         item: [element, back as u32],
-        _pad: [0; 2],
+        origin: lookup.origin,
+        axis: lookup.axis,
+        bilinear: lookup.bilinear,
+        grid: lookup.grid,
     };
     if primary {
         out.push(inst);
