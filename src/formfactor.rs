@@ -23,6 +23,9 @@ pub fn unpack(v: u64) -> (u64, u64) {
 /// element (so each element can shoot its own share); larger ones shoot as a whole.
 pub const MAX_SHOOTER_COLUMNS: usize = 16;
 
+/// Rows with at least this many integrals are evaluated on every core.
+const PARALLEL_INTEGRALS: usize = 4096;
+
 /// One shooter's form factors to the receivers it reaches: for each receiver,
 /// one value per shooter element (`columns` of them; 1 when the patch shoots
 /// as a whole). The form factor for a given spread of the shooter's unshot
@@ -91,6 +94,8 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
         ..Row::default()
     };
     let (s_normal, s_origin) = (spoly.normal.as_dvec3(), sp.centre.as_dvec3());
+    // First the receivers and their visibilities (cheap), then the integrals.
+    let mut jobs: Vec<(u32, f64)> = Vec::new();
     let mut k = 0;
     while k < counts.len() {
         let patch = mesh.elements[counts[k].0 as usize].patch;
@@ -122,28 +127,54 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
             } else {
                 patch_visibility
             };
-            if v <= 0.0 {
-                continue;
+            // The shooter emits from its front only.
+            let x = element_centre(&mesh.elements[j as usize]).as_dvec3();
+            if v > 0.0 && s_normal.dot(x - s_origin) > 0.0 {
+                jobs.push((j, v));
             }
+        }
+    }
+    let eval = |jobs: &[(u32, f64)]| -> Vec<f64> {
+        let mut values = Vec::with_capacity(jobs.len() * outlines.len());
+        for &(j, v) in jobs {
             let e = &mesh.elements[j as usize];
             let x = element_centre(e).as_dvec3();
-            // The shooter emits from its front only.
-            if s_normal.dot(x - s_origin) <= 0.0 {
-                continue;
-            }
             let normal = mesh.polygons[e.polygon as usize].normal.as_dvec3();
             let scale = v * e.area / sp.area;
-            let start = row.values.len();
-            row.values.extend(
+            values.extend(
                 outlines
                     .iter()
                     .map(|(o, n)| scale * point_to_polygon(x, normal, &o[..*n])),
             );
-            if row.values[start..].iter().any(|&f| f > 0.0) {
-                row.ids.push(j);
-            } else {
-                row.values.truncate(start);
-            }
+        }
+        values
+    };
+    // The integrals are independent: large rows use every core, joined in order.
+    let threads = if jobs.len() * outlines.len() >= PARALLEL_INTEGRALS {
+        std::thread::available_parallelism().map_or(1, |n| n.get().min(8))
+    } else {
+        1
+    };
+    let values = if threads <= 1 {
+        eval(&jobs)
+    } else {
+        let chunk = jobs.len().div_ceil(threads);
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = jobs
+                .chunks(chunk)
+                .map(|c| scope.spawn(move || eval(c)))
+                .collect();
+            handles
+                .into_iter()
+                .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        })
+    };
+    let m = outlines.len();
+    for (&(j, _), v) in jobs.iter().zip(values.chunks_exact(m)) {
+        if v.iter().any(|&f| f > 0.0) {
+            row.ids.push(j);
+            row.values.extend_from_slice(v);
         }
     }
     row

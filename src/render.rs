@@ -536,6 +536,7 @@ pub fn render_on(
 
     let mut solver = Solver::partitioned(&mesh, rank, ranks);
     let mut trace = Trace::default();
+    let (mut landed_fixed, mut last_power) = (0.0f64, None::<f64>);
     let mut ff = Vec::new();
     let mut shot_times = Vec::new();
     let (mut select, mut update) = (Duration::ZERO, Duration::ZERO);
@@ -546,7 +547,7 @@ pub fn render_on(
         // One collective per shot decides both the stop rule and the shooter:
         // every rank's unshot power (fixed point, exact in f64 below 2^53) and
         // its best patch.
-        const W: usize = 10;
+        const W: usize = 11;
         let mine: [f64; W] = match solver.local_candidate() {
             Some(c) => [
                 solver.local_unshot_fixed() as f64,
@@ -559,15 +560,23 @@ pub fn render_on(
                 c.centre.y as f64,
                 c.centre.z as f64,
                 c.weighted as u8 as f64,
+                landed_fixed,
             ],
             None => {
                 let mut v = [0.0; W];
                 v[0] = solver.local_unshot_fixed() as f64;
                 v[1] = -1.0;
+                v[10] = landed_fixed;
                 v
             }
         };
         let all = comm.all_gather_f64(&mine);
+        if let Some(power) = last_power.take() {
+            // What the last shot landed, over every rank's elements (fixed
+            // point, so the sum is exact and the same on every rank).
+            let landed = all.chunks_exact(W).map(|c| c[10] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
+            solver.note_retention(power, landed);
+        }
         unshot_fraction = all.chunks_exact(W).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
         if solver.done_at(&opts.stop, unshot_fraction) {
             break;
@@ -603,8 +612,18 @@ pub fn render_on(
         }
         source.form_factors(best.patch, &region, &mut ff)?;
         let t = Instant::now();
-        solver.shoot_candidate(&best, &ff);
+        let shot = solver.shoot_candidate(&best, &ff);
         let dt = t.elapsed();
+        // This rank's elements' share of what landed, told at the next collective.
+        // Each element's F is rounded on its own, so the sum does not depend
+        // on how elements are split between ranks.
+        let own: u64 = ff
+            .iter()
+            .filter(|(j, _)| solver.owns(mesh.elements[*j as usize].patch))
+            .map(|(_, f)| (f.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64)
+            .sum();
+        landed_fixed = own as f64;
+        last_power = Some(shot.power);
         update += dt;
         if let Some(b) = source.busy.last_mut() {
             *b += dt.as_secs_f64();
@@ -837,6 +856,7 @@ impl Trace {
             gb.zip(gu).map(|(gb, gu)| {
                 let mut whole = Solver::new(solver.mesh());
                 whole.assemble(&gb, &gu);
+                whole.copy_retention(solver);
                 (
                     report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),
                     whole.unshot_fraction(),

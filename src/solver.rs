@@ -118,6 +118,8 @@ pub struct Solver<'m> {
     element_unshot: Vec<[f64; 3]>,
     emitted_power: f64,
     shots: u64,
+    /// Shot power so far, and landed power so far (see [`Solver::note_retention`]).
+    retention: [f64; 2],
     ff: Vec<(u32, f64)>,
 }
 
@@ -157,6 +159,7 @@ impl<'m> Solver<'m> {
             unshot,
             emitted_power,
             shots: 0,
+            retention: [0.0; 2],
             ff: Vec::new(),
         }
     }
@@ -367,7 +370,9 @@ impl<'m> Solver<'m> {
             centre: glam::Vec3::ZERO,
             weighted: false,
         };
-        self.shoot_candidate(&c, ff)
+        let shot = self.shoot_candidate(&c, ff);
+        self.note_retention(shot.power, shot.form_factor_sum);
+        shot
     }
 
     /// One whole shot: select, get form factors, distribute. `None` when nothing is left to shoot.
@@ -382,10 +387,38 @@ impl<'m> Solver<'m> {
         Ok(Some(shot))
     }
 
-    /// The ambient term (Cohen et al. 1988): the unshot radiosity spread
-    /// uniformly and multiplied by the interreflection factor 1 / (1 - rho_avg).
-    /// For display only; never added to [`Solver::radiosity`].
+    /// Records that a shot of `power` landed the fraction `landed` of it on
+    /// the scene (the sum of its form factors over all elements; below 1 where
+    /// light escapes an open scene). The ambient term uses the power-weighted mean.
+    pub fn note_retention(&mut self, power: f64, landed: f64) {
+        if power > 0.0 && landed.is_finite() {
+            self.retention[0] += power;
+            self.retention[1] += power * landed.clamp(0.0, 1.0);
+        }
+    }
+
+    /// The power-weighted mean fraction of shot power that landed (1 before any shot).
+    pub fn retention(&self) -> f64 {
+        if self.retention[0] > 0.0 {
+            self.retention[1] / self.retention[0]
+        } else {
+            1.0
+        }
+    }
+
+    /// Takes over `other`'s retention record (for a solver assembled from ranks).
+    pub fn copy_retention(&mut self, other: &Solver) {
+        self.retention = other.retention;
+    }
+
+    /// The ambient term (Cohen et al. 1988), for an open scene: the unshot
+    /// power U spread uniformly over the area A, of which the fraction f that
+    /// shots have been seen to land ([`Solver::retention`]) lands each bounce:
+    /// U f / (A (1 - rho_avg f)) per channel (Cohen's 1 / (1 - rho_avg) in a
+    /// closed scene). It estimates the light not yet shot; it is kept apart
+    /// from [`Solver::radiosity`] and added by [`Solver::display_radiosity`].
     pub fn ambient(&self) -> [f64; 3] {
+        let f = self.retention();
         let mesh = self.mesh;
         let total_area = mesh.total_area();
         let mut out = [0.0; 3];
@@ -405,7 +438,7 @@ impl<'m> Solver<'m> {
                 .map(|e| mesh.polygons[e.polygon as usize].reflectance[c] * e.area)
                 .sum::<f64>()
                 / total_area;
-            out[c] = unshot / total_area / (1.0 - rho).max(1e-3);
+            out[c] = unshot * f / total_area / (1.0 - rho * f).max(1e-3);
         }
         out
     }
