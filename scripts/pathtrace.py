@@ -13,7 +13,9 @@ one JSON line per level: {"spp", "seconds", "surfaces": [{"node", "area",
 "radiosity"}]}, where seconds is the total render time over all nodes at that
 level (scene loading excluded, as device set-up is excluded on our side).
 
-Usage: pathtrace.py SCENE.json [--variant scalar_rgb] [--min-spp 4] [--max-spp 4096]
+The first line printed is {"variant": NAME}.
+
+Usage: pathtrace.py SCENE.json [--variant auto] [--min-spp 4] [--max-spp 4096]
 Install: pip install mitsuba (llvm_ad_rgb needs Debian's libllvm19; scalar_rgb runs anywhere).
 """
 
@@ -28,7 +30,8 @@ import time
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene")
-    ap.add_argument("--variant", default="scalar_rgb")
+    ap.add_argument("--variant", default="auto",
+                    help="a Mitsuba variant; auto: llvm_ad_rgb when it loads, else scalar_rgb")
     ap.add_argument("--min-spp", type=int, default=4)
     ap.add_argument("--max-spp", type=int, default=4096)
     ap.add_argument("--max-seconds", type=float, default=120.0,
@@ -39,7 +42,14 @@ def main():
         import mitsuba as mi
     except ImportError:
         sys.exit("pathtrace.py: Mitsuba 3 is not installed: pip install mitsuba")
-    mi.set_variant(args.variant)
+    if args.variant == "auto":
+        try:
+            mi.set_variant("llvm_ad_rgb")
+        except Exception:  # no usable LLVM (Debian 12: apt-get install libllvm19)
+            mi.set_variant("scalar_rgb")
+    else:
+        mi.set_variant(args.variant)
+    print(json.dumps({"variant": mi.variant()}), flush=True)
 
     with open(args.scene) as f:
         scene = json.load(f)

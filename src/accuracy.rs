@@ -5,7 +5,8 @@
 //! over nodes of the relative error of the node's mean radiosity (mean over
 //! RGB channels), and the worst node's. References are closed forms for the
 //! analytic case and, for the other scenes, a long fine run of this renderer
-//! (hybrid form factors, 256 x 1024, patches of 1/24 of the scene's extent, unshot 1e-5), cached as
+//! (hybrid form factors, 256 x 1024, patches of 1/40 of the scene's extent
+//! with 2 x 2 elements, unshot 1e-5), cached as
 //! `reference-<scene>.json` beside the charts; the path tracer's converged
 //! values check it independently.
 
@@ -32,10 +33,10 @@ pub struct AccuracyArgs {
     /// Hemisphere resolutions to chart, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "64x256,128x512,256x1024")]
     resolutions: Vec<Resolution>,
-    /// Patch sizes in metres to chart beside each scene's own subdivision
-    /// (hybrid form factors at 128 x 512), comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5")]
-    patch_sizes: Vec<f32>,
+    /// Patch sizes to chart beside each scene's own subdivision (both methods
+    /// at 128 x 512), as fractions 1/N of the scene's extent, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "16,8")]
+    patch_fractions: Vec<f32>,
     /// Where the CSV, the charts and the cached references go.
     #[arg(long, default_value = "docs/bench/accuracy")]
     out: PathBuf,
@@ -54,8 +55,9 @@ pub struct AccuracyArgs {
     /// Python interpreter for the path tracer.
     #[arg(long, default_value = "python3")]
     python: String,
-    /// Mitsuba variant (scalar_rgb runs anywhere; llvm_ad_rgb needs libllvm19).
-    #[arg(long, default_value = "scalar_rgb")]
+    /// Mitsuba variant: auto (llvm_ad_rgb when Debian's libllvm19 is
+    /// installed, else scalar_rgb, which runs anywhere) or a variant name.
+    #[arg(long, default_value = "auto")]
     variant: String,
     /// Largest samples per sensor for the path tracer (it also stops once a
     /// level takes more than a minute).
@@ -203,7 +205,7 @@ fn reference(
             return Ok(r.surfaces);
         }
     }
-    let patch = scene.extent() / 24.0;
+    let patch = scene.extent() / 40.0;
     let mut o = base.clone();
     o.form_factor = FormFactorMethod::Hybrid;
     o.resolution = Resolution {
@@ -336,7 +338,14 @@ fn path_tracer(
         );
     }
     let mut points = Vec::new();
+    let mut variant = args.variant.clone();
     for line in String::from_utf8_lossy(&out.stdout).lines() {
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(line) {
+            if let Some(name) = v.get("variant").and_then(|n| n.as_str()) {
+                variant = name.to_string();
+                continue;
+            }
+        }
         let l: Level =
             serde_json::from_str(line).with_context(|| format!("path tracer said '{line}'"))?;
         let (mean, max) = error(&l.surfaces, reference);
@@ -348,7 +357,7 @@ fn path_tracer(
         });
     }
     Ok(Curve {
-        label: format!("path tracer (Mitsuba 3 {}, spp doubling)", args.variant),
+        label: format!("path tracer (Mitsuba 3 {variant}, spp doubling)"),
         method: "pathtracer".into(),
         resolution: String::new(),
         patches: 0,
@@ -491,14 +500,15 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
             }
         }
-        for &p in &args.patch_sizes {
+        for &n in &args.patch_fractions {
+            let p = scene.extent() / n.max(1.0);
             for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
                 let mut o = base.clone();
                 o.form_factor = method;
                 o.mesh.patch_size = Some(p);
                 eprintln!("accuracy: {} {method:?} patches {p} m", scene.name);
                 let label = format!(
-                    "{} 128x512, {p} m patches",
+                    "{} 128x512, {p:.3} m patches",
                     format!("{method:?}").to_lowercase()
                 );
                 curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
