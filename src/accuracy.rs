@@ -61,8 +61,15 @@ pub struct AccuracyArgs {
     variant: String,
     /// Largest samples per sensor for the path tracer (it also stops once a
     /// level takes more than a minute).
-    #[arg(long, default_value_t = 1 << 20)]
+    #[arg(long, default_value_t = 1 << 24)]
     max_spp: u32,
+}
+
+/// A file-name-safe name for a scene (a file's stem; built-in names as they are).
+fn stem(name: &str) -> String {
+    Path::new(name)
+        .file_stem()
+        .map_or_else(|| name.to_string(), |s| s.to_string_lossy().into_owned())
 }
 
 /// A cached reference solution.
@@ -197,7 +204,9 @@ fn reference(
     base: &RenderOptions,
     args: &AccuracyArgs,
 ) -> Result<Vec<Surface>> {
-    let path = args.out.join(format!("reference-{}.json", scene.name));
+    let path = args
+        .out
+        .join(format!("reference-{}.json", stem(&scene.name)));
     if !args.recompute_reference {
         if let Ok(text) = std::fs::read_to_string(&path) {
             let r: Reference = serde_json::from_str(&text)
@@ -312,7 +321,7 @@ fn path_tracer(
         seconds: f64,
         surfaces: Vec<Surface>,
     }
-    let json = dir.join(format!("{}-pt.json", scene.name));
+    let json = dir.join(format!("{}-pt.json", stem(&scene.name)));
     export_for_pathtracer(scene, &json)?;
     eprintln!(
         "accuracy: path tracing {} with Mitsuba 3 ({})...",
@@ -339,6 +348,7 @@ fn path_tracer(
     }
     let mut points = Vec::new();
     let mut variant = args.variant.clone();
+    let mut last: Option<Level> = None;
     for line in String::from_utf8_lossy(&out.stdout).lines() {
         if let Ok(v) = serde_json::from_str::<serde_json::Value>(line) {
             if let Some(name) = v.get("variant").and_then(|n| n.as_str()) {
@@ -355,6 +365,25 @@ fn path_tracer(
             max,
             shots: l.spp,
         });
+        last = Some(l);
+    }
+    // The path tracer's most converged estimate, kept as an independent check
+    // of the reference.
+    if let Some(l) = last {
+        output::write_json(
+            &args
+                .out
+                .join(format!("pathtracer-{}.json", stem(&scene.name))),
+            &Reference {
+                scene: scene.name.clone(),
+                how: format!(
+                    "Mitsuba 3 {variant}, path integrator, {} spp per node (scripts/pathtrace.py)",
+                    l.spp
+                ),
+                seconds: l.seconds,
+                surfaces: l.surfaces,
+            },
+        )?;
     }
     Ok(Curve {
         label: format!("path tracer (Mitsuba 3 {variant}, spp doubling)"),
@@ -563,7 +592,7 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 last.seconds
             );
         }
-        chart(&args.out, &scene.name, &curves)?;
+        chart(&args.out, &stem(&scene.name), &curves)?;
     }
     output::write_atomic(&args.out.join("accuracy.csv"), csv.as_bytes())?;
     output::write_atomic(&args.out.join("summary.md"), summary.as_bytes())?;

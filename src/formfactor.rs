@@ -23,6 +23,10 @@ pub fn unpack(v: u64) -> (u64, u64) {
 /// element (so each element can shoot its own share); larger ones shoot as a whole.
 pub const MAX_SHOOTER_COLUMNS: usize = 16;
 
+/// Receivers farther than this many shooter radii from the shooter's centre
+/// take one integral over the whole patch instead of one per shooter element.
+pub const NEAR_FIELD: f64 = 4.0;
+
 /// Rows with at least this many integrals are evaluated on every core.
 const PARALLEL_INTEGRALS: usize = 4096;
 
@@ -134,6 +138,23 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
             }
         }
     }
+    // Where the spread over the shooter's elements matters: receivers nearer
+    // than NEAR_FIELD shooter radii. Farther ones get one integral over the
+    // whole patch, shared out by element area (which any spread then sums back
+    // to, since the weights average to 1 over the area).
+    let (patch_outline, patch_n) = outline(&sp.corners);
+    let radius = patch_outline[..patch_n]
+        .iter()
+        .map(|c| c.distance(s_origin))
+        .fold(0.0f64, f64::max);
+    let shares: Vec<f64> = if outlines.len() > 1 {
+        sp.elements
+            .clone()
+            .map(|k| mesh.elements[k as usize].area / sp.area)
+            .collect()
+    } else {
+        vec![1.0]
+    };
     let eval = |jobs: &[(u32, f64)]| -> Vec<f64> {
         let mut values = Vec::with_capacity(jobs.len() * outlines.len());
         for &(j, v) in jobs {
@@ -141,11 +162,16 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
             let x = element_centre(e).as_dvec3();
             let normal = mesh.polygons[e.polygon as usize].normal.as_dvec3();
             let scale = v * e.area / sp.area;
-            values.extend(
-                outlines
-                    .iter()
-                    .map(|(o, n)| scale * point_to_polygon(x, normal, &o[..*n])),
-            );
+            if outlines.len() > 1 && x.distance(s_origin) > NEAR_FIELD * radius {
+                let f = scale * point_to_polygon(x, normal, &patch_outline[..patch_n]);
+                values.extend(shares.iter().map(|a| f * a));
+            } else {
+                values.extend(
+                    outlines
+                        .iter()
+                        .map(|(o, n)| scale * point_to_polygon(x, normal, &o[..*n])),
+                );
+            }
         }
         values
     };

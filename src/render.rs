@@ -121,10 +121,9 @@ pub struct PhaseTimes {
     pub cached: u64,
 }
 
-/// Memory the form-factor row cache may use per rank, in bytes (counted
-/// against the worst case of a row with every element, so the decision to
-/// cache is the same on every rank).
-pub const ROW_CACHE_BYTES: usize = 1 << 30;
+/// Memory the form-factor row cache may use, in bytes per rank (summed over
+/// ranks before each decision, so every rank keeps or drops a row alike).
+pub const ROW_CACHE_BYTES: u64 = 1 << 30;
 
 /// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
 /// exchanging them between ranks as DESIGN.md section 3 describes. Returns
@@ -161,8 +160,11 @@ pub struct GpuFormFactors<'a> {
     /// Form-factor rows of patches that have shot, for when they shoot again
     /// (the same shooter gives the same row, so a hit changes no result).
     cache: std::collections::HashMap<(u32, [u32; 3]), Row>,
-    /// How many rows the cache may hold: the same number on every rank.
-    cache_rows: usize,
+    /// The last row computed, until it is known whether it fits.
+    pending: Option<((u32, [u32; 3]), Row)>,
+    /// Bytes the cache holds over all ranks, and may hold.
+    cache_bytes: u64,
+    cache_budget: u64,
 }
 
 impl<'a> GpuFormFactors<'a> {
@@ -239,14 +241,31 @@ impl<'a> GpuFormFactors<'a> {
             timings: PhaseTimes::default(),
             busy: Vec::new(),
             cache: Default::default(),
-            cache_rows: if opts.cache_rows {
-                ROW_CACHE_BYTES
-                    / ((4 + 8 * crate::formfactor::MAX_SHOOTER_COLUMNS)
-                        * mesh.elements.len().max(1))
+            pending: None,
+            cache_bytes: 0,
+            cache_budget: if opts.cache_rows {
+                ROW_CACHE_BYTES * n as u64
             } else {
                 0
             },
         })
+    }
+
+    /// Bytes of the row computed by the last shot that the cache has not
+    /// decided on yet (this rank's share).
+    pub fn pending_bytes(&self) -> u64 {
+        self.pending.as_ref().map_or(0, |(_, r)| r.bytes() as u64)
+    }
+
+    /// Keeps the pending row if the cache has room for `all_ranks_bytes`
+    /// (the pending bytes summed over ranks, the same number on every rank).
+    pub fn settle_cache(&mut self, all_ranks_bytes: u64) {
+        if let Some((key, row)) = self.pending.take() {
+            if self.cache_bytes + all_ranks_bytes <= self.cache_budget {
+                self.cache_bytes += all_ranks_bytes;
+                self.cache.insert(key, row);
+            }
+        }
     }
 
     /// The rasteriser (for inspection: proxies, resolution).
@@ -418,8 +437,12 @@ impl FormFactorSource for GpuFormFactors<'_> {
             }
         };
         row.combine(&region.weights, out);
-        if self.cache.len() < self.cache_rows {
-            self.cache.insert(key, row);
+        if self.cache_budget > 0 {
+            self.pending = Some((key, row));
+            if self.comm.size() == 1 {
+                // One process: the decision needs nobody else.
+                self.settle_cache(self.pending_bytes());
+            }
         }
         let total = start.elapsed();
         let drawn = self.timings.bounds + self.timings.rasterise + self.timings.read_back - before;
@@ -547,7 +570,7 @@ pub fn render_on(
         // One collective per shot decides both the stop rule and the shooter:
         // every rank's unshot power (fixed point, exact in f64 below 2^53) and
         // its best patch.
-        const W: usize = 11;
+        const W: usize = 12;
         let mine: [f64; W] = match solver.local_candidate() {
             Some(c) => [
                 solver.local_unshot_fixed() as f64,
@@ -561,16 +584,21 @@ pub fn render_on(
                 c.centre.z as f64,
                 c.weighted as u8 as f64,
                 landed_fixed,
+                source.pending_bytes() as f64,
             ],
             None => {
                 let mut v = [0.0; W];
                 v[0] = solver.local_unshot_fixed() as f64;
                 v[1] = -1.0;
                 v[10] = landed_fixed;
+                v[11] = source.pending_bytes() as f64;
                 v
             }
         };
         let all = comm.all_gather_f64(&mine);
+        if ranks > 1 {
+            source.settle_cache(all.chunks_exact(W).map(|c| c[11] as u64).sum());
+        }
         if let Some(power) = last_power.take() {
             // What the last shot landed, over every rank's elements (fixed
             // point, so the sum is exact and the same on every rank).
