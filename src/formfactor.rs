@@ -157,20 +157,28 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
     };
     let eval = |jobs: &[(u32, f64)]| -> Vec<f64> {
         let mut values = Vec::with_capacity(jobs.len() * outlines.len());
+        let mut column = vec![0.0; outlines.len()];
         for &(j, v) in jobs {
             let e = &mesh.elements[j as usize];
             let x = element_centre(e).as_dvec3();
             let normal = mesh.polygons[e.polygon as usize].normal.as_dvec3();
             let scale = v * e.area / sp.area;
-            if outlines.len() > 1 && x.distance(s_origin) > NEAR_FIELD * radius {
+            let reach = radius.max(element_radius(e, x));
+            if x.distance(s_origin) > NEAR_FIELD * reach {
+                // Far: one integral over the whole patch, at the element's centre.
                 let f = scale * point_to_polygon(x, normal, &patch_outline[..patch_n]);
                 values.extend(shares.iter().map(|a| f * a));
             } else {
-                values.extend(
-                    outlines
-                        .iter()
-                        .map(|(o, n)| scale * point_to_polygon(x, normal, &o[..*n])),
-                );
+                // Near: per shooter element, averaged over four points of the
+                // receiver (the midpoint rule alone is off where the
+                // integrand bends within the element).
+                column.iter_mut().for_each(|c| *c = 0.0);
+                for y in sub_points(e) {
+                    for (c, (o, n)) in column.iter_mut().zip(&outlines) {
+                        *c += point_to_polygon(y, normal, &o[..*n]);
+                    }
+                }
+                values.extend(column.iter().map(|c| scale * c / 4.0));
             }
         }
         values
@@ -245,6 +253,47 @@ pub fn point_to_polygon(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
         sum += angle * n.dot(c) / lc;
     }
     (sum / (2.0 * std::f64::consts::PI)).abs()
+}
+
+/// The largest distance from `centre` to a corner of `e`.
+fn element_radius(e: &crate::mesh::Element, centre: DVec3) -> f64 {
+    e.corners
+        .iter()
+        .map(|c| c.as_dvec3().distance(centre))
+        .fold(0.0, f64::max)
+}
+
+/// Four points standing for equal parts of an element: the centres of the
+/// quarters of a quad (bilinear u, v in {1/4, 3/4}) or of the four midpoint
+/// triangles of a triangle.
+fn sub_points(e: &crate::mesh::Element) -> [DVec3; 4] {
+    let c = e.corners.map(|p| p.as_dvec3());
+    if e.corners[3] == e.corners[2] {
+        let (m01, m12, m20) = (
+            (c[0] + c[1]) / 2.0,
+            (c[1] + c[2]) / 2.0,
+            (c[2] + c[0]) / 2.0,
+        );
+        [
+            (c[0] + m01 + m20) / 3.0,
+            (c[1] + m12 + m01) / 3.0,
+            (c[2] + m20 + m12) / 3.0,
+            (m01 + m12 + m20) / 3.0,
+        ]
+    } else {
+        let at = |u: f64, v: f64| {
+            c[0] * (1.0 - u) * (1.0 - v)
+                + c[1] * u * (1.0 - v)
+                + c[2] * u * v
+                + c[3] * (1.0 - u) * v
+        };
+        [
+            at(0.25, 0.25),
+            at(0.75, 0.25),
+            at(0.75, 0.75),
+            at(0.25, 0.75),
+        ]
+    }
 }
 
 /// The distinct corners of an outline that repeats its last corner for a triangle.

@@ -146,3 +146,84 @@ fn classroom_counts_are_near_the_paper() {
         }
     }
 }
+
+#[test]
+fn row_cache_changes_no_number() {
+    // Enough shots that most patches shoot again and hit the cache.
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 900;
+    let cached = cornell(&opts);
+    assert!(
+        cached.report.timings.cached_shots > 300,
+        "{} cached shots",
+        cached.report.timings.cached_shots
+    );
+    opts.cache_rows = false;
+    let fresh = cornell(&opts);
+    assert_eq!(fresh.report.timings.cached_shots, 0);
+    assert!(
+        cached.radiosity == fresh.radiosity,
+        "the cache changed the solution"
+    );
+    assert_eq!(cached.report.surfaces, fresh.report.surfaces);
+}
+
+#[test]
+fn drawing_polygons_or_elements_gives_the_same_form_factors() {
+    // Polygons drawn whole, in 3 x 3 pieces, or element by element: the
+    // element at each cell is the same but for cells on element boundaries,
+    // which may go to either neighbour.
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.threshold = 1e-3;
+    let results: Vec<_> = [1, 3, 0]
+        .into_iter()
+        .map(|pieces| {
+            opts.raster_pieces = pieces;
+            cornell(&opts).report.surfaces
+        })
+        .collect();
+    for other in &results[1..] {
+        for (a, b) in results[0].iter().zip(other) {
+            for c in 0..3 {
+                assert!(
+                    rel(a.radiosity[c], b.radiosity[c]) < 2e-3,
+                    "{}: {:?} vs {:?}",
+                    a.node,
+                    a.radiosity,
+                    b.radiosity
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_ambient_term_is_in_the_report_unless_asked_not_to_be() {
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 20;
+    let with = cornell(&opts);
+    opts.ambient = false;
+    let without = cornell(&opts);
+    assert!(with.report.unshot_fraction > 0.1);
+    // After 20 shots much light is unshot: every reflecting surface is
+    // brighter with the estimate of it, and the emitter-only light is not.
+    for (a, b) in with.report.surfaces.iter().zip(&without.report.surfaces) {
+        if a.node != "light" {
+            assert!(
+                a.radiosity[1] > b.radiosity[1],
+                "{}: {a:?} vs {b:?}",
+                a.node
+            );
+        }
+    }
+    assert!(with.report.settings.ambient && !without.report.settings.ambient);
+}
