@@ -253,7 +253,7 @@ impl HemisphereRasterizer {
         });
         // One u32 per element (at least one, as a binding may not be empty).
         let coverage_bytes = 4 * mesh.elements.len().max(1) as u64;
-        if coverage_bytes > limits.max_storage_buffer_binding_size as u64 {
+        if coverage_bytes > limits.max_storage_buffer_binding_size {
             return Err(GpuError::TooLarge(format!(
                 "{} elements need {coverage_bytes} bytes of coverage counters",
                 mesh.elements.len()
