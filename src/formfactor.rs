@@ -23,6 +23,32 @@ pub fn unpack(v: u64) -> (u64, u64) {
 /// element (so each element can shoot its own share); larger ones shoot as a whole.
 pub const MAX_SHOOTER_COLUMNS: usize = 16;
 
+/// The groups of a shooter's `columns` elements that get a hemisphere each
+/// when its shot is split: up to four runs of consecutive elements (for a
+/// quad patch, rows of its element grid), with the area-weighted centre of each.
+pub fn split_groups(
+    mesh: &Mesh,
+    shooter: u32,
+    columns: usize,
+) -> Vec<(std::ops::Range<usize>, glam::Vec3)> {
+    let sp = &mesh.patches[shooter as usize];
+    let per = columns.div_ceil(4).max(1);
+    (0..columns)
+        .step_by(per)
+        .map(|start| {
+            let range = start..(start + per).min(columns);
+            let (mut c, mut a) = (glam::Vec3::ZERO, 0.0f64);
+            for k in range.clone() {
+                let e = &mesh.elements[sp.elements.start as usize + k];
+                c += element_centre(e) * e.area as f32;
+                a += e.area;
+            }
+            let centre = if a > 0.0 { c / a as f32 } else { sp.centre };
+            (range, centre)
+        })
+        .collect()
+}
+
 /// Receivers farther than this many shooter radii from the shooter's centre
 /// take one integral over the whole patch instead of one per shooter element.
 pub const NEAR_FIELD: f64 = 4.0;
@@ -42,6 +68,8 @@ pub struct Row {
     pub ids: Vec<u32>,
     /// `columns` values per receiver, receiver-major.
     pub values: Vec<f64>,
+    /// Whether a near receiver was partly hidden (see [`hybrid_row`]).
+    pub near_occlusion: bool,
 }
 
 impl Row {
@@ -61,6 +89,42 @@ impl Row {
                 out.push((id, f));
             }
         }
+    }
+
+    /// Adds `other` (the same shooter, other columns) receiver by receiver.
+    pub fn merge(&mut self, other: &Row) {
+        let m = self.columns.max(1);
+        let (mut ids, mut values) = (Vec::new(), Vec::new());
+        let (mut a, mut b) = (0, 0);
+        while a < self.ids.len() || b < other.ids.len() {
+            let ia = self.ids.get(a).copied().unwrap_or(u32::MAX);
+            let ib = other.ids.get(b).copied().unwrap_or(u32::MAX);
+            let id = ia.min(ib);
+            let start = values.len();
+            values.resize(start + m, 0.0);
+            if ia == id {
+                for (v, x) in values[start..]
+                    .iter_mut()
+                    .zip(&self.values[a * m..(a + 1) * m])
+                {
+                    *v += x;
+                }
+                a += 1;
+            }
+            if ib == id {
+                for (v, x) in values[start..]
+                    .iter_mut()
+                    .zip(&other.values[b * m..(b + 1) * m])
+                {
+                    *v += x;
+                }
+                b += 1;
+            }
+            ids.push(id);
+        }
+        self.ids = ids;
+        self.values = values;
+        self.near_occlusion |= other.near_occlusion;
     }
 
     /// Bytes this row holds.
@@ -83,7 +147,18 @@ impl Row {
 /// takes its patch's visibility, so small receivers are not lost between cell
 /// centres. `counts` holds (element, packed count) pairs sorted by element
 /// (see [`VISIBLE_ONE`]).
-pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
+///
+/// Only the columns in `columns` are filled (the others are 0): a shot split
+/// into sub-hemispheres fills each group of shooter elements from its own.
+/// The row's `near_occlusion` says whether a receiver nearer than
+/// [`NEAR_FIELD`] shooter radii is hidden in part: then visibility from one
+/// point of the shooter is not to be trusted (see [`split_groups`]).
+pub fn hybrid_row(
+    mesh: &Mesh,
+    shooter: u32,
+    counts: &[(u32, u64)],
+    columns: std::ops::Range<usize>,
+) -> Row {
     let sp = &mesh.patches[shooter as usize];
     let spoly = &mesh.polygons[sp.polygon as usize];
     let own = sp.elements.clone();
@@ -98,6 +173,11 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
         ..Row::default()
     };
     let (s_normal, s_origin) = (spoly.normal.as_dvec3(), sp.centre.as_dvec3());
+    let (patch_outline, patch_n) = outline(&sp.corners);
+    let radius = patch_outline[..patch_n]
+        .iter()
+        .map(|c| c.distance(s_origin))
+        .fold(0.0f64, f64::max);
     // First the receivers and their visibilities (cheap), then the integrals.
     let mut jobs: Vec<(u32, f64)> = Vec::new();
     let mut k = 0;
@@ -133,7 +213,13 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
             };
             // The shooter emits from its front only.
             let x = element_centre(&mesh.elements[j as usize]).as_dvec3();
-            if v > 0.0 && s_normal.dot(x - s_origin) > 0.0 {
+            if s_normal.dot(x - s_origin) <= 0.0 {
+                continue;
+            }
+            if cov > vis && x.distance(s_origin) < NEAR_FIELD * radius {
+                row.near_occlusion = true;
+            }
+            if v > 0.0 {
                 jobs.push((j, v));
             }
         }
@@ -142,18 +228,21 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
     // than NEAR_FIELD shooter radii. Farther ones get one integral over the
     // whole patch, shared out by element area (which any spread then sums back
     // to, since the weights average to 1 over the area).
-    let (patch_outline, patch_n) = outline(&sp.corners);
-    let radius = patch_outline[..patch_n]
-        .iter()
-        .map(|c| c.distance(s_origin))
-        .fold(0.0f64, f64::max);
+    let in_columns = |k: usize| columns.contains(&k);
     let shares: Vec<f64> = if outlines.len() > 1 {
         sp.elements
             .clone()
-            .map(|k| mesh.elements[k as usize].area / sp.area)
+            .enumerate()
+            .map(|(k, e)| {
+                if in_columns(k) {
+                    mesh.elements[e as usize].area / sp.area
+                } else {
+                    0.0
+                }
+            })
             .collect()
     } else {
-        vec![1.0]
+        vec![if in_columns(0) { 1.0 } else { 0.0 }]
     };
     let eval = |jobs: &[(u32, f64)]| -> Vec<f64> {
         let mut values = Vec::with_capacity(jobs.len() * outlines.len());
@@ -174,8 +263,10 @@ pub fn hybrid_row(mesh: &Mesh, shooter: u32, counts: &[(u32, u64)]) -> Row {
                 // integrand bends within the element).
                 column.iter_mut().for_each(|c| *c = 0.0);
                 for y in sub_points(e) {
-                    for (c, (o, n)) in column.iter_mut().zip(&outlines) {
-                        *c += point_to_polygon(y, normal, &o[..*n]);
+                    for (k, (c, (o, n))) in column.iter_mut().zip(&outlines).enumerate() {
+                        if in_columns(k) {
+                            *c += point_to_polygon(y, normal, &o[..*n]);
+                        }
                     }
                 }
                 values.extend(column.iter().map(|c| scale * c / 4.0));

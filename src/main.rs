@@ -99,6 +99,11 @@ pub struct SolveArgs {
     /// results are identical, only the time changes).
     #[arg(long)]
     no_cache: bool,
+    /// Do not split hybrid shots: by default, when a receiver near the
+    /// shooter is partly hidden from its centre, each group of the shooter's
+    /// elements takes visibility from a hemisphere of its own.
+    #[arg(long)]
+    no_split: bool,
 }
 
 impl SolveArgs {
@@ -120,6 +125,7 @@ impl SolveArgs {
             },
             raster_pieces: self.raster_pieces,
             cache_rows: !self.no_cache,
+            split_shots: !self.no_split,
             ..RenderOptions::default()
         }
     }

@@ -66,6 +66,9 @@ pub struct RenderOptions {
     /// Keep form-factor rows of patches that have shot, so a patch that
     /// shoots again costs no rasterisation (results are identical either way).
     pub cache_rows: bool,
+    /// Split a hybrid shot into one hemisphere per group of shooter elements
+    /// where a near receiver is partly hidden from the shooter's centre.
+    pub split_shots: bool,
     /// Draw element edges over the image.
     pub wireframe: bool,
 }
@@ -86,6 +89,7 @@ impl Default for RenderOptions {
             shading: Shading::Smooth,
             ambient: true,
             cache_rows: true,
+            split_shots: true,
             wireframe: false,
         }
     }
@@ -119,6 +123,8 @@ pub struct PhaseTimes {
     pub rects: u64,
     /// Shots answered from the form-factor row cache (no rasterisation).
     pub cached: u64,
+    /// Shots split into one hemisphere per group of shooter elements.
+    pub split: u64,
 }
 
 /// Memory the form-factor row cache may use, in bytes per rank (summed over
@@ -162,6 +168,8 @@ pub struct GpuFormFactors<'a> {
     cache: std::collections::HashMap<(u32, [u32; 3]), Row>,
     /// The last row computed, until it is known whether it fits.
     pending: Option<((u32, [u32; 3]), Row)>,
+    /// Whether shots split where visibility varies across the shooter.
+    split: bool,
     /// Bytes the cache holds over all ranks, and may hold.
     cache_bytes: u64,
     cache_budget: u64,
@@ -242,6 +250,7 @@ impl<'a> GpuFormFactors<'a> {
             busy: Vec::new(),
             cache: Default::default(),
             pending: None,
+            split: opts.split_shots,
             cache_bytes: 0,
             cache_budget: if opts.cache_rows {
                 ROW_CACHE_BYTES * n as u64
@@ -255,6 +264,34 @@ impl<'a> GpuFormFactors<'a> {
     /// decided on yet (this rank's share).
     pub fn pending_bytes(&self) -> u64 {
         self.pending.as_ref().map_or(0, |(_, r)| r.bytes() as u64)
+    }
+
+    /// Draws the hemisphere of `shooter` at `centre` (every rank its tiles),
+    /// exchanges, and leaves this rank's per-element sums in `self.pairs`.
+    /// Returns the time spent in the exchange.
+    fn hemisphere(&mut self, shooter: u32, centre: glam::Vec3) -> Result<Duration, GpuError> {
+        let frame = self.mesh.shooter_frame_at(shooter, centre);
+        let cols = self.raster.resolution().cols as usize;
+        let exchange = if self.comm.size() == 1 && self.layout.ranks() > 1 {
+            // One process standing in for a rank grid: draw every rank's tiles.
+            for ry in 0..self.layout.py {
+                for rx in 0..self.layout.px {
+                    self.draw(&frame, (rx, ry))?;
+                    self.add_own(cols);
+                }
+            }
+            Duration::ZERO
+        } else if self.comm.size() == 1 {
+            self.draw(&frame, (0, 0))?;
+            self.add_own(cols);
+            Duration::ZERO
+        } else {
+            let rank = self.comm.rank() as u32;
+            self.draw(&frame, (rank % self.layout.px, rank / self.layout.px))?;
+            self.exchange(cols)
+        };
+        self.acc.drain_fixed(&mut self.pairs);
+        Ok(exchange)
     }
 
     /// Keeps the pending row if the cache has room for `all_ranks_bytes`
@@ -400,28 +437,8 @@ impl FormFactorSource for GpuFormFactors<'_> {
             self.busy.push(start.elapsed().as_secs_f64());
             return Ok(());
         }
-        let frame = self.mesh.shooter_frame_at(shooter, centre);
-        let cols = self.raster.resolution().cols as usize;
         let before = self.timings.bounds + self.timings.rasterise + self.timings.read_back;
-        let exchange = if self.comm.size() == 1 && self.layout.ranks() > 1 {
-            // One process standing in for a rank grid: draw every rank's tiles.
-            for ry in 0..self.layout.py {
-                for rx in 0..self.layout.px {
-                    self.draw(&frame, (rx, ry))?;
-                    self.add_own(cols);
-                }
-            }
-            Duration::ZERO
-        } else if self.comm.size() == 1 {
-            self.draw(&frame, (0, 0))?;
-            self.add_own(cols);
-            Duration::ZERO
-        } else {
-            let rank = self.comm.rank() as u32;
-            self.draw(&frame, (rank % self.layout.px, rank / self.layout.px))?;
-            self.exchange(cols)
-        };
-        self.acc.drain_fixed(&mut self.pairs);
+        let mut exchange = self.hemisphere(shooter, centre)?;
         let row = match self.method {
             FormFactorMethod::Hemisphere => Row {
                 columns: 1,
@@ -431,9 +448,49 @@ impl FormFactorSource for GpuFormFactors<'_> {
                     .iter()
                     .map(|p| p.1 as f64 / crate::hemisphere::FIXED_ONE)
                     .collect(),
+                near_occlusion: false,
             },
             FormFactorMethod::Hybrid => {
-                crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs)
+                let m = self.mesh.patches[shooter as usize].elements.len();
+                let columns = if m <= crate::formfactor::MAX_SHOOTER_COLUMNS {
+                    m
+                } else {
+                    1
+                };
+                let mut row =
+                    crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
+                // Refinement by need: a near receiver partly hidden from the
+                // shooter's centre means visibility varies across the
+                // shooter, so each group of its elements looks for itself.
+                let mut split = self.split && columns > 1 && row.near_occlusion;
+                if self.split && columns > 1 && self.comm.size() > 1 {
+                    let t = Instant::now();
+                    split = self
+                        .comm
+                        .all_gather_f64(&[row.near_occlusion as u8 as f64])
+                        .iter()
+                        .any(|&x| x > 0.0);
+                    exchange += t.elapsed();
+                }
+                if split {
+                    let mut merged = Row {
+                        columns,
+                        ..Row::default()
+                    };
+                    for (group, at) in crate::formfactor::split_groups(self.mesh, shooter, columns)
+                    {
+                        exchange += self.hemisphere(shooter, at)?;
+                        merged.merge(&crate::formfactor::hybrid_row(
+                            self.mesh,
+                            shooter,
+                            &self.pairs,
+                            group,
+                        ));
+                    }
+                    self.timings.split += 1;
+                    row = merged;
+                }
+                row
             }
         };
         row.combine(&region.weights, out);
@@ -698,6 +755,7 @@ pub fn render_on(
     timings.bounds = timings_src.bounds.as_secs_f64();
     timings.rects_per_shot = timings_src.rects as f64 / shots.max(1) as f64;
     timings.cached_shots = timings_src.cached;
+    timings.split_shots = timings_src.split;
     timings.rasterise = timings_src.rasterise.as_secs_f64();
     timings.read_back = timings_src.read_back.as_secs_f64();
     timings.exchange = timings_src.exchange.as_secs_f64();

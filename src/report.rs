@@ -110,6 +110,9 @@ pub struct Timings {
     pub rects_per_shot: f64,
     /// Shots whose form factors came from the row cache (a patch shooting again).
     pub cached_shots: u64,
+    /// Shots split into one hemisphere per group of shooter elements
+    /// (visibility varied across the shooter).
+    pub split_shots: u64,
     /// Drawing hemispheres on the GPU and waiting for them (summed over shots).
     pub rasterise: f64,
     /// Reading item buffers back (summed over shots).

@@ -11,7 +11,12 @@ fn mpirun(ranks: usize, dir: &Path, tag: &str, extra: &[&str]) -> serde_json::Va
     let mut cmd = Command::new("mpirun");
     cmd.args(["--oversubscribe", "-n", &ranks.to_string()])
         .arg(env!("CARGO_BIN_EXE_radiosity"))
-        .args(["render", "cornell", "--max-shots", "25", "--width", "48"])
+        .args(["render", "cornell", "--width", "48"])
+        .args(if extra.contains(&"--max-shots") {
+            &[][..]
+        } else {
+            &["--max-shots", "25"][..]
+        })
         .arg("--report")
         .arg(&report)
         .arg("--image")
@@ -67,6 +72,29 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
         let tag = format!("tile-{tile}");
         let r = mpirun(4, dir.path(), &tag, &["--tile", tile]);
         same_result(&base, &r, &tag);
+    }
+}
+
+#[test]
+fn split_shots_agree_across_ranks() {
+    // Long enough that some shooters have a near receiver partly hidden and
+    // split their shot: the decision is gathered, so every rank splits alike.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let one = mpirun(1, dir.path(), "one", &["--max-shots", "300"]);
+    assert!(
+        one["timings"]["split_shots"].as_u64().expect("split count") > 0,
+        "no split shot in 300"
+    );
+    for exchange in ["hemispheres", "sparse"] {
+        let tag = format!("three-{exchange}");
+        let r = mpirun(
+            3,
+            dir.path(),
+            &tag,
+            &["--max-shots", "300", "--exchange", exchange],
+        );
+        same_result(&one, &r, &tag);
+        assert_eq!(r["timings"]["split_shots"], one["timings"]["split_shots"]);
     }
 }
 
