@@ -68,8 +68,12 @@ pub struct Row {
     pub ids: Vec<u32>,
     /// `columns` values per receiver, receiver-major.
     pub values: Vec<f64>,
-    /// Whether a near receiver was partly hidden (see [`hybrid_row`]).
-    pub near_occlusion: bool,
+    /// The form factor hidden from the shooter's centre among receivers
+    /// within [`NEAR_FIELD`] shooter radii, and the row's total (visible)
+    /// form factor, both in [`SHARE_ONE`] fixed point (see [`hybrid_row`]).
+    pub near_hidden: u64,
+    /// See `near_hidden`.
+    pub total: u64,
 }
 
 impl Row {
@@ -124,7 +128,8 @@ impl Row {
         }
         self.ids = ids;
         self.values = values;
-        self.near_occlusion |= other.near_occlusion;
+        self.near_hidden += other.near_hidden;
+        self.total += other.total;
     }
 
     /// Bytes this row holds.
@@ -150,9 +155,10 @@ impl Row {
 ///
 /// Only the columns in `columns` are filled (the others are 0): a shot split
 /// into sub-hemispheres fills each group of shooter elements from its own.
-/// The row's `near_occlusion` says whether a receiver nearer than
-/// [`NEAR_FIELD`] shooter radii is hidden in part: then visibility from one
-/// point of the shooter is not to be trusted (see [`split_groups`]).
+/// The row's `near_hidden` is the form factor that receivers nearer than
+/// [`NEAR_FIELD`] shooter radii lose to occlusion seen from the shooter's
+/// centre; where that is a noticeable share of the row ([`needs_split`]),
+/// visibility from one point is not to be trusted (see [`split_groups`]).
 pub fn hybrid_row(
     mesh: &Mesh,
     shooter: u32,
@@ -217,7 +223,10 @@ pub fn hybrid_row(
                 continue;
             }
             if cov > vis && x.distance(s_origin) < NEAR_FIELD * radius {
-                row.near_occlusion = true;
+                let e = &mesh.elements[j as usize];
+                let n = mesh.polygons[e.polygon as usize].normal.as_dvec3();
+                let f = point_to_polygon(x, n, &patch_outline[..patch_n]) * e.area / sp.area;
+                row.near_hidden += to_share(f * (cov - vis) as f64 / cov as f64);
             }
             if v > 0.0 {
                 jobs.push((j, v));
@@ -300,9 +309,28 @@ pub fn hybrid_row(
         if v.iter().any(|&f| f > 0.0) {
             row.ids.push(j);
             row.values.extend_from_slice(v);
+            row.total += to_share(v.iter().sum());
         }
     }
     row
+}
+
+/// Fixed-point scale of the form factors a split decision sums: per
+/// receiver rounded, so sums are exact and ranks agree bit for bit.
+pub const SHARE_ONE: f64 = (1u64 << 40) as f64;
+
+fn to_share(f: f64) -> u64 {
+    (f.clamp(0.0, 1.0) * SHARE_ONE).round() as u64
+}
+
+/// A shot is split when the near receivers lose more than this share of the
+/// shooter's light to occlusion seen from its centre.
+pub const SPLIT_SHARE: f64 = 0.02;
+
+/// Whether a shot whose rows (over all ranks) sum to `near_hidden` and
+/// `total` needs one hemisphere per group of shooter elements.
+pub fn needs_split(near_hidden: u64, total: u64) -> bool {
+    near_hidden as f64 > SPLIT_SHARE * (near_hidden + total) as f64
 }
 
 /// Form factor from a differential area at `x` with unit normal `n` to the

@@ -448,7 +448,8 @@ impl FormFactorSource for GpuFormFactors<'_> {
                     .iter()
                     .map(|p| p.1 as f64 / crate::hemisphere::FIXED_ONE)
                     .collect(),
-                near_occlusion: false,
+                near_hidden: 0,
+                total: 0,
             },
             FormFactorMethod::Hybrid => {
                 let m = self.mesh.patches[shooter as usize].elements.len();
@@ -462,14 +463,19 @@ impl FormFactorSource for GpuFormFactors<'_> {
                 // Refinement by need: a near receiver partly hidden from the
                 // shooter's centre means visibility varies across the
                 // shooter, so each group of its elements looks for itself.
-                let mut split = self.split && columns > 1 && row.near_occlusion;
+                let mut split = self.split
+                    && columns > 1
+                    && crate::formfactor::needs_split(row.near_hidden, row.total);
                 if self.split && columns > 1 && self.comm.size() > 1 {
+                    // Each rank has its receivers' share: sum them (exactly).
                     let t = Instant::now();
-                    split = self
+                    let all = self
                         .comm
-                        .all_gather_f64(&[row.near_occlusion as u8 as f64])
-                        .iter()
-                        .any(|&x| x > 0.0);
+                        .all_gather_f64(&[row.near_hidden as f64, row.total as f64]);
+                    let (h, tot) = all
+                        .chunks_exact(2)
+                        .fold((0u64, 0u64), |(h, t), c| (h + c[0] as u64, t + c[1] as u64));
+                    split = crate::formfactor::needs_split(h, tot);
                     exchange += t.elapsed();
                 }
                 if split {
