@@ -217,6 +217,13 @@ fn share_cores_between_ranks() {
     }
 }
 
+/// Writes one line to stderr in a single write, so that under mpirun other
+/// processes' output cannot land in the middle of it.
+fn print_error(line: &str) {
+    use std::io::Write;
+    let _ = std::io::stderr().write_all(format!("{line}\n").as_bytes());
+}
+
 fn main() {
     env_logger::Builder::from_env(
         env_logger::Env::default().default_filter_or("warn,radiosity=info"),
@@ -233,7 +240,7 @@ fn main() {
     };
     if let Err(e) = result {
         if e.downcast_ref::<ReportedByRankZero>().is_none() {
-            eprintln!("error: {e:#}");
+            print_error(&format!("error: {e:#}"));
         }
         std::process::exit(1);
     }
@@ -383,7 +390,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         Ok(r) => r,
         // A failure mid-solve is seen by one rank only: end every rank now.
         Err(e) if ranks > 1 => {
-            eprintln!("error: rank {rank}: {e:#}");
+            print_error(&format!("error: rank {rank}: {e:#}"));
             comm.abort(1)
         }
         Err(e) => return Err(e.into()),
