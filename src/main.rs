@@ -66,25 +66,25 @@ pub struct SolveArgs {
     #[arg(long, value_enum, default_value = "hybrid")]
     pub form_factor: FormFactorMethod,
     /// Stop when the unshot power is at most this fraction of the emitted power.
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-3, value_parser = fraction)]
     threshold: f64,
     /// Stop after this many shots even if the threshold is not reached.
     #[arg(long, default_value_t = 100_000)]
     max_shots: u64,
     /// Patch edge length in metres, for every polygon (default: the node's
     /// extras.radiosity, else automatic: see --near-field-ratio).
-    #[arg(long)]
+    #[arg(long, value_parser = positive)]
     patch_size: Option<f32>,
     /// Element edge length in metres, for every polygon (default: the node's
     /// extras.radiosity, else 2 x 2 elements per patch).
-    #[arg(long)]
+    #[arg(long, value_parser = positive)]
     element_size: Option<f32>,
     /// Automatic subdivision: patch size as a fraction of the distance to the
     /// nearest polygon that faces it (smaller: more accurate, slower).
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, value_parser = positive)]
     near_field_ratio: f32,
     /// Cap on patches along one polygon edge (automatic subdivision).
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=4096))]
     max_patches_per_edge: u32,
     /// What the hemisphere rasteriser draws: every quad polygon as at most
     /// N x N pieces (never more than its elements), the fragment shader
@@ -147,11 +147,11 @@ struct RenderArgs {
     /// Directory for outputs whose paths are not given.
     #[arg(long, default_value = "out")]
     out_dir: PathBuf,
-    /// Image width in pixels.
-    #[arg(long, default_value_t = 512)]
+    /// Image width in pixels; 0 writes no image (only the report).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(0..=16384))]
     width: u32,
     /// Image height in pixels (default: from the camera's aspect ratio).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=16384))]
     height: Option<u32>,
     /// Shading of the image: smooth (interpolated) or flat (one value per element).
     #[arg(long, value_enum, default_value = "smooth")]
@@ -176,6 +176,24 @@ struct RenderArgs {
     exposure: f32,
     #[command(flatten)]
     solve: SolveArgs,
+}
+
+/// A finite number above 0 (sizes and ratios: 0 would mean infinitely many patches).
+fn positive(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        Ok(_) => Err(format!("'{s}' must be a finite number above 0")),
+        Err(_) => Err(format!("'{s}' is not a number")),
+    }
+}
+
+/// A finite fraction in [0, 1].
+fn fraction(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if (0.0..=1.0).contains(&x) => Ok(x),
+        Ok(_) => Err(format!("'{s}' must be between 0 and 1")),
+        Err(_) => Err(format!("'{s}' is not a number")),
+    }
 }
 
 fn parse_tile(s: &str) -> Result<(u32, u32), String> {
@@ -409,6 +427,14 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if let Some((w, h, pixels)) = &rendered.image {
         let png = output::write_image(&image_path, *w, *h, pixels, args.exposure)?;
         eprintln!("wrote {} and {}", image_path.display(), png.display());
+    } else {
+        eprintln!("no image (--width 0)");
+    }
+    if let Some(what) = rendered.report.non_finite() {
+        anyhow::bail!(
+            "{}: the solution has a non-finite number in {what}; no report written",
+            args.scene
+        );
     }
     output::write_json(&report_path, &rendered.report)?;
     eprintln!("wrote {}", report_path.display());

@@ -38,6 +38,36 @@ pub struct Report {
     pub warnings: Vec<String>,
 }
 
+impl Report {
+    /// The first number that is not finite where a number belongs (a
+    /// radiosity, area, fraction or power), named; `None` when all are.
+    pub fn non_finite(&self) -> Option<String> {
+        let surfaces = |s: &[Surface], at: &str| {
+            s.iter().find_map(|x| {
+                (!x.area.is_finite() || x.radiosity.iter().any(|v| !v.is_finite()))
+                    .then(|| format!("{at}surface '{}'", x.node))
+            })
+        };
+        if !self.unshot_fraction.is_finite() {
+            return Some("unshot_fraction".into());
+        }
+        if !self.emitted_power.is_finite() {
+            return Some("emitted_power".into());
+        }
+        surfaces(&self.surfaces, "").or_else(|| {
+            self.convergence.iter().find_map(|p| {
+                if !(p.unshot_fraction.is_finite() && p.seconds.is_finite()) {
+                    return Some(format!("convergence point at {} shots", p.shots));
+                }
+                surfaces(
+                    &p.surfaces,
+                    &format!("convergence point at {} shots, ", p.shots),
+                )
+            })
+        })
+    }
+}
+
 /// The settings of a run.
 #[derive(Clone, Debug, Serialize)]
 pub struct Settings {

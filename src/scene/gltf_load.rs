@@ -169,28 +169,46 @@ impl Loader<'_> {
         }))
     }
 
-    fn material(prim: &gltf::Primitive) -> Material {
+    /// The primitive's material, checked against the glTF specification's
+    /// ranges: baseColorFactor and emissiveFactor in [0, 1], the emissive
+    /// strength finite and >= 0. A reflectance above 1 would create energy
+    /// (a room 7x too bright), so it is an error, not a clamp.
+    fn material(&self, prim: &gltf::Primitive, node: &str) -> Result<Material, SceneError> {
         let m = prim.material();
+        let what = m.name().map_or_else(
+            || "the default material".to_string(),
+            |n| format!("material '{n}'"),
+        );
+        let bad = |message: String| SceneError::BadMaterial {
+            path: self.path.clone(),
+            node: node.to_string(),
+            message,
+        };
         let base = m.pbr_metallic_roughness().base_color_factor();
         let strength = m.emissive_strength().unwrap_or(1.0);
         let e = m.emissive_factor();
-        let clamp = |x: f32| {
-            if x.is_finite() {
-                x.clamp(0.0, 1.0)
-            } else {
-                0.0
-            }
-        };
-        let nonneg = |x: f32| if x.is_finite() { x.max(0.0) } else { 0.0 };
-        Material {
-            reflectance: [clamp(base[0]), clamp(base[1]), clamp(base[2])],
-            emission: [
-                nonneg(e[0] * strength),
-                nonneg(e[1] * strength),
-                nonneg(e[2] * strength),
-            ],
-            double_sided: m.double_sided(),
+        let unit = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
+        if !base[..3].iter().all(|&x| unit(x)) {
+            return Err(bad(format!(
+                "{what}: baseColorFactor {:?} is outside [0, 1] (the reflectance must not exceed 1)",
+                &base[..3]
+            )));
         }
+        if !e.iter().all(|&x| unit(x)) {
+            return Err(bad(format!(
+                "{what}: emissiveFactor {e:?} is outside [0, 1] (scale it with KHR_materials_emissive_strength)"
+            )));
+        }
+        if !(strength.is_finite() && strength >= 0.0) {
+            return Err(bad(format!(
+                "{what}: KHR_materials_emissive_strength {strength} must be finite and >= 0"
+            )));
+        }
+        Ok(Material {
+            reflectance: [base[0], base[1], base[2]],
+            emission: [e[0] * strength, e[1] * strength, e[2] * strength],
+            double_sided: m.double_sided(),
+        })
     }
 
     fn primitive(
@@ -230,7 +248,7 @@ impl Loader<'_> {
         };
         // A mirroring transform flips the winding (glTF spec, 3.7.4).
         let flip = world.determinant() < 0.0;
-        let mat = Self::material(prim);
+        let mat = self.material(prim, name)?;
         let mut tris = Vec::with_capacity(indices.len() / 3);
         let mut degenerate = 0usize;
         for (k, t) in indices.chunks_exact(3).enumerate() {

@@ -176,6 +176,16 @@ pub enum SceneError {
         /// What is wrong.
         message: String,
     },
+    /// A material value outside the glTF specification's range.
+    #[error("scene '{path}', node '{node}': {message}")]
+    BadMaterial {
+        /// The scene path.
+        path: String,
+        /// The node.
+        node: String,
+        /// What is wrong.
+        message: String,
+    },
     /// A scene name that is neither a file nor a built-in scene.
     #[error("no scene file '{0}' and no built-in scene of that name (built-ins: {1})")]
     Unknown(String, String),

@@ -195,3 +195,92 @@ fn no_vulkan_adapter() {
         "should name the package: {stderr}"
     );
 }
+
+/// A one-node scene whose material JSON gets `edit` applied.
+fn scene_with_material(
+    name: &str,
+    edit: impl Fn(String) -> String,
+) -> (tempfile::TempDir, Vec<String>) {
+    let (dir, path) = write_scene(
+        name,
+        &[surface(
+            "lamp",
+            vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+            0.5,
+            1.0,
+        )],
+    );
+    let text = std::fs::read_to_string(&path).expect("read");
+    std::fs::write(&path, edit(text)).expect("write");
+    (dir, render_args(&path))
+}
+
+#[test]
+fn reflectance_above_one_is_an_error() {
+    // It would create energy: the room came out 7x too bright.
+    let (_dir, args) = scene_with_material("bright", |t| {
+        let mut json: serde_json::Value = serde_json::from_str(&t).expect("json");
+        json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] =
+            serde_json::json!([1.5, 0.5, 0.5, 1.0]);
+        json.to_string()
+    });
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    expect_error(&args, "node 'lamp'");
+    expect_error(&args, "baseColorFactor");
+}
+
+#[test]
+fn negative_emissive_strength_is_an_error() {
+    let (_dir, args) = scene_with_material("negative", |t| {
+        let mut json: serde_json::Value = serde_json::from_str(&t).expect("json");
+        json["materials"][0]["extensions"] = serde_json::json!({
+            "KHR_materials_emissive_strength": { "emissiveStrength": -3.0 }
+        });
+        json["extensionsUsed"] = serde_json::json!(["KHR_materials_emissive_strength"]);
+        json.to_string()
+    });
+    expect_error(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        "KHR_materials_emissive_strength",
+    );
+}
+
+#[test]
+fn flags_are_checked_when_parsed() {
+    for (flag, value) in [
+        ("--patch-size", "0"),
+        ("--patch-size", "-1"),
+        ("--element-size", "nan"),
+        ("--near-field-ratio", "0"),
+        ("--threshold", "2"),
+        ("--height", "0"),
+        ("--max-patches-per-edge", "0"),
+    ] {
+        let arg = format!("{flag}={value}");
+        let (code, stderr) = run(&["render", "cornell", &arg], &[]);
+        assert_ne!(code, 0, "{flag} {value} should fail: {stderr}");
+        assert!(
+            stderr.contains(flag) && stderr.contains("error"),
+            "{flag} {value}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn a_report_with_a_non_finite_number_is_caught() {
+    let scene = radiosity::scene::open("cornell").expect("scene");
+    let mut opts = tight(1e-3);
+    opts.stop.max_shots = 5;
+    let mut r =
+        radiosity::render::render(gpu(), &scene, &opts, std::time::Duration::ZERO, &mut |_| {})
+            .expect("render");
+    assert_eq!(r.report.non_finite(), None);
+    r.report.convergence[2].surfaces[1].radiosity[0] = f64::NAN;
+    let what = r.report.non_finite().expect("caught");
+    assert!(
+        what.contains("ceiling") && what.contains("3 shots"),
+        "{what}"
+    );
+    r.report.surfaces[0].radiosity[2] = f64::INFINITY;
+    assert_eq!(r.report.non_finite().as_deref(), Some("surface 'floor'"));
+}
