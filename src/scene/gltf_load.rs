@@ -228,6 +228,18 @@ impl Loader<'_> {
         }
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
         let Some(positions) = reader.read_positions() else {
+            if let Some(acc) = prim.get(&gltf::Semantic::Positions) {
+                // It has positions the buffers cannot hold (e.g. a count past
+                // the buffer's end): rendering without it would be wrong.
+                return Err(SceneError::Parse {
+                    path: self.path.clone(),
+                    message: format!(
+                        "node '{name}': POSITION accessor {} ({} elements) does not fit its buffer",
+                        acc.index(),
+                        acc.count()
+                    ),
+                });
+            }
             self.scene.warnings.push(format!(
                 "node '{name}': primitive without positions skipped"
             ));

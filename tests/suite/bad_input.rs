@@ -284,3 +284,18 @@ fn a_report_with_a_non_finite_number_is_caught() {
     r.report.surfaces[0].radiosity[2] = f64::INFINITY;
     assert_eq!(r.report.non_finite().as_deref(), Some("surface 'floor'"));
 }
+
+#[test]
+fn an_accessor_past_its_buffer_is_an_error() {
+    // The case: a count of 1e9 skipped the floor and rendered without it.
+    let (_dir, args) = scene_with_material("count", |t| {
+        let mut json: serde_json::Value = serde_json::from_str(&t).expect("json");
+        let acc = json["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+            .as_u64()
+            .expect("position accessor") as usize;
+        json["accessors"][acc]["count"] = serde_json::json!(1_000_000_000u64);
+        json.to_string()
+    });
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    expect_error(&args, "node 'lamp'");
+}
