@@ -1,7 +1,7 @@
 //! glTF 2.0 loading (DESIGN.md section 6).
 
 use super::{Camera, Polygon, Scene, SceneError, Subdivision};
-use glam::{Mat4, Vec3};
+use glam::{DMat4, DVec3, Vec3};
 use std::path::Path;
 
 /// Cosine of the largest fold (0.8 degrees) between two triangles merged into
@@ -44,6 +44,8 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         path: name.to_string(),
         buffers: &buffers,
         scene: Scene::default(),
+        origin: None,
+        camera_at: None,
     };
     loader.scene.name = name.to_string();
     let doc = &gltf.document;
@@ -61,9 +63,14 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         }
     };
     for node in roots {
-        loader.visit(&node, Mat4::IDENTITY, 0)?;
+        loader.visit(&node, DMat4::IDENTITY, 0)?;
+    }
+    let origin = loader.origin.unwrap_or(DVec3::ZERO);
+    if let (Some(cam), Some(at)) = (loader.scene.camera.as_mut(), loader.camera_at) {
+        cam.position = (at - origin).as_vec3();
     }
     let mut scene = loader.scene;
+    scene.origin = origin.to_array();
     if scene.polygons.is_empty() {
         return Err(SceneError::NoTriangles {
             path: name.to_string(),
@@ -85,6 +92,11 @@ struct Loader<'a> {
     path: String,
     buffers: &'a [gltf::buffer::Data],
     scene: Scene,
+    /// The first vertex's world position: every position is stored relative
+    /// to it (computed in f64, then f32).
+    origin: Option<DVec3>,
+    /// The camera's world position (made relative at the end).
+    camera_at: Option<DVec3>,
 }
 
 struct Material {
@@ -94,7 +106,7 @@ struct Material {
 }
 
 impl Loader<'_> {
-    fn visit(&mut self, node: &gltf::Node, parent: Mat4, depth: usize) -> Result<(), SceneError> {
+    fn visit(&mut self, node: &gltf::Node, parent: DMat4, depth: usize) -> Result<(), SceneError> {
         let name = node
             .name()
             .map(str::to_string)
@@ -105,13 +117,15 @@ impl Loader<'_> {
                 message: format!("node '{name}' nests too deeply (a cycle?)"),
             });
         }
-        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        let local = node.transform().matrix().map(|c| c.map(f64::from));
+        let world = parent * DMat4::from_cols_array_2d(&local);
         if let (Some(cam), None) = (node.camera(), self.scene.camera) {
             if let gltf::camera::Projection::Perspective(p) = cam.projection() {
                 let (_, rotation, position) = world.to_scale_rotation_translation();
+                self.camera_at = Some(position);
                 self.scene.camera = Some(Camera {
-                    position,
-                    rotation: rotation.normalize(),
+                    position: position.as_vec3(),
+                    rotation: rotation.normalize().as_quat(),
                     yfov: p.yfov(),
                     aspect: p.aspect_ratio(),
                     znear: p.znear(),
@@ -214,7 +228,7 @@ impl Loader<'_> {
     fn primitive(
         &mut self,
         prim: &gltf::Primitive,
-        world: Mat4,
+        world: DMat4,
         node: usize,
         name: &str,
         subdivision: Option<Subdivision>,
@@ -246,7 +260,10 @@ impl Loader<'_> {
             return Ok(());
         };
         let positions: Vec<Vec3> = positions
-            .map(|p| world.transform_point3(Vec3::from(p)))
+            .map(|p| {
+                let w = world.transform_point3(Vec3::from(p).as_dvec3());
+                (w - *self.origin.get_or_insert(w)).as_vec3()
+            })
             .collect();
         if positions.iter().any(|p| !p.is_finite()) {
             return Err(SceneError::NonFinite {

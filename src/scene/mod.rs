@@ -90,6 +90,10 @@ pub struct Scene {
     pub camera: Option<Camera>,
     /// Non-fatal problems met while loading (e.g. degenerate triangles skipped).
     pub warnings: Vec<String>,
+    /// World position (metres, f64) of the point all positions here are
+    /// relative to: the loader works in f64 and keeps f32 coordinates near
+    /// zero, so a scene far from the world origin loses no precision.
+    pub origin: [f64; 3],
 }
 
 impl Scene {

@@ -246,3 +246,48 @@ fn glb_gives_the_same_answer_as_gltf() {
     assert_eq!(a.report.surfaces, b.report.surfaces);
     assert!(node(&b, "receiver").radiosity[0] > 0.5);
 }
+
+#[test]
+fn a_scene_far_from_the_origin_gives_the_same_answer() {
+    // 1e6 m away, f32 world coordinates would keep only 6 cm steps; the
+    // loader works in f64 relative to the scene, so nothing changes.
+    let surfaces = [
+        surface(
+            "emitter",
+            vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+            0.0,
+            1.0,
+        ),
+        surface(
+            "receiver",
+            vec![rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false)],
+            1.0,
+            0.0,
+        ),
+    ];
+    let (_near_dir, near) = write_scene("near", &surfaces);
+    let (_far_dir, far) = write_scene("far-away", &surfaces);
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&far).expect("read")).expect("json");
+    for node in json["nodes"].as_array_mut().expect("nodes") {
+        node["translation"] = serde_json::json!([1.0e6, -2.0e6, 3.0e6]);
+    }
+    std::fs::write(&far, json.to_string()).expect("write");
+    let opts = tight(1e-6);
+    let (a, b) = (solve_file(&near, &opts), solve_file(&far, &opts));
+    for (x, y) in a.report.surfaces.iter().zip(&b.report.surfaces) {
+        assert!(
+            rel(y.radiosity[0], x.radiosity[0]) < 1e-3,
+            "{}: {:?} far vs {:?} near",
+            x.node,
+            y.radiosity,
+            x.radiosity
+        );
+    }
+    assert!(
+        rel(
+            b.report.surfaces[1].radiosity[0],
+            std::f64::consts::PI * 0.19982
+        ) < 0.005
+    );
+}
