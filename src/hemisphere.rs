@@ -168,6 +168,8 @@ impl TileLayout {
 pub struct FormFactorAccumulator {
     fixed: Vec<u64>,
     touched: Vec<u32>,
+    /// Whether a sum overflowed (it is then left saturated, never wrapped).
+    overflow: bool,
 }
 
 impl FormFactorAccumulator {
@@ -176,6 +178,7 @@ impl FormFactorAccumulator {
         Self {
             fixed: vec![0; elements],
             touched: Vec::new(),
+            overflow: false,
         }
     }
 
@@ -202,13 +205,26 @@ impl FormFactorAccumulator {
     }
 
     /// Adds `value` (fixed point) to element `id`; ids past the end (EMPTY, BLOCKED) are ignored.
+    /// A sum that would pass `u64::MAX` saturates and is reported by
+    /// [`FormFactorAccumulator::take_overflow`].
     pub fn add(&mut self, id: u32, value: u64) {
         if let Some(slot) = self.fixed.get_mut(id as usize) {
             if *slot == 0 {
                 self.touched.push(id);
             }
-            *slot += value;
+            match slot.checked_add(value) {
+                Some(v) => *slot = v,
+                None => {
+                    *slot = u64::MAX;
+                    self.overflow = true;
+                }
+            }
         }
+    }
+
+    /// Whether a sum overflowed since the last call (and forget it).
+    pub fn take_overflow(&mut self) -> bool {
+        std::mem::take(&mut self.overflow)
     }
 
     /// Drains the accumulated fixed-point sums as (element, sum) pairs sorted by element.
@@ -366,6 +382,19 @@ pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect>
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn an_overflowing_sum_is_reported_not_wrapped() {
+        let mut acc = super::FormFactorAccumulator::new(2);
+        acc.add(1, u64::MAX - 1);
+        assert!(!acc.take_overflow());
+        acc.add(1, 5);
+        assert!(acc.take_overflow());
+        let mut out = Vec::new();
+        acc.drain_fixed(&mut out);
+        assert_eq!(out, vec![(1, u64::MAX)]);
+        assert!(!acc.take_overflow());
+    }
+
     use super::*;
 
     #[test]

@@ -290,6 +290,11 @@ impl<'a> GpuFormFactors<'a> {
             self.draw(&frame, (rank % self.layout.px, rank / self.layout.px))?;
             self.exchange(cols)
         };
+        if self.acc.take_overflow() {
+            return Err(GpuError::Failed(format!(
+                "the fixed-point form-factor sums of shooter {shooter} overflowed 64 bits"
+            )));
+        }
         self.acc.drain_fixed(&mut self.pairs);
         Ok(exchange)
     }
