@@ -222,6 +222,14 @@ impl std::fmt::Display for ReportedByRankZero {
 
 impl std::error::Error for ReportedByRankZero {}
 
+/// How many processes the MPI launcher started, from its environment
+/// (Open MPI, PMI/PMIx, MPICH's Hydra), if one did.
+fn launched_ranks() -> Option<usize> {
+    ["OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "PMI_SIZE"]
+        .iter()
+        .find_map(|k| std::env::var(k).ok()?.trim().parse().ok())
+}
+
 /// Under mpirun, several lavapipe devices on one host must share its cores:
 /// give each rank cores / ranks-on-this-host worker threads (unless set).
 fn share_cores_between_ranks() {
@@ -350,6 +358,16 @@ fn run_render(args: RenderArgs) -> Result<()> {
         None => &single,
     };
     let (rank, ranks) = (comm.rank(), comm.size());
+    // Under a launcher that started several processes, a world of one would
+    // mean N independent solves all writing the same files: refuse.
+    if let Some(launched) = launched_ranks() {
+        if launched > 1 && ranks != launched {
+            anyhow::bail!(
+                "the launcher started {launched} processes but MPI gave this one a world of {ranks}: \
+                 is this binary built against the same MPI as the mpirun that started it?"
+            );
+        }
+    }
     if rank > 0 {
         log::set_max_level(log::LevelFilter::Warn);
     }
@@ -361,11 +379,17 @@ fn run_render(args: RenderArgs) -> Result<()> {
         .and_then(|s| Ok((s, Gpu::new()?)));
     let load_time = t.elapsed();
     if let Err(failures) = comm.all_ok(setup.as_ref().map(|_| ()).map_err(|e| format!("{e:#}"))) {
-        return match failures.first() {
-            Some((r, m)) if ranks > 1 => Err(anyhow::anyhow!("rank {r}: {m}")),
-            Some((_, m)) => Err(anyhow::anyhow!("{m}")),
-            None => Err(ReportedByRankZero.into()),
-        };
+        if rank == 0 {
+            print_error(&match failures.first() {
+                Some((r, m)) if ranks > 1 => format!("error: rank {r}: {m}"),
+                Some((_, m)) => format!("error: {m}"),
+                None => "error: a rank failed to start".to_string(),
+            });
+        }
+        // Nobody leaves before rank 0 has said why: a rank that exits early
+        // makes mpirun kill the others, rank 0's message with them.
+        let _ = comm.all_gather_f64(&[0.0]);
+        return Err(ReportedByRankZero.into());
     }
     let (scene, gpu) = setup?;
     if rank == 0 {

@@ -299,3 +299,14 @@ fn an_accessor_past_its_buffer_is_an_error() {
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     expect_error(&args, "node 'lamp'");
 }
+
+#[test]
+fn a_world_of_one_under_a_launcher_of_several_is_an_error() {
+    // N independent solves would all write the same files.
+    let (code, stderr) = run(&["render", "cornell"], &[("OMPI_COMM_WORLD_SIZE", "3")]);
+    assert_ne!(code, 0, "should fail: {stderr}");
+    assert!(
+        stderr.contains("started 3 processes") && stderr.contains("world of 1"),
+        "{stderr}"
+    );
+}
