@@ -939,9 +939,25 @@ impl Trace {
         ambient: bool,
         solve_start: Instant,
     ) {
+        let seconds = solve_start
+            .elapsed()
+            .saturating_sub(self.spent)
+            .as_secs_f64();
+        self.record_at(comm, solver, nodes, ambient, seconds);
+    }
+
+    /// [`Trace::record`] with the solve time given (e.g. a viewer's, which
+    /// leaves its pauses out).
+    pub fn record_at(
+        &mut self,
+        comm: &dyn Collectives,
+        solver: &Solver,
+        nodes: &[String],
+        ambient: bool,
+        seconds: f64,
+    ) {
         let t = Instant::now();
         let before = comm.traffic();
-        let seconds = (t - solve_start).saturating_sub(self.spent).as_secs_f64();
         let summary = if comm.size() == 1 {
             Some((
                 report::surfaces(solver.mesh(), nodes, &solver.display_radiosity(ambient)),
@@ -975,17 +991,23 @@ impl Trace {
     }
 
     /// The trace with its last point made equal to the final result.
-    pub fn finish(mut self, report: &Report, seconds: f64) -> Vec<TracePoint> {
-        if self.points.last().is_some_and(|p| p.shots == report.shots) {
-            self.points.pop();
+    pub fn finish(self, report: &Report, seconds: f64) -> Vec<TracePoint> {
+        self.ending_with(report, seconds)
+    }
+
+    /// The points so far, the last made equal to `report` (which the trace keeps going after).
+    pub fn ending_with(&self, report: &Report, seconds: f64) -> Vec<TracePoint> {
+        let mut points = self.points.clone();
+        if points.last().is_some_and(|p| p.shots == report.shots) {
+            points.pop();
         }
-        self.points.push(TracePoint {
+        points.push(TracePoint {
             shots: report.shots,
             seconds,
             unshot_fraction: report.unshot_fraction,
             surfaces: report.surfaces.clone(),
         });
-        self.points
+        points
     }
 }
 

@@ -153,6 +153,8 @@ fn solve(
     let mut pause_at = settings.pause_at;
     let mut ff = Vec::new();
     let mut solve_time = Duration::ZERO;
+    // The report's convergence trace, as `radiosity render` keeps it.
+    let mut trace = radiosity::render::Trace::default();
     let mut last_publish = Instant::now();
     loop {
         let done = solver.done(&opts.stop);
@@ -181,7 +183,7 @@ fn solve(
             }
             Some(Command::Restart(next)) => return Ok(Some(next)),
             Some(Command::Save(req)) => {
-                let outcome = save(gpu, scene, &mesh, opts, &solver, solve_time, &req);
+                let outcome = save(gpu, scene, &mesh, opts, &solver, solve_time, &trace, &req);
                 if let Ok(mut s) = shared.lock() {
                     s.saved = Some(outcome.unwrap_or_else(|e| format!("save failed: {e}")));
                 }
@@ -205,6 +207,10 @@ fn solve(
                 .map_err(|e| e.to_string())?;
             solver.shoot(shooter, &ff);
             solve_time += t.elapsed();
+            if trace.due(solver.shots()) {
+                let seconds = solve_time.as_secs_f64();
+                trace.record_at(&single, &solver, &scene.nodes, opts.ambient, seconds);
+            }
             if let Some(n) = steps_left.as_mut() {
                 *n = n.saturating_sub(1);
             }
@@ -245,6 +251,7 @@ fn solve(
 }
 
 /// Writes the image and the report of the current state.
+#[allow(clippy::too_many_arguments)]
 fn save(
     gpu: &Gpu,
     scene: &Scene,
@@ -252,6 +259,7 @@ fn save(
     opts: &RenderOptions,
     solver: &Solver,
     solve_time: Duration,
+    trace: &radiosity::render::Trace,
     req: &SaveRequest,
 ) -> Result<String, String> {
     let (w, h) = (800, 600);
@@ -281,8 +289,9 @@ fn save(
     };
     let parallel =
         radiosity::render::single_process(opts.resolution, mesh.elements.len(), solver.shots());
-    let report =
+    let mut report =
         radiosity::render::build_report(scene, mesh, opts, solver, gpu, [w, h], timings, parallel);
+    report.convergence = trace.ending_with(&report, solve_time.as_secs_f64());
     let json = req.stem.with_extension("json");
     radiosity::output::write_json(&json, &report).map_err(|e| e.to_string())?;
     Ok(format!("wrote {}, .png and .json", exr.display()))

@@ -110,6 +110,12 @@ fn pause_step_resume_restart_quit() {
     .expect("json");
     assert_eq!(report["shots"].as_u64(), Some(s.shots));
     assert_eq!(report["surfaces"].as_array().map(Vec::len), Some(8));
+    // The convergence trace, as `radiosity render` writes it: ends at the report.
+    let trace = report["convergence"].as_array().expect("trace");
+    let last = trace.last().expect("a point");
+    assert_eq!(last["shots"], report["shots"]);
+    assert_eq!(last["surfaces"], report["surfaces"]);
+    assert!(trace.len() >= 2, "{} points", trace.len());
 
     // Restart with another resolution: starts again from no shots.
     let mut options = RenderOptions {
