@@ -37,13 +37,10 @@ pub fn split_groups(
         .step_by(per)
         .map(|start| {
             let range = start..(start + per).min(columns);
-            let (mut c, mut a) = (glam::Vec3::ZERO, 0.0f64);
-            for k in range.clone() {
-                let e = &mesh.elements[sp.elements.start as usize + k];
-                c += element_centre(e) * e.area as f32;
-                a += e.area;
-            }
-            let centre = if a > 0.0 { c / a as f32 } else { sp.centre };
+            let first = sp.elements.start as usize;
+            let centre =
+                crate::mesh::area_centroid(&mesh.elements[first + range.start..first + range.end])
+                    .unwrap_or(sp.centre);
             (range, centre)
         })
         .collect()

@@ -195,10 +195,7 @@ impl Mesh {
     fn push_patch(&mut self, polygon: u32, first_element: u32, corners: [Vec3; 4]) {
         let els = &self.elements[first_element as usize..];
         let area: f64 = els.iter().map(|e| e.area).sum();
-        let centre = els
-            .iter()
-            .fold(Vec3::ZERO, |acc, e| acc + element_centre(e) * e.area as f32)
-            / area as f32;
+        let centre = area_centroid(els).unwrap_or(Vec3::ZERO);
         let patch = self.patches.len() as u32;
         self.patches.push(Patch {
             polygon,
@@ -232,11 +229,8 @@ impl Mesh {
         for j in 0..=nv {
             for i in 0..=nu {
                 let (u, w) = (i as f32 / nu as f32, j as f32 / nv as f32);
-                let p = v[0] * (1.0 - u) * (1.0 - w)
-                    + v[1] * u * (1.0 - w)
-                    + v[2] * u * w
-                    + v[3] * (1.0 - u) * w;
-                self.vertices.push(p);
+                self.vertices
+                    .push(bilinear(&[v[0], v[1], v[2], v[3]], u, w));
             }
         }
         let id = |i: u32, j: u32| base + j * (nu + 1) + i;
@@ -321,6 +315,22 @@ impl Mesh {
             [ids[0], ids[1], ids[2], ids[2]],
         );
     }
+}
+
+/// The point (u, v) of the bilinear quad with corners `c` (counter-clockwise
+/// from (0, 0)): how quads are subdivided, and how pieces of them are cut.
+pub fn bilinear(c: &[Vec3; 4], u: f32, v: f32) -> Vec3 {
+    c[0] * (1.0 - u) * (1.0 - v) + c[1] * u * (1.0 - v) + c[2] * u * v + c[3] * (1.0 - u) * v
+}
+
+/// The area-weighted centre of some elements (`None` when they have no area).
+pub fn area_centroid<'a>(elements: impl IntoIterator<Item = &'a Element>) -> Option<Vec3> {
+    let (mut sum, mut area) = (Vec3::ZERO, 0.0f64);
+    for e in elements {
+        sum += element_centre(e) * e.area as f32;
+        area += e.area;
+    }
+    (area > 0.0).then(|| sum / area as f32)
 }
 
 /// Centroid (centre of area) of an element: for a quad, the area-weighted

@@ -351,10 +351,8 @@ impl<'a> GpuFormFactors<'a> {
     }
 
     fn add_coverage(&mut self) {
-        for (id, &c) in self.raster.coverage().iter().enumerate() {
-            if c > 0 {
-                self.acc.add(id as u32, c as u64);
-            }
+        for (id, c) in self.raster.coverage_pairs() {
+            self.acc.add(id, c);
         }
     }
 
@@ -383,18 +381,12 @@ impl<'a> GpuFormFactors<'a> {
                     .add_cells(&self.full, cols, 0, &self.weights, Some(owned));
                 if self.method == FormFactorMethod::Hybrid {
                     // Coverage counts are per rank: send them to the owners.
-                    let mut outgoing = vec![Vec::new(); comm.size()];
-                    for (id, &c) in self.raster.coverage().iter().enumerate() {
-                        if c > 0 {
-                            outgoing[self.element_rank[id] as usize].push((id as u32, c as u64));
-                        }
-                    }
-                    let t = Instant::now();
-                    let incoming = comm.all_to_all_pairs(&outgoing);
-                    exchange += t.elapsed();
-                    for (id, v) in incoming {
-                        self.acc.add(id, v);
-                    }
+                    exchange += send_to_owners(
+                        comm,
+                        &self.element_rank,
+                        &mut self.acc,
+                        self.raster.coverage_pairs(),
+                    );
                 }
             }
             Exchange::FormFactors => {
@@ -407,20 +399,37 @@ impl<'a> GpuFormFactors<'a> {
             Exchange::Sparse => {
                 self.add_own(cols);
                 self.acc.drain_fixed(&mut self.pairs);
-                let mut outgoing = vec![Vec::new(); comm.size()];
-                for &(id, v) in &self.pairs {
-                    outgoing[self.element_rank[id as usize] as usize].push((id, v));
-                }
-                let t = Instant::now();
-                let incoming = comm.all_to_all_pairs(&outgoing);
-                exchange += t.elapsed();
-                for (id, v) in incoming {
-                    self.acc.add(id, v);
-                }
+                exchange += send_to_owners(
+                    comm,
+                    &self.element_rank,
+                    &mut self.acc,
+                    self.pairs.iter().copied(),
+                );
             }
         }
         exchange
     }
+}
+
+/// Sends (element, fixed-point value) pairs to the ranks that own the
+/// elements and adds what arrives to `acc`. Returns the time in the collective.
+fn send_to_owners(
+    comm: &dyn Collectives,
+    element_rank: &[u32],
+    acc: &mut FormFactorAccumulator,
+    pairs: impl Iterator<Item = (u32, u64)>,
+) -> Duration {
+    let mut outgoing = vec![Vec::new(); comm.size()];
+    for (id, v) in pairs {
+        outgoing[element_rank[id as usize] as usize].push((id, v));
+    }
+    let t = Instant::now();
+    let incoming = comm.all_to_all_pairs(&outgoing);
+    let spent = t.elapsed();
+    for (id, v) in incoming {
+        acc.add(id, v);
+    }
+    spent
 }
 
 impl FormFactorSource for GpuFormFactors<'_> {

@@ -261,18 +261,13 @@ impl<'m> Solver<'m> {
             Vec::new()
         };
         let lit = |j: &u32| self.radiosity[*j as usize].iter().any(|&b| b > 0.0);
-        let mut centre = p.centre;
-        if !p.elements.clone().all(|j| lit(&j)) {
-            let (mut sum, mut area) = (glam::Vec3::ZERO, 0.0f64);
-            for j in p.elements.clone().filter(lit) {
-                let e = &self.mesh.elements[j as usize];
-                sum += crate::mesh::element_centre(e) * e.area as f32;
-                area += e.area;
-            }
-            if area > 0.0 {
-                centre = sum / area as f32;
-            }
-        }
+        let centre = if p.elements.clone().all(|j| lit(&j)) {
+            p.centre
+        } else {
+            let lit_elements = p.elements.clone().filter(lit);
+            crate::mesh::area_centroid(lit_elements.map(|j| &self.mesh.elements[j as usize]))
+                .unwrap_or(p.centre)
+        };
         ShotRegion { centre, weights }
     }
 

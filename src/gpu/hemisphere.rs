@@ -195,12 +195,7 @@ impl HemisphereRasterizer {
                         poly.patch_grid[1] * poly.element_grid[1],
                     );
                     let (su, sv) = (pieces.min(nu), pieces.min(nv));
-                    let at = |u: f32, v: f32| {
-                        c[0] * (1.0 - u) * (1.0 - v)
-                            + c[1] * u * (1.0 - v)
-                            + c[2] * u * v
-                            + c[3] * (1.0 - u) * v
-                    };
+                    let at = |u: f32, v: f32| crate::mesh::bilinear(&c, u, v);
                     for j in 0..sv {
                         for i in 0..su {
                             let (u0, u1) = (i as f32 / su as f32, (i + 1) as f32 / su as f32);
@@ -364,7 +359,7 @@ impl HemisphereRasterizer {
     }
 
     /// Whether each shot also counts, per element, every cell whose ray hits
-    /// the element whether or not something nearer hides it (see [`HemisphereRasterizer::coverage`]).
+    /// the element whether or not something nearer hides it (see [`HemisphereRasterizer::coverage_pairs`]).
     pub fn set_count_coverage(&mut self, on: bool) {
         self.count_coverage = on;
         if !on {
@@ -372,10 +367,15 @@ impl HemisphereRasterizer {
         }
     }
 
-    /// The last shot's unoccluded cell count per element (this rank's cells
-    /// only); empty unless [`HemisphereRasterizer::set_count_coverage`] is on.
-    pub fn coverage(&self) -> &[u32] {
-        &self.coverage
+    /// The last shot's unoccluded cell counts (this rank's cells only), as
+    /// (element, count) for every element with some; none unless
+    /// [`HemisphereRasterizer::set_count_coverage`] is on.
+    pub fn coverage_pairs(&self) -> impl Iterator<Item = (u32, u64)> + '_ {
+        self.coverage
+            .iter()
+            .enumerate()
+            .filter(|(_, &c)| c > 0)
+            .map(|(id, &c)| (id as u32, c as u64))
     }
 
     /// The hemisphere resolution.

@@ -220,9 +220,9 @@ fn to_glb(gltf_text: &str) -> Vec<u8> {
     out
 }
 
-#[test]
-fn glb_gives_the_same_answer_as_gltf() {
-    let surfaces = [
+/// A black emitter (L_e = 1) and a white receiver: unit squares 1 apart, facing.
+fn unit_squares_one_apart() -> [radiosity::scene::GltfSurface; 2] {
+    [
         surface(
             "emitter",
             vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
@@ -235,7 +235,12 @@ fn glb_gives_the_same_answer_as_gltf() {
             1.0,
             0.0,
         ),
-    ];
+    ]
+}
+
+#[test]
+fn glb_gives_the_same_answer_as_gltf() {
+    let surfaces = unit_squares_one_apart();
     let (dir, path) = write_scene("pair", &surfaces);
     let glb = dir.path().join("pair.glb");
     std::fs::write(&glb, to_glb(&std::fs::read_to_string(&path).expect("read"))).expect("write");
@@ -251,20 +256,7 @@ fn glb_gives_the_same_answer_as_gltf() {
 fn a_scene_far_from_the_origin_gives_the_same_answer() {
     // 1e6 m away, f32 world coordinates would keep only 6 cm steps; the
     // loader works in f64 relative to the scene, so nothing changes.
-    let surfaces = [
-        surface(
-            "emitter",
-            vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
-            0.0,
-            1.0,
-        ),
-        surface(
-            "receiver",
-            vec![rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false)],
-            1.0,
-            0.0,
-        ),
-    ];
+    let surfaces = unit_squares_one_apart();
     let (_near_dir, near) = write_scene("near", &surfaces);
     let (_far_dir, far) = write_scene("far-away", &surfaces);
     let mut json: serde_json::Value =
