@@ -529,6 +529,14 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
             }
         }
+        if base.mesh.refine > 0 {
+            // Refinement by need against the mesh it starts from, unrefined.
+            let mut o = base.clone();
+            o.mesh.refine = 0;
+            eprintln!("accuracy: {} hybrid, no refinement", scene.name);
+            let label = "hybrid 128x512, no refinement (--refine 0)".to_string();
+            curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+        }
         for &n in &args.patch_fractions {
             let p = scene.extent() / n.max(1.0);
             for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {

@@ -71,6 +71,13 @@ pub struct Row {
     pub near_hidden: u64,
     /// See `near_hidden`.
     pub total: u64,
+    /// The visible form factor of receivers that the shooter's centre sees
+    /// only partly (some of their cells hidden): where a shadow edge crosses
+    /// them, at any distance. Its share of `total` says how much of the
+    /// shooter's light lands where its size would blur the shadow (a
+    /// penumbra), which one point at its centre cannot see: the shooter
+    /// refinement criterion (`crate::refine`). [`SHARE_ONE`] fixed point.
+    pub partial: u64,
 }
 
 impl Row {
@@ -126,6 +133,7 @@ impl Row {
         self.ids = ids;
         self.values = values;
         self.near_hidden += other.near_hidden;
+        self.partial += other.partial;
         self.total += other.total;
     }
 
@@ -183,6 +191,7 @@ pub fn hybrid_row(
         .fold(0.0f64, f64::max);
     // First the receivers and their visibilities (cheap), then the integrals.
     let mut jobs: Vec<(u32, f64)> = Vec::new();
+    let mut partly = Vec::new();
     let mut k = 0;
     while k < counts.len() {
         let patch = mesh.elements[counts[k].0 as usize].patch;
@@ -227,6 +236,7 @@ pub fn hybrid_row(
             }
             if v > 0.0 {
                 jobs.push((j, v));
+                partly.push(cov > vis && vis > 0);
             }
         }
     }
@@ -302,11 +312,15 @@ pub fn hybrid_row(
         })
     };
     let m = outlines.len();
-    for (&(j, _), v) in jobs.iter().zip(values.chunks_exact(m)) {
+    for ((&(j, _), v), &part) in jobs.iter().zip(values.chunks_exact(m)).zip(&partly) {
         if v.iter().any(|&f| f > 0.0) {
             row.ids.push(j);
             row.values.extend_from_slice(v);
-            row.total += to_share(v.iter().sum());
+            let share = to_share(v.iter().sum());
+            row.total += share;
+            if part {
+                row.partial += share;
+            }
         }
     }
     row

@@ -6,6 +6,7 @@
 //! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
+//! - [`refine`]: which polygons a coarse solution says to subdivide (pure maths);
 //! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
 //! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
 //!   MPI implementation (the only module that calls MPI);
@@ -19,6 +20,7 @@ pub mod hemisphere;
 pub mod mesh;
 pub mod output;
 pub mod parallel;
+pub mod refine;
 pub mod render;
 pub mod report;
 pub mod scene;

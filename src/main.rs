@@ -83,6 +83,15 @@ pub struct SolveArgs {
     /// nearest polygon that faces it (smaller: more accurate, slower).
     #[arg(long, default_value_t = 0.2, value_parser = positive)]
     near_field_ratio: f32,
+    /// Refinement passes by need: the mesh starts 2^N times coarser than the
+    /// automatic rule's (or at the scene's own subdivision), each pass solves
+    /// it roughly and doubles the patch grid of polygons whose shooters cast
+    /// penumbrae onto a noticeable share of the light, and the element grid of
+    /// quads whose neighbouring elements differ a lot (README "Refinement by
+    /// need"). 0: the mesh as given. Hybrid form factors only; `--patch-size`
+    /// fixes the mesh.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=6))]
+    refine: u32,
     /// Cap on patches along one polygon edge (automatic subdivision).
     #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=4096))]
     max_patches_per_edge: u32,
@@ -121,6 +130,7 @@ impl SolveArgs {
                 element_size: self.element_size,
                 near_field_ratio: self.near_field_ratio,
                 max_patches_per_edge: self.max_patches_per_edge,
+                refine: self.refine,
                 ..MeshSettings::default()
             },
             raster_pieces: self.raster_pieces,

@@ -33,6 +33,11 @@ pub struct MeshSettings {
     pub max_patches_per_edge: u32,
     /// Cap on elements along one patch edge.
     pub max_elements_per_edge: u32,
+    /// Refinement passes by need (`crate::refine`): the automatic rule starts
+    /// `2^refine` times coarser (patches up to `near_field_ratio * 2^refine`
+    /// of the distance, at most the distance), and each pass doubles the
+    /// patch grid of the polygons whose shots ask for it.
+    pub refine: u32,
 }
 
 impl Default for MeshSettings {
@@ -43,6 +48,7 @@ impl Default for MeshSettings {
             near_field_ratio: 0.2,
             max_patches_per_edge: 32,
             max_elements_per_edge: 16,
+            refine: 2,
         }
     }
 }
@@ -121,10 +127,18 @@ pub struct Mesh {
 impl Mesh {
     /// Subdivides every polygon of `scene`.
     pub fn build(scene: &Scene, settings: &MeshSettings) -> Mesh {
+        Self::build_refined(scene, settings, &[])
+    }
+
+    /// Subdivides every polygon of `scene`, multiplying polygon i's patch grid
+    /// by `factors[i]` along each edge (within the cap; each patch keeps its
+    /// element grid); missing factors are 1.
+    pub fn build_refined(scene: &Scene, settings: &MeshSettings, factors: &[u32]) -> Mesh {
         let sizes = patch_sizes(scene, settings);
         let mut mesh = Mesh::default();
         for (pi, (poly, &size)) in scene.polygons.iter().zip(&sizes).enumerate() {
-            mesh.add_polygon(pi as u32, poly, size, settings);
+            let f = factors.get(pi).copied().unwrap_or(1);
+            mesh.add_polygon(pi as u32, poly, size, settings, f);
         }
         mesh
     }
@@ -134,7 +148,14 @@ impl Mesh {
         self.elements.iter().map(|e| e.area).sum()
     }
 
-    fn add_polygon(&mut self, index: u32, poly: &Polygon, patch_size: f32, s: &MeshSettings) {
+    fn add_polygon(
+        &mut self,
+        index: u32,
+        poly: &Polygon,
+        patch_size: f32,
+        s: &MeshSettings,
+        factor: u32,
+    ) {
         let v = &poly.vertices;
         let tri = v.len() == 3;
         let cap_p = |len: f32| ((len / patch_size).ceil() as u32).clamp(1, s.max_patches_per_edge);
@@ -165,6 +186,7 @@ impl Mesh {
             (None, Some(sub)) => sub.elements,
             (None, None) => [2, 2],
         };
+        let patch_grid = patch_grid.map(|n| (n * factor).min(s.max_patches_per_edge).max(n));
         let refl = poly.reflectance.map(f64::from);
         let exitance = poly.emission.map(|l| std::f64::consts::PI * l as f64);
         let first_patch = self.patches.len() as u32;
@@ -359,6 +381,12 @@ fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
     if n > AUTO_SEARCH_LIMIT {
         return vec![scene.extent() / 32.0; n];
     }
+    // Refinement by need starts coarser and halves where the solution asks.
+    let ratio = if s.refine > 0 {
+        (s.near_field_ratio * (1u32 << s.refine.min(8)) as f32).min(1.0)
+    } else {
+        s.near_field_ratio
+    };
     let eps = 1e-5 * scene.extent();
     let centres: Vec<Vec3> = scene.polygons.iter().map(Polygon::centre).collect();
     let areas: Vec<f32> = scene.polygons.iter().map(Polygon::area).collect();
@@ -378,13 +406,7 @@ fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
             let pi_h2 = std::f32::consts::PI * h * h;
             // Disk estimate of F in each direction; a pair that exchanges
             // little light tolerates a larger relative error (up to h / ratio).
-            let allow = |f: f32| {
-                s.near_field_ratio
-                    * h
-                    * (0.2 / f.max(1e-6))
-                        .sqrt()
-                        .clamp(1.0, 1.0 / s.near_field_ratio)
-            };
+            let allow = |f: f32| ratio * h * (0.2 / f.max(1e-6)).sqrt().clamp(1.0, 1.0 / ratio);
             size[i] = size[i].min(allow(areas[j] * cos_i * cos_j / (pi_h2 + areas[j])));
             size[j] = size[j].min(allow(areas[i] * cos_i * cos_j / (pi_h2 + areas[i])));
         }

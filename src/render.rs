@@ -7,8 +7,10 @@ use crate::gpu::{render_view, Gpu, GpuError, HemisphereRasterizer, Shading, View
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout};
 use crate::mesh::{Mesh, MeshSettings};
 use crate::parallel::{rank_grid, Collectives, Exchange, Single, Traffic};
+use crate::refine::{self, PatchStats};
 use crate::report::{
-    self, Counts, LoadBalance, Parallel, RankStats, Report, Settings, Timings, TracePoint,
+    self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
+    TracePoint,
 };
 use crate::scene::Scene;
 use crate::solver::{Candidate, FormFactorSource, ShotRegion, Solver, StopRule, UNSHOT_ONE};
@@ -163,6 +165,9 @@ pub struct GpuFormFactors<'a> {
     pub timings: PhaseTimes,
     /// This rank's busy time (everything but waiting in collectives) per shot.
     pub busy: Vec<f64>,
+    /// Per patch, from its first uncached hybrid shot: this rank's receivers'
+    /// penumbra and total shares (see `refine::PatchStats`).
+    pub penumbra: Vec<[u64; 2]>,
     /// Form-factor rows of patches that have shot, for when they shoot again
     /// (the same shooter gives the same row, so a hit changes no result).
     cache: std::collections::HashMap<(u32, [u32; 3]), Row>,
@@ -248,6 +253,7 @@ impl<'a> GpuFormFactors<'a> {
             pairs: Vec::new(),
             timings: PhaseTimes::default(),
             busy: Vec::new(),
+            penumbra: vec![[0, 0]; mesh.patches.len()],
             cache: Default::default(),
             pending: None,
             split: opts.split_shots,
@@ -462,8 +468,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
                     .iter()
                     .map(|p| p.1 as f64 / crate::hemisphere::FIXED_ONE)
                     .collect(),
-                near_hidden: 0,
-                total: 0,
+                ..Row::default()
             },
             FormFactorMethod::Hybrid => {
                 let m = self.mesh.patches[shooter as usize].elements.len();
@@ -474,6 +479,9 @@ impl FormFactorSource for GpuFormFactors<'_> {
                 };
                 let mut row =
                     crate::formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
+                if let Some(p) = self.penumbra.get_mut(shooter as usize) {
+                    *p = [row.partial + row.near_hidden, row.total + row.near_hidden];
+                }
                 // Refinement by need: a near receiver partly hidden from the
                 // shooter's centre means visibility varies across the
                 // shooter, so each group of its elements looks for itself.
@@ -576,7 +584,8 @@ fn stats_vector(
     trace: Traffic,
 ) -> Vec<f64> {
     let mut traffic = comm.traffic();
-    // The trace's gathers are bookkeeping, not the solve's exchange.
+    // The trace's gathers (and the refinement passes, passed in with them)
+    // are not the solve's exchange.
     traffic.sent -= trace.sent.min(traffic.sent);
     traffic.received -= trace.received.min(traffic.received);
     vec![
@@ -593,55 +602,36 @@ fn stats_vector(
     ]
 }
 
-/// Solves `scene` over the ranks of `comm` (every rank calls this with the
-/// same arguments) and, on rank 0, renders the camera view and the report.
-/// Other ranks get `Ok(None)`.
-pub fn render_on(
-    gpu: &Gpu,
-    scene: &Scene,
-    opts: &RenderOptions,
+/// What a shooting loop measured, besides the solver's state.
+#[derive(Default)]
+struct LoopStats {
+    select: Duration,
+    update: Duration,
+    shot_times: Vec<Duration>,
+    /// Power each patch shot, summed (sum over RGB; the same on every rank).
+    patch_power: Vec<f64>,
+}
+
+/// Shoots until `stop` says done: progressive refinement (DESIGN.md section
+/// 2) over the ranks of `comm`. `after_shot` runs on every rank after every
+/// shot, with the unshot fraction before it (the trace, progress displays).
+/// The loop also ends when the strongest shooter left has less than `floor` power.
+fn shoot_until(
+    mesh: &Mesh,
+    stop: &StopRule,
+    floor: f64,
     comm: &dyn Collectives,
-    load_time: Duration,
-    progress: &mut dyn FnMut(&Progress),
-) -> Result<Option<Rendered>, RenderError> {
-    opts.resolution.validate().map_err(RenderError::Settings)?;
-    if opts.stop.threshold.is_nan() || opts.stop.threshold < 0.0 {
-        return Err(RenderError::Settings(format!(
-            "threshold {} must be >= 0",
-            opts.stop.threshold
-        )));
-    }
+    source: &mut GpuFormFactors,
+    solver: &mut Solver,
+    after_shot: &mut dyn FnMut(&Solver, f64),
+) -> Result<LoopStats, RenderError> {
     let (rank, ranks) = (comm.rank(), comm.size());
-    let mut timings = Timings {
-        load: load_time.as_secs_f64(),
-        ..Default::default()
+    let mut stats = LoopStats {
+        patch_power: vec![0.0; mesh.patches.len()],
+        ..LoopStats::default()
     };
-    let t = Instant::now();
-    let mesh = Mesh::build(scene, &opts.mesh);
-    timings.mesh = t.elapsed().as_secs_f64();
-    if rank == 0 {
-        log::info!(
-            "{}: {} polygons, {} patches, {} elements",
-            scene.name,
-            scene.polygons.len(),
-            mesh.patches.len(),
-            mesh.elements.len()
-        );
-    }
-
-    let t = Instant::now();
-    let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
-    timings.setup = t.elapsed().as_secs_f64();
-    let layout = source.layout();
-
-    let mut solver = Solver::partitioned(&mesh, rank, ranks);
-    let mut trace = Trace::default();
     let (mut landed_fixed, mut last_power) = (0.0f64, None::<f64>);
     let mut ff = Vec::new();
-    let mut shot_times = Vec::new();
-    let (mut select, mut update) = (Duration::ZERO, Duration::ZERO);
-    let solve_start = Instant::now();
-    let mut unshot_fraction;
     loop {
         let shot_start = Instant::now();
         // One collective per shot decides both the stop rule and the shooter:
@@ -682,8 +672,9 @@ pub fn render_on(
             let landed = all.chunks_exact(W).map(|c| c[10] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
             solver.note_retention(power, landed);
         }
-        unshot_fraction = all.chunks_exact(W).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
-        if solver.done_at(&opts.stop, unshot_fraction) {
+        let unshot_fraction =
+            all.chunks_exact(W).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
+        if solver.done_at(stop, unshot_fraction) {
             break;
         }
         let best = Candidate::best(all.chunks_exact(W).filter(|c| c[1] >= 0.0).map(|c| {
@@ -696,8 +687,10 @@ pub fn render_on(
                 weighted: c[9] != 0.0,
             }
         }));
-        select += shot_start.elapsed();
-        let Some(best) = best else { break };
+        stats.select += shot_start.elapsed();
+        let Some(best) = best.filter(|b| b.power >= floor) else {
+            break;
+        };
         let mut region = ShotRegion {
             centre: best.centre,
             weights: Vec::new(),
@@ -729,22 +722,192 @@ pub fn render_on(
             .sum();
         landed_fixed = own as f64;
         last_power = Some(shot.power);
-        update += dt;
+        stats.update += dt;
+        stats.patch_power[best.patch as usize] += shot.power;
         if let Some(b) = source.busy.last_mut() {
             *b += dt.as_secs_f64();
         }
-        shot_times.push(shot_start.elapsed());
-        if trace.due(solver.shots()) {
-            trace.record(comm, &solver, &scene.nodes, opts.ambient, solve_start);
+        stats.shot_times.push(shot_start.elapsed());
+        after_shot(solver, unshot_fraction);
+    }
+    Ok(stats)
+}
+
+/// The mesh settings a render uses: refinement by need only with hybrid
+/// form factors (hemisphere sums do not measure penumbrae) and without a
+/// fixed `--patch-size`.
+pub fn mesh_settings(opts: &RenderOptions) -> MeshSettings {
+    let mut m = opts.mesh;
+    if opts.form_factor != FormFactorMethod::Hybrid || m.patch_size.is_some() {
+        m.refine = 0;
+    }
+    m
+}
+
+/// The mesh a render solves: refinement by need (`crate::refine`), i.e.
+/// coarse solves, each followed by a decision that doubles some polygons'
+/// patch grids, until nothing asks for more or [`mesh_settings`]' `refine`
+/// passes have run. Every rank calls this with the same arguments.
+pub fn refined_mesh(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Mesh, Refinement), RenderError> {
+    let settings = mesh_settings(opts);
+    let n = scene.polygons.len();
+    let mut factors = vec![1u32; n];
+    let mut summary = Refinement::default();
+    let levels = settings.refine;
+    let mut shooters = vec![false; n];
+    for pass in 0..levels {
+        let mesh = Mesh::build_refined(scene, &settings, &factors);
+        if pass == 0 {
+            summary.start = [mesh.patches.len(), mesh.elements.len()];
         }
-        if rank == 0 {
-            progress(&Progress {
-                shots: solver.shots(),
-                unshot_fraction,
-                elapsed: solve_start.elapsed(),
-            });
+        let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
+        let started = Instant::now();
+        let mut solver = Solver::partitioned(&mesh, comm.rank(), comm.size());
+        // Shots after the last one strong enough to be refined change nothing.
+        let floor = refine::SHOOTER_TOL * solver.emitted_power();
+        let stats = shoot_until(
+            &mesh,
+            &opts.stop,
+            floor,
+            comm,
+            &mut source,
+            &mut solver,
+            &mut |s, u| {
+                if comm.rank() == 0 {
+                    progress(&Progress {
+                        shots: s.shots(),
+                        unshot_fraction: u,
+                        elapsed: started.elapsed(),
+                    });
+                }
+            },
+        )?;
+        summary.passes += 1;
+        summary.shots += solver.shots();
+        // Every rank saw its own receivers' penumbrae: sum them (exactly).
+        let mut penumbra: Vec<u64> = source.penumbra.iter().flatten().copied().collect();
+        comm.reduce_broadcast_sum(&mut penumbra);
+        let patches: Vec<PatchStats> = stats
+            .patch_power
+            .iter()
+            .zip(penumbra.chunks_exact(2))
+            .map(|(&power, p)| PatchStats {
+                power,
+                penumbra: [p[0], p[1]],
+            })
+            .collect();
+        let decided = refine::decide(&mesh, &patches, solver.emitted_power());
+        summary.seconds += started.elapsed().as_secs_f64();
+        let mut changed = 0;
+        for ((f, refined), &d) in factors.iter_mut().zip(&mut shooters).zip(&decided) {
+            if d {
+                *f *= 2;
+                *refined = true;
+                changed += 1;
+            }
+        }
+        summary.shooter_refinements += changed;
+        if comm.rank() == 0 {
+            log::info!(
+                "refinement pass {}: {} patches, {} shots; {changed} polygons get finer shooters",
+                pass + 1,
+                mesh.patches.len(),
+                solver.shots(),
+            );
+        }
+        if changed == 0 {
+            break;
         }
     }
+    summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
+    Ok((Mesh::build_refined(scene, &settings, &factors), summary))
+}
+
+/// Solves `scene` over the ranks of `comm` (every rank calls this with the
+/// same arguments) and, on rank 0, renders the camera view and the report.
+/// Other ranks get `Ok(None)`.
+pub fn render_on(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    load_time: Duration,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Option<Rendered>, RenderError> {
+    opts.resolution.validate().map_err(RenderError::Settings)?;
+    if opts.stop.threshold.is_nan() || opts.stop.threshold < 0.0 {
+        return Err(RenderError::Settings(format!(
+            "threshold {} must be >= 0",
+            opts.stop.threshold
+        )));
+    }
+    let (rank, ranks) = (comm.rank(), comm.size());
+    let mut timings = Timings {
+        load: load_time.as_secs_f64(),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let (mesh, refinement) = refined_mesh(gpu, scene, opts, comm, progress)?;
+    // The passes' solves count as solve time, below.
+    timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
+    // Their exchanges are not the final solve's.
+    let before = comm.traffic();
+    if rank == 0 {
+        log::info!(
+            "{}: {} polygons, {} patches, {} elements",
+            scene.name,
+            scene.polygons.len(),
+            mesh.patches.len(),
+            mesh.elements.len()
+        );
+    }
+
+    let t = Instant::now();
+    let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
+    timings.setup = t.elapsed().as_secs_f64();
+    let layout = source.layout();
+
+    let mut solver = Solver::partitioned(&mesh, rank, ranks);
+    let mut trace = Trace::default();
+    let nodes = &scene.nodes;
+    // The refinement passes count as solve time (set-up excluded), so the
+    // trace's times are the honest time to each accuracy.
+    let passes = Duration::from_secs_f64(refinement.seconds);
+    let solve_start = Instant::now()
+        .checked_sub(passes)
+        .unwrap_or_else(Instant::now);
+    let stats = shoot_until(
+        &mesh,
+        &opts.stop,
+        0.0,
+        comm,
+        &mut source,
+        &mut solver,
+        &mut |solver, unshot_fraction| {
+            if trace.due(solver.shots()) {
+                trace.record(comm, solver, nodes, opts.ambient, solve_start);
+            }
+            if rank == 0 {
+                progress(&Progress {
+                    shots: solver.shots(),
+                    unshot_fraction,
+                    elapsed: solve_start.elapsed(),
+                });
+            }
+        },
+    )?;
+    let LoopStats {
+        select,
+        update,
+        mut shot_times,
+        ..
+    } = stats;
     timings.solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
     let shots = solver.shots();
 
@@ -757,7 +920,10 @@ pub fn render_on(
         select,
         update,
         comm,
-        trace.traffic,
+        Traffic {
+            sent: trace.traffic.sent + before.sent,
+            received: trace.traffic.received + before.received,
+        },
     ));
     let busy = comm.gather_f64(&source.busy);
     let timings_src = source.timings;
@@ -853,6 +1019,7 @@ pub fn render_on(
         parallel,
     );
     report.convergence = trace.finish(&report, solve_seconds);
+    report.refinement = refinement;
     let radiosity = solver.display_radiosity(opts.ambient);
     drop(solver);
     Ok(Some(Rendered {
@@ -883,13 +1050,14 @@ pub fn build_report(
             form_factor: opts.form_factor,
             threshold: opts.stop.threshold,
             max_shots: opts.stop.max_shots,
-            mesh: opts.mesh,
+            mesh: mesh_settings(opts),
             raster_pieces: opts.raster_pieces,
             image_size,
             shading: opts.shading,
             ambient: opts.ambient,
         },
         device: gpu.describe(),
+        refinement: Refinement::default(),
         counts: Counts {
             polygons: scene.polygons.len(),
             patches: mesh.patches.len(),

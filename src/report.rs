@@ -13,8 +13,10 @@ pub struct Report {
     pub settings: Settings,
     /// The adapter the form factors were rasterised on.
     pub device: String,
-    /// Sizes of the problem.
+    /// Sizes of the problem (the final mesh).
     pub counts: Counts,
+    /// How the mesh was refined by need before the final solve.
+    pub refinement: Refinement,
     /// Shots taken.
     pub shots: u64,
     /// Unshot power / emitted power at the end.
@@ -119,6 +121,23 @@ pub struct Counts {
     pub cells: usize,
     /// MPI ranks.
     pub ranks: usize,
+}
+
+/// What refinement by need did (`crate::refine`) before the final solve.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Refinement {
+    /// Coarse solves run (each until no shooter left could be refined).
+    pub passes: u32,
+    /// Shots those passes took (not counted in `shots`).
+    pub shots: u64,
+    /// Seconds they took (included in `timings.solve` and the trace's times).
+    pub seconds: f64,
+    /// Polygons whose patch grid (shooters) was refined at least once.
+    pub shooter_polygons: u32,
+    /// Doublings of patch grids, over all polygons and passes.
+    pub shooter_refinements: u32,
+    /// Patches and elements of the first (coarsest) mesh.
+    pub start: [usize; 2],
 }
 
 /// Seconds spent per phase.

@@ -98,7 +98,7 @@ fn benchmark_scene_counts_match_the_paper() {
 
 #[test]
 fn threaded_rectangle_pass_is_deterministic() {
-    // cubes-5 has 8424 elements, enough for the multi-threaded rectangle pass.
+    // cubes-5 has at least 8424 elements, enough for the multi-threaded rectangle pass.
     let scene = radiosity::scene::open("cubes-5").expect("built-in");
     let mut opts = RenderOptions {
         width: 0,
@@ -107,7 +107,7 @@ fn threaded_rectangle_pass_is_deterministic() {
     opts.stop.max_shots = 12;
     let a = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
     let b = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
-    assert_eq!(a.mesh.elements.len(), 8424);
+    assert!(a.mesh.elements.len() >= 8424);
     assert!(
         a.radiosity == b.radiosity,
         "radiosities differ between runs"

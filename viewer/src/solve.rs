@@ -130,8 +130,11 @@ fn solve(
     wake: &impl Fn(),
 ) -> Result<Option<Settings>, String> {
     let opts = &settings.options;
-    let mesh = Arc::new(Mesh::build(scene, &opts.mesh));
     let single = Single::default();
+    // The same mesh `radiosity render` solves (refinement passes included).
+    let (mesh, _) = radiosity::render::refined_mesh(gpu, scene, opts, &single, &mut |_| {})
+        .map_err(|e| e.to_string())?;
+    let mesh = Arc::new(mesh);
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())
         .map_err(|e| e.to_string())?;
     let mut solver = Solver::new(&mesh);
