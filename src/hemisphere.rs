@@ -397,6 +397,81 @@ mod tests {
 
     use super::*;
 
+    /// Every cell whose centre ray (in f64) passes inside the quad `d`.
+    fn cells_inside(d: &[Vec3; 4], res: Resolution, rows: std::ops::Range<u32>) -> Vec<(u32, u32)> {
+        let c: Vec<glam::DVec3> = d.iter().map(|v| v.as_dvec3()).collect();
+        let centre = (c[0] + c[1] + c[2] + c[3]) / 4.0;
+        let planes: Vec<glam::DVec3> = (0..4).map(|k| c[k].cross(c[(k + 1) % 4])).collect();
+        let sides: Vec<f64> = planes.iter().map(|p| p.dot(centre).signum()).collect();
+        let mut out = Vec::new();
+        for p in rows {
+            let phi = (p as f64 + 0.5) * FRAC_PI_2 / res.rows as f64;
+            for t in 0..res.cols {
+                let theta = (t as f64 + 0.5) * 2.0 * PI / res.cols as f64;
+                let r = glam::DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos());
+                // Well inside every edge plane (a cell on an edge may go either way).
+                if planes
+                    .iter()
+                    .zip(&sides)
+                    .all(|(pl, s)| pl.dot(r) * s > 1e-9 * pl.length())
+                {
+                    out.push((p, t));
+                }
+            }
+        }
+        out
+    }
+
+    fn in_rect(r: &CellRect, res: Resolution, (p, t): (u32, u32)) -> bool {
+        let (y, x) = (p as f32 + 0.5, t as f32 + 0.5);
+        let cols = res.cols as f32;
+        r.y0 <= y && y <= r.y1 && ((r.x0 <= x && x <= r.x1) || (r.x0 <= x + cols && x + cols <= r.x1))
+    }
+
+    #[test]
+    fn rectangles_hold_every_cell_near_the_pole() {
+        // Small quads a few rows from the pole, far away, at 512 x 2048: the
+        // polar bound must hold every cell the exact per-cell test accepts.
+        let res = Resolution {
+            rows: 512,
+            cols: 2048,
+        };
+        let row = FRAC_PI_2 / res.rows as f64;
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut missed = Vec::new();
+        for _ in 0..400 {
+            let (phi, theta) = (rnd() * 3.0 * row, rnd() * 2.0 * PI);
+            let dist = 1.0 + 999.0 * rnd();
+            let half = (0.3 + 2.0 * rnd()) * row * dist;
+            let centre = glam::DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos()) * dist;
+            let a = rnd() * PI;
+            let (ex, ey) = (
+                glam::DVec3::new(a.cos(), a.sin(), 0.0) * half,
+                glam::DVec3::new(-a.sin(), a.cos(), 0.0) * half,
+            );
+            let d = [
+                centre - ex - ey,
+                centre + ex - ey,
+                centre + ex + ey,
+                centre - ex + ey,
+            ]
+            .map(|v| v.as_vec3());
+            let rect = cell_bounds(&d, res, 2000.0);
+            for cell in cells_inside(&d, res, 0..8) {
+                if !rect.is_some_and(|r| in_rect(&r, res, cell)) {
+                    missed.push((cell, rect));
+                }
+            }
+        }
+        assert!(missed.is_empty(), "{} cells dropped, e.g. {:?}", missed.len(), missed.first());
+    }
+
     #[test]
     fn delta_form_factors_sum_to_one() {
         for (rows, cols) in [(8, 32), (128, 512), (160, 640), (192, 768), (1000, 7)] {

@@ -7,5 +7,6 @@ mod common;
 mod determinism;
 mod furnace;
 mod mpi;
+mod refine;
 mod shaders;
 mod traps;

@@ -1,0 +1,66 @@
+//! Refinement by need: what the passes refine, and that they refine nothing
+//! where nothing casts a shadow.
+
+use crate::common::*;
+use radiosity::render::{render, RenderOptions};
+use std::time::Duration;
+
+fn patches_per_polygon(mesh: &radiosity::mesh::Mesh) -> Vec<usize> {
+    mesh.polygons.iter().map(|p| p.patches.len()).collect()
+}
+
+#[test]
+fn the_cornell_box_refines_its_light_and_nothing_else() {
+    let scene = radiosity::scene::open("cornell").expect("built-in");
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.threshold = 0.05;
+    let refined = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+    opts.mesh.refine = 0;
+    let plain = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+    let (a, b) = (
+        patches_per_polygon(&refined.mesh),
+        patches_per_polygon(&plain.mesh),
+    );
+    let changed: Vec<usize> = (0..a.len()).filter(|&i| a[i] != b[i]).collect();
+    let r = &refined.report.refinement;
+    assert!(r.passes >= 1, "{r:?}");
+    assert_eq!(changed.len() as u32, r.shooter_polygons, "{r:?}");
+    assert_eq!(r.start, [plain.mesh.patches.len(), plain.mesh.elements.len()]);
+    assert_eq!(refined.report.counts.patches, refined.mesh.patches.len());
+    // The light (the only emitter, over the blocks) and nothing else: the
+    // walls' shooters are dim and the blocks' shadows are not theirs.
+    assert_eq!(changed.len(), 1, "refined polygons {changed:?}");
+    let light = &refined.mesh.polygons[changed[0]];
+    assert!(light.exitance[0] > 0.0, "refined a polygon that is not the light");
+    assert!(a[changed[0]] >= 4 * b[changed[0]]);
+    assert_eq!(plain.report.refinement.passes, 0);
+}
+
+#[test]
+fn two_facing_squares_refine_nothing() {
+    // No occluder: no receiver is ever partly visible, so no penumbra.
+    let (_dir, path) = write_scene(
+        "squares",
+        &[
+            surface(
+                "emitter",
+                vec![rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true)],
+                0.0,
+                1.0,
+            ),
+            surface(
+                "receiver",
+                vec![rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false)],
+                1.0,
+                0.0,
+            ),
+        ],
+    );
+    let r = solve_file(&path, &tight(1e-6));
+    assert!(r.report.refinement.passes >= 1);
+    assert_eq!(r.report.refinement.shooter_polygons, 0);
+    assert_eq!(r.report.refinement.start[0], r.mesh.patches.len());
+}
