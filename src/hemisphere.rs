@@ -341,26 +341,32 @@ pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect>
     if span >= 0.999 * PI32 {
         full = true;
     }
-    let (mut phi_min, mut phi_max) = (HALF_PI, 0.0f32);
+    // The polar range in f64, as atan2(rho, z): f32 acos(z) is off by up
+    // to sqrt(2 eps) near the pole (0.03 rows at R_phi = 512, more above),
+    // which no small margin covers.
+    let w = d.map(|c| c.as_dvec3().normalize_or_zero());
+    let polar = |v: glam::DVec3| v.x.hypot(v.y).atan2(v.z);
+    let (mut phi_min, mut phi_max) = (std::f64::consts::FRAC_PI_2, 0.0f64);
     for k in 0..4 {
-        let ph = u[k].z.clamp(-1.0, 1.0).acos();
+        let ph = polar(w[k]);
         phi_max = phi_max.max(ph);
         phi_min = phi_min.min(ph);
-        let b = u[(k + 1) % 4];
-        let m = u[k].cross(b);
+        let b = w[(k + 1) % 4];
+        let m = w[k].cross(b);
         let ml = m.length();
-        if ml > 1e-9 {
+        if ml > 1e-12 {
             let mh = m / ml;
-            let q = Vec3::Z - mh * mh.z;
+            let q = glam::DVec3::Z - mh * mh.z;
             let ql = q.length();
-            if ql > 1e-9 {
+            if ql > 1e-12 {
                 let top = q / ql;
-                if u[k].cross(top).dot(mh) >= 0.0 && top.cross(b).dot(mh) >= 0.0 {
-                    phi_min = phi_min.min(top.z.clamp(-1.0, 1.0).acos());
+                if w[k].cross(top).dot(mh) >= 0.0 && top.cross(b).dot(mh) >= 0.0 {
+                    phi_min = phi_min.min(polar(top));
                 }
             }
         }
     }
+    let (phi_min, phi_max) = (phi_min as f32, phi_max as f32);
     let phi_max = phi_max.min(HALF_PI);
     let y1 = phi_max / HALF_PI * rows + RECT_MARGIN;
     let (x0, x1, y0) = if full {
@@ -408,7 +414,8 @@ mod tests {
             let phi = (p as f64 + 0.5) * FRAC_PI_2 / res.rows as f64;
             for t in 0..res.cols {
                 let theta = (t as f64 + 0.5) * 2.0 * PI / res.cols as f64;
-                let r = glam::DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos());
+                let r =
+                    glam::DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos());
                 // Well inside every edge plane (a cell on an edge may go either way).
                 if planes
                     .iter()
@@ -425,17 +432,25 @@ mod tests {
     fn in_rect(r: &CellRect, res: Resolution, (p, t): (u32, u32)) -> bool {
         let (y, x) = (p as f32 + 0.5, t as f32 + 0.5);
         let cols = res.cols as f32;
-        r.y0 <= y && y <= r.y1 && ((r.x0 <= x && x <= r.x1) || (r.x0 <= x + cols && x + cols <= r.x1))
+        r.y0 <= y
+            && y <= r.y1
+            && ((r.x0 <= x && x <= r.x1) || (r.x0 <= x + cols && x + cols <= r.x1))
     }
 
     #[test]
     fn rectangles_hold_every_cell_near_the_pole() {
-        // Small quads a few rows from the pole, far away, at 512 x 2048: the
-        // polar bound must hold every cell the exact per-cell test accepts.
-        let res = Resolution {
-            rows: 512,
-            cols: 2048,
-        };
+        // Small quads a few rows from the pole, far away, at 512 x 2048 and
+        // 2048 x 8192: the polar bound must hold the outline and every cell
+        // the exact per-cell test accepts.
+        for rows in [512, 2048] {
+            pole_case(Resolution {
+                rows,
+                cols: 4 * rows,
+            });
+        }
+    }
+
+    fn pole_case(res: Resolution) {
         let row = FRAC_PI_2 / res.rows as f64;
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rnd = move || {
@@ -445,11 +460,14 @@ mod tests {
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let mut missed = Vec::new();
+        let mut worst = f64::MIN;
         for _ in 0..400 {
             let (phi, theta) = (rnd() * 3.0 * row, rnd() * 2.0 * PI);
             let dist = 1.0 + 999.0 * rnd();
             let half = (0.3 + 2.0 * rnd()) * row * dist;
-            let centre = glam::DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos()) * dist;
+            let centre =
+                glam::DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos())
+                    * dist;
             let a = rnd() * PI;
             let (ex, ey) = (
                 glam::DVec3::new(a.cos(), a.sin(), 0.0) * half,
@@ -463,13 +481,36 @@ mod tests {
             ]
             .map(|v| v.as_vec3());
             let rect = cell_bounds(&d, res, 2000.0);
+            // The polar range of the outline, sampled in f64 (inside the true range).
+            let (mut lo, mut hi) = (f64::MAX, 0.0f64);
+            for k in 0..4 {
+                let (a, b) = (d[k].as_dvec3(), d[(k + 1) % 4].as_dvec3());
+                for i in 0..=64 {
+                    let q = a + (b - a) * (i as f64 / 64.0);
+                    let ph = q.x.hypot(q.y).atan2(q.z) / row;
+                    lo = lo.min(ph);
+                    hi = hi.max(ph);
+                }
+            }
+            if let Some(r) = rect {
+                worst = worst.max(r.y0 as f64 - lo).max(hi - r.y1 as f64);
+            }
             for cell in cells_inside(&d, res, 0..8) {
                 if !rect.is_some_and(|r| in_rect(&r, res, cell)) {
                     missed.push((cell, rect));
                 }
             }
         }
-        assert!(missed.is_empty(), "{} cells dropped, e.g. {:?}", missed.len(), missed.first());
+        assert!(
+            missed.is_empty(),
+            "{res}: {} cells dropped, e.g. {:?}",
+            missed.len(),
+            missed.first()
+        );
+        assert!(
+            worst <= 0.0,
+            "{res}: the rectangle misses the outline by {worst} rows"
+        );
     }
 
     #[test]

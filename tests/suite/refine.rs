@@ -28,13 +28,19 @@ fn the_cornell_box_refines_its_light_and_nothing_else() {
     let r = &refined.report.refinement;
     assert!(r.passes >= 1, "{r:?}");
     assert_eq!(changed.len() as u32, r.shooter_polygons, "{r:?}");
-    assert_eq!(r.start, [plain.mesh.patches.len(), plain.mesh.elements.len()]);
+    assert_eq!(
+        r.start,
+        [plain.mesh.patches.len(), plain.mesh.elements.len()]
+    );
     assert_eq!(refined.report.counts.patches, refined.mesh.patches.len());
     // The light (the only emitter, over the blocks) and nothing else: the
     // walls' shooters are dim and the blocks' shadows are not theirs.
     assert_eq!(changed.len(), 1, "refined polygons {changed:?}");
     let light = &refined.mesh.polygons[changed[0]];
-    assert!(light.exitance[0] > 0.0, "refined a polygon that is not the light");
+    assert!(
+        light.exitance[0] > 0.0,
+        "refined a polygon that is not the light"
+    );
     assert!(a[changed[0]] >= 4 * b[changed[0]]);
     assert_eq!(plain.report.refinement.passes, 0);
 }
