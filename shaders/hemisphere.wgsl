@@ -18,6 +18,8 @@ const BLOCKED: u32 = 0xfffffffeu;
 // Angular tolerance of the edge tests (radians): far below a cell, so shared
 // edges leave no cracks. Ties go to the rectangle drawn first.
 const EDGE_TOL: f32 = 1.0e-6;
+// Pixels a lattice-mode rectangle grows by on each side.
+const LATTICE_MARGIN: f32 = 0.02;
 
 struct Shot {
     res: vec4<u32>,    // rows (R_phi), cols (R_theta), unused, unused
@@ -75,6 +77,11 @@ fn vs(@builtin(vertex_index) vi: u32, r: Rect) -> VsOut {
         let grid = vec2<f32>(f32(shot.tiles.z), f32(shot.tiles.w));
         x = (x - f32(shot.own.x) - 0.5) / grid.x + 0.5;
         y = (y - f32(shot.own.y) - 0.5) / grid.y + 0.5;
+        // The map divides the rectangle's margin by the grid; give it back
+        // in pixels, well above the rasteriser's sub-pixel snap (1/256), so
+        // no pixel centre on the edge is lost. The exact test decides anyway.
+        x += select(-LATTICE_MARGIN, LATTICE_MARGIN, (vi & 1u) == 1u);
+        y += select(-LATTICE_MARGIN, LATTICE_MARGIN, (vi >> 1u) == 1u);
     }
     var out: VsOut;
     out.pos = vec4<f32>(x / f32(shot.res.y) * 2.0 - 1.0, 1.0 - y / f32(shot.res.x) * 2.0, 0.5, 1.0);

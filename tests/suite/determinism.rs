@@ -54,6 +54,33 @@ fn tiling_does_not_change_the_solution() {
 }
 
 #[test]
+fn lattice_grids_of_many_columns_leave_no_cracks() {
+    // 1 x 1 tiles pack each rank's cells into a lattice image, which shrinks
+    // the rectangles' margins by the grid size: with 6 or more columns they
+    // fell below the rasteriser's sub-pixel snap. Every rank grid must give
+    // the whole hemisphere's solution bit for bit.
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 30;
+    let whole = cornell(&opts);
+    for (px, py) in [(6, 1), (7, 1), (8, 4), (13, 1), (32, 2)] {
+        opts.layout = Some(TileLayout {
+            tile_w: 1,
+            tile_h: 1,
+            px,
+            py,
+        });
+        let tiled = cornell(&opts);
+        assert!(
+            whole.radiosity == tiled.radiosity,
+            "radiosities differ on a {px} x {py} lattice"
+        );
+    }
+}
+
+#[test]
 fn cornell_box_looks_right() {
     // Red wall on the left of the camera view, green on the right, light brightest at the top.
     let mut opts = RenderOptions {
