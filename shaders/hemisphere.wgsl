@@ -12,8 +12,6 @@
 // tessellation, is what makes the projection right. Depth is that distance;
 // back faces write BLOCKED (they stop light but receive none).
 
-const TWO_PI: f32 = 6.28318530717959;
-const HALF_PI: f32 = 1.57079632679490;
 const BLOCKED: u32 = 0xfffffffeu;
 // Angular tolerance of the edge tests (radians): far below a cell, so shared
 // edges leave no cracks. Ties go to the rectangle drawn first.
@@ -34,6 +32,11 @@ struct Shot {
 // factors divide the visible cells by these, so aliasing cancels). The depth
 // test runs after this shader (it writes depth), so every hit is counted.
 @group(0) @binding(1) var<storage, read_write> coverage: array<atomic<u32>>;
+// Cell-centre directions, computed once in f64 (`hemisphere::direction_table`):
+// per row (sin phi, cos phi), then per column (cos theta, sin theta). The
+// driver's f32 sin/cos have unspecified precision; a table makes every
+// driver see the same rays.
+@group(0) @binding(2) var<storage, read> trig: array<vec2<f32>>;
 
 struct Rect {
     @location(0) rect: vec4<f32>,   // x0, x1, y0, y1 in cells
@@ -162,10 +165,9 @@ fn fs(in: VsOut) -> FsOut {
         }
     }
     // Cell-centre direction in the shooter's frame.
-    let theta = (f32(cell.x) + 0.5) * TWO_PI / f32(shot.res.y);
-    let phi = (f32(cell.y) + 0.5) * HALF_PI / f32(shot.res.x);
-    let sp = sin(phi);
-    let dir = vec3<f32>(sp * cos(theta), sp * sin(theta), cos(phi));
+    let polar = trig[cell.y];
+    let azimuth = trig[shot.res.x + cell.x];
+    let dir = vec3<f32>(polar.x * azimuth.x, polar.x * azimuth.y, polar.y);
     if (dot(dir, in.e0) < -EDGE_TOL || dot(dir, in.e1) < -EDGE_TOL || dot(dir, in.e2) < -EDGE_TOL || dot(dir, in.e3) < -EDGE_TOL) {
         discard;
     }

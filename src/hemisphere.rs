@@ -271,6 +271,23 @@ impl FormFactorAccumulator {
     }
 }
 
+/// The cell-centre directions the hemisphere shader uses, computed once in
+/// f64 and rounded to f32: per row (sin phi, cos phi), then per column
+/// (cos theta, sin theta). The shader multiplies them (correctly rounded in
+/// every driver), so every driver sees the same directions; its own f32
+/// sin/cos would not (their precision is unspecified).
+pub fn direction_table(res: Resolution) -> Vec<[f32; 2]> {
+    let rows = (0..res.rows).map(|p| {
+        let phi = (p as f64 + 0.5) * FRAC_PI_2 / res.rows as f64;
+        [phi.sin() as f32, phi.cos() as f32]
+    });
+    let cols = (0..res.cols).map(|t| {
+        let theta = (t as f64 + 0.5) * 2.0 * PI / res.cols as f64;
+        [theta.cos() as f32, theta.sin() as f32]
+    });
+    rows.chain(cols).collect()
+}
+
 /// A conservative rectangle of cells holding a planar piece's projection:
 /// columns `x0..x1` and rows `y0..y1` in cell units (cell (p, t) spans
 /// `t..t+1` by `p..p+1`). `x1` may exceed R_theta: the rectangle then wraps

@@ -268,6 +268,19 @@ impl HemisphereRasterizer {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        // Cell directions from f64, the same on every driver.
+        let table = crate::hemisphere::direction_table(res);
+        let trig = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cell directions"),
+            size: std::mem::size_of_val(table.as_slice()) as u64,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: true,
+        });
+        trig.slice(..)
+            .get_mapped_range_mut()
+            .map_err(|e| GpuError::Failed(e.to_string()))?
+            .copy_from_slice(bytemuck::cast_slice(&table));
+        trig.unmap();
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("hemisphere.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
@@ -326,6 +339,10 @@ impl HemisphereRasterizer {
                 wgpu::BindGroupEntry {
                     binding: 1,
                     resource: coverage_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: trig.as_entire_binding(),
                 },
             ],
         });
