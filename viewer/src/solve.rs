@@ -236,7 +236,7 @@ fn solve(
         }
         let now_idle = !shooting
             || solver.done(&opts.stop)
-            || settings.pause_at.is_some_and(|n| solver.shots() >= n)
+            || pause_at.is_some_and(|n| solver.shots() >= n)
             || steps_left == Some(0);
         if let Ok(mut s) = shared.lock() {
             let converged = solver.done(&opts.stop);
