@@ -2,11 +2,12 @@
 # Installs what the renderer needs on Debian 12, only what is missing:
 # lavapipe (Mesa's software Vulkan driver) and the Vulkan loader, Open MPI and
 # libclang (for the MPI crate), pkgconf and Xvfb (for the viewer's tests),
-# fontconfig and DejaVu fonts (benchmark charts).
+# fontconfig and DejaVu fonts (benchmark charts), procps (kill and pgrep, for
+# the fault tests).
 # Safe to run again. Sourced by render.sh and test.sh.
 set -euo pipefail
 
-packages=(mesa-vulkan-drivers libvulkan1 libopenmpi-dev openmpi-bin libclang-dev pkgconf xvfb libfontconfig1-dev fonts-dejavu-core)
+packages=(mesa-vulkan-drivers libvulkan1 libopenmpi-dev openmpi-bin libclang-dev pkgconf xvfb libfontconfig1-dev fonts-dejavu-core procps)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -11,8 +11,9 @@
 //! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
 //!   MPI implementation (the only module that calls MPI);
 //! - [`render`]: one render from scene to image and report, on one or many ranks;
-//! - [`output`], [`report`]: files out.
+//! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume).
 
+pub mod checkpoint;
 pub mod comm;
 pub mod formfactor;
 pub mod gpu;

@@ -3,12 +3,13 @@
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use radiosity::checkpoint::Checkpoint;
 use radiosity::comm::MpiComm;
 use radiosity::gpu::{Gpu, Shading};
 use radiosity::hemisphere::Resolution;
 use radiosity::mesh::MeshSettings;
 use radiosity::parallel::{Collectives, Exchange, Single};
-use radiosity::render::{render_on, FormFactorMethod, Progress, RenderOptions};
+use radiosity::render::{render_on, CheckpointPlan, FormFactorMethod, Progress, RenderOptions};
 use radiosity::solver::StopRule;
 use radiosity::{output, scene};
 use std::io::IsTerminal;
@@ -184,6 +185,19 @@ struct RenderArgs {
     /// PNG preview exposure adjustment in stops, on top of automatic exposure.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
+    /// Where to save the solve's state (replaced atomically each time), to
+    /// resume it with --resume. SIGINT or SIGTERM always save it (here, or
+    /// OUT_DIR/<scene>.ckpt) and write the outputs so far. Default: OUT_DIR/<scene>.ckpt.
+    #[arg(long)]
+    checkpoint: Option<PathBuf>,
+    /// Also save the state every this many seconds of solving.
+    #[arg(long, value_parser = positive)]
+    checkpoint_every: Option<f32>,
+    /// Continue a solve from a checkpoint (same scene and settings that
+    /// change the numbers; any number of ranks, tiles or exchange). The
+    /// result is bit for bit the one an uninterrupted solve gives.
+    #[arg(long)]
+    resume: Option<PathBuf>,
     #[command(flatten)]
     solve: SolveArgs,
 }
@@ -223,6 +237,19 @@ fn parse_tile(s: &str) -> Result<(u32, u32), String> {
 /// An error already reported by rank 0: other ranks exit quietly.
 #[derive(Debug)]
 struct ReportedByRankZero;
+
+/// The solve was interrupted: the outputs so far and a checkpoint are
+/// written; the process exits with 130 (the shell's code for SIGINT).
+#[derive(Debug)]
+struct Interrupted(String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
 
 impl std::fmt::Display for ReportedByRankZero {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -275,6 +302,10 @@ fn main() {
         Command::Accuracy { args, solve } => accuracy::run(args, solve),
     };
     if let Err(e) = result {
+        if let Some(Interrupted(message)) = e.downcast_ref::<Interrupted>() {
+            print_error(message);
+            std::process::exit(130);
+        }
         if e.downcast_ref::<ReportedByRankZero>().is_none() {
             print_error(&format!("error: {e:#}"));
         }
@@ -360,6 +391,14 @@ fn stem(scene: &str) -> String {
 }
 
 fn run_render(args: RenderArgs) -> Result<()> {
+    // SIGINT and SIGTERM (mpirun forwards them to every rank) end the solve
+    // after the current shot, saving its state and writing what it has.
+    // Registered first, so no signal finds the default handler.
+    let interrupt = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, interrupt.clone())
+            .with_context(|| format!("cannot handle signal {signal}"))?;
+    }
     share_cores_between_ranks();
     let mpi = MpiComm::init();
     let single = Single::default();
@@ -429,6 +468,19 @@ fn run_render(args: RenderArgs) -> Result<()> {
     opts.wireframe = args.wireframe;
     opts.tile = args.tile;
     opts.exchange = args.exchange;
+    opts.checkpoint = Some(CheckpointPlan {
+        path: args
+            .checkpoint
+            .clone()
+            .unwrap_or_else(|| args.out_dir.join(format!("{}.ckpt", stem(&args.scene)))),
+        every: args
+            .checkpoint_every
+            .map(|s| std::time::Duration::from_secs_f32(s)),
+    });
+    if let Some(path) = &args.resume {
+        opts.resume = Some(std::sync::Arc::new(Checkpoint::read(path)?));
+    }
+    opts.interrupt = Some(interrupt);
     let mut reporter = (rank == 0).then(|| Reporter::new(opts.stop.max_shots, opts.stop.threshold));
     let rendered = render_on(&gpu, &scene, &opts, comm, load_time, &mut |p| {
         if let Some(r) = reporter.as_mut() {
@@ -472,5 +524,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
     }
     output::write_json(&report_path, &rendered.report)?;
     eprintln!("wrote {}", report_path.display());
+    if rendered.interrupted {
+        let why = rendered.report.warnings.last().cloned().unwrap_or_default();
+        return Err(Interrupted(format!("{}: {why}", args.scene)).into());
+    }
     Ok(())
 }

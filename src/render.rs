@@ -2,6 +2,7 @@
 //! progressive refinement -> image and report. Used by the `radiosity` binary,
 //! the tests and the viewer; it joins the modules but adds no maths of its own.
 
+use crate::checkpoint::{Checkpoint, Header};
 use crate::formfactor::Row;
 use crate::gpu::{render_view, Gpu, GpuError, HemisphereRasterizer, Shading, ViewSettings};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout};
@@ -14,6 +15,8 @@ use crate::report::{
 };
 use crate::scene::Scene;
 use crate::solver::{Candidate, FormFactorSource, ShotRegion, Solver, StopRule, UNSHOT_ONE};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// How the form factor from a shooter to each element is evaluated.
@@ -73,6 +76,22 @@ pub struct RenderOptions {
     pub split_shots: bool,
     /// Draw element edges over the image.
     pub wireframe: bool,
+    /// Where and how often to save the solve's state (`None`: never).
+    pub checkpoint: Option<CheckpointPlan>,
+    /// Set (by a signal handler, say) to stop after the current shot: the
+    /// state goes to the checkpoint and the result so far is returned.
+    pub interrupt: Option<Arc<AtomicBool>>,
+    /// Continue from this saved state instead of starting afresh.
+    pub resume: Option<Arc<Checkpoint>>,
+}
+
+/// Where a solve saves its state.
+#[derive(Clone, Debug)]
+pub struct CheckpointPlan {
+    /// The checkpoint file (replaced atomically each time).
+    pub path: std::path::PathBuf,
+    /// Save every this often (`None`: only when interrupted).
+    pub every: Option<Duration>,
 }
 
 impl Default for RenderOptions {
@@ -93,6 +112,9 @@ impl Default for RenderOptions {
             cache_rows: true,
             split_shots: true,
             wireframe: false,
+            checkpoint: None,
+            interrupt: None,
+            resume: None,
         }
     }
 }
@@ -106,6 +128,9 @@ pub enum RenderError {
     /// A setting is unusable.
     #[error("invalid setting: {0}")]
     Settings(String),
+    /// A checkpoint could not be written or does not fit this render.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
 }
 
 /// Time one rank spent per phase, summed over shots.
@@ -559,6 +584,8 @@ pub struct Rendered {
     pub image: Option<(u32, u32, Vec<[f32; 3]>)>,
     /// The report.
     pub report: Report,
+    /// The solve stopped early because it was interrupted.
+    pub interrupted: bool,
 }
 
 /// Solves `scene` in this process and renders its camera view. `load_time` is
@@ -602,9 +629,35 @@ fn stats_vector(
     ]
 }
 
+/// What the shooting loop asks of its caller between shots.
+trait LoopHooks {
+    /// After every shot, on every rank, with the unshot fraction before it.
+    fn after_shot(&mut self, solver: &Solver, unshot_fraction: f64);
+    /// This rank's say for the next shot: bit 0 stop now (interrupted),
+    /// bit 1 save the state (only rank 0's bit 1 counts, so ranks agree).
+    fn flags(&self) -> u32 {
+        0
+    }
+    /// Saves the state; every rank calls it at the same point.
+    fn checkpoint(&mut self, _solver: &Solver) -> Result<(), RenderError> {
+        Ok(())
+    }
+}
+
+/// Hooks from a closure run after every shot (no checkpoints).
+struct AfterShot<F>(F);
+
+impl<F: FnMut(&Solver, f64)> LoopHooks for AfterShot<F> {
+    fn after_shot(&mut self, solver: &Solver, unshot_fraction: f64) {
+        (self.0)(solver, unshot_fraction)
+    }
+}
+
 /// What a shooting loop measured, besides the solver's state.
 #[derive(Default)]
 struct LoopStats {
+    /// It stopped because a rank was interrupted.
+    interrupted: bool,
     select: Duration,
     update: Duration,
     shot_times: Vec<Duration>,
@@ -613,8 +666,8 @@ struct LoopStats {
 }
 
 /// Shoots until `stop` says done: progressive refinement (DESIGN.md section
-/// 2) over the ranks of `comm`. `after_shot` runs on every rank after every
-/// shot, with the unshot fraction before it (the trace, progress displays).
+/// 2) over the ranks of `comm`. `hooks` run on every rank after every shot
+/// (the trace, progress displays) and say when to save the state or stop.
 /// The loop also ends when the strongest shooter left has less than `floor` power.
 fn shoot_until(
     mesh: &Mesh,
@@ -623,7 +676,7 @@ fn shoot_until(
     comm: &dyn Collectives,
     source: &mut GpuFormFactors,
     solver: &mut Solver,
-    after_shot: &mut dyn FnMut(&Solver, f64),
+    hooks: &mut dyn LoopHooks,
 ) -> Result<LoopStats, RenderError> {
     let (rank, ranks) = (comm.rank(), comm.size());
     let mut stats = LoopStats {
@@ -637,7 +690,7 @@ fn shoot_until(
         // One collective per shot decides both the stop rule and the shooter:
         // every rank's unshot power (fixed point, exact in f64 below 2^53) and
         // its best patch.
-        const W: usize = 12;
+        const W: usize = 13;
         let mine: [f64; W] = match solver.local_candidate() {
             Some(c) => [
                 solver.local_unshot_fixed() as f64,
@@ -652,6 +705,7 @@ fn shoot_until(
                 c.weighted as u8 as f64,
                 landed_fixed,
                 source.pending_bytes() as f64,
+                hooks.flags() as f64,
             ],
             None => {
                 let mut v = [0.0; W];
@@ -659,6 +713,7 @@ fn shoot_until(
                 v[1] = -1.0;
                 v[10] = landed_fixed;
                 v[11] = source.pending_bytes() as f64;
+                v[12] = hooks.flags() as f64;
                 v
             }
         };
@@ -674,6 +729,16 @@ fn shoot_until(
         }
         let unshot_fraction =
             all.chunks_exact(W).map(|c| c[0] as u64).sum::<u64>() as f64 / UNSHOT_ONE;
+        // Between shots the state decides everything that follows: the
+        // place to save it, or to stop when any rank was interrupted.
+        let interrupted = all.chunks_exact(W).any(|c| c[12] as u32 & 1 != 0);
+        if interrupted || all[12] as u32 & 2 != 0 {
+            hooks.checkpoint(solver)?;
+        }
+        if interrupted {
+            stats.interrupted = true;
+            break;
+        }
         if solver.done_at(stop, unshot_fraction) {
             break;
         }
@@ -728,9 +793,144 @@ fn shoot_until(
             *b += dt.as_secs_f64();
         }
         stats.shot_times.push(shot_start.elapsed());
-        after_shot(solver, unshot_fraction);
+        hooks.after_shot(solver, unshot_fraction);
     }
     Ok(stats)
+}
+
+/// The final solve's hooks: the trace, progress, checkpoints and interrupts.
+struct SolveHooks<'a, 'p> {
+    comm: &'a dyn Collectives,
+    mesh: &'a Mesh,
+    nodes: &'a [String],
+    ambient: bool,
+    solve_start: Instant,
+    trace: Trace,
+    progress: &'p mut dyn FnMut(&Progress),
+    plan: Option<&'a CheckpointPlan>,
+    interrupt: Option<&'a AtomicBool>,
+    last_save: Instant,
+    /// What every checkpoint says besides the state, the trace and the time.
+    header: Header,
+}
+
+impl LoopHooks for SolveHooks<'_, '_> {
+    fn after_shot(&mut self, solver: &Solver, unshot_fraction: f64) {
+        if self.trace.due(solver.shots()) {
+            self.trace.record(
+                self.comm,
+                solver,
+                self.nodes,
+                self.ambient,
+                self.solve_start,
+            );
+        }
+        if self.comm.rank() == 0 {
+            (self.progress)(&Progress {
+                shots: solver.shots(),
+                unshot_fraction,
+                elapsed: self.solve_start.elapsed(),
+            });
+        }
+    }
+
+    fn flags(&self) -> u32 {
+        let mut flags = 0;
+        if self.interrupt.is_some_and(|i| i.load(Ordering::Relaxed)) {
+            flags |= 1;
+        }
+        let every = self.plan.and_then(|p| p.every);
+        if self.comm.rank() == 0 && every.is_some_and(|e| self.last_save.elapsed() >= e) {
+            flags |= 2;
+        }
+        flags
+    }
+
+    fn checkpoint(&mut self, solver: &Solver) -> Result<(), RenderError> {
+        let started = Instant::now();
+        self.last_save = started;
+        let Some(plan) = self.plan else {
+            return Ok(());
+        };
+        // Rank 0 assembles the whole state and writes it; every rank learns
+        // whether that worked, so none waits for a rank that gave up.
+        let (b, u) = solver.local_state();
+        let e = solver.local_element_unshot();
+        let gathered = (
+            self.comm.gather_f64(&b),
+            self.comm.gather_f64(&u),
+            self.comm.gather_f64(&e),
+        );
+        let written = match gathered {
+            (Some(b), Some(u), Some(e)) => {
+                let mut whole = Solver::new(self.mesh);
+                whole.assemble(&b, &u);
+                whole.assemble_element_unshot(&e);
+                whole.set_shots(solver.shots());
+                whole.copy_retention(solver);
+                let mut header = self.header.clone();
+                header.seconds = self
+                    .solve_start
+                    .elapsed()
+                    .saturating_sub(self.trace.spent)
+                    .as_secs_f64();
+                header.trace = self.trace.points.clone();
+                let c = Checkpoint {
+                    header,
+                    state: whole.state(),
+                };
+                crate::output::write_atomic(&plan.path, &c.to_bytes()).map_err(|e| e.to_string())
+            }
+            _ => Ok(()),
+        };
+        self.comm.all_ok(written).map_err(|failed| {
+            RenderError::Checkpoint(if failed.is_empty() {
+                "rank 0 could not write it".into()
+            } else {
+                failed
+                    .iter()
+                    .map(|(r, m)| format!("rank {r}: {m}"))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            })
+        })?;
+        if self.comm.rank() == 0 {
+            log::info!(
+                "saved the state after {} shots to {}",
+                solver.shots(),
+                plan.path.display()
+            );
+        }
+        // Saving is bookkeeping, like the trace: not solve time.
+        self.trace.spent += started.elapsed();
+        Ok(())
+    }
+}
+
+/// What a checkpoint must match to be resumed here: the scene's geometry,
+/// materials and subdivision, and every setting that changes the numbers
+/// (not the rank count, tiles or exchange, which do not).
+fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
+    let mut geometry = Vec::new();
+    for p in &scene.polygons {
+        let floats = p.vertices.iter().flat_map(|v| v.to_array());
+        for x in floats.chain(p.reflectance).chain(p.emission) {
+            geometry.extend_from_slice(&x.to_bits().to_le_bytes());
+        }
+        geometry.extend_from_slice(format!("{} {:?};", p.node, p.subdivision).as_bytes());
+    }
+    let settings = format!(
+        "{} {:?} {:?} {}",
+        opts.resolution,
+        opts.form_factor,
+        mesh_settings(opts),
+        opts.split_shots
+    );
+    crate::checkpoint::fingerprint(&[
+        &geometry,
+        settings.as_bytes(),
+        scene.nodes.join("\n").as_bytes(),
+    ])
 }
 
 /// The mesh settings a render uses: refinement by need only with hybrid
@@ -747,14 +947,15 @@ pub fn mesh_settings(opts: &RenderOptions) -> MeshSettings {
 /// The mesh a render solves: refinement by need (`crate::refine`), i.e.
 /// coarse solves, each followed by a decision that doubles some polygons'
 /// patch grids, until nothing asks for more or [`mesh_settings`]' `refine`
-/// passes have run. Every rank calls this with the same arguments.
+/// passes have run. Returns the mesh, what the passes did and the
+/// per-polygon patch-grid factors. Every rank calls this with the same arguments.
 pub fn refined_mesh(
     gpu: &Gpu,
     scene: &Scene,
     opts: &RenderOptions,
     comm: &dyn Collectives,
     progress: &mut dyn FnMut(&Progress),
-) -> Result<(Mesh, Refinement), RenderError> {
+) -> Result<(Mesh, Refinement, Vec<u32>), RenderError> {
     let settings = mesh_settings(opts);
     let n = scene.polygons.len();
     let mut factors = vec![1u32; n];
@@ -778,7 +979,7 @@ pub fn refined_mesh(
             comm,
             &mut source,
             &mut solver,
-            &mut |s, u| {
+            &mut AfterShot(|s: &Solver, u: f64| {
                 if comm.rank() == 0 {
                     progress(&Progress {
                         shots: s.shots(),
@@ -786,7 +987,7 @@ pub fn refined_mesh(
                         elapsed: started.elapsed(),
                     });
                 }
-            },
+            }),
         )?;
         summary.passes += 1;
         summary.shots += solver.shots();
@@ -826,7 +1027,11 @@ pub fn refined_mesh(
         }
     }
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
-    Ok((Mesh::build_refined(scene, &settings, &factors), summary))
+    Ok((
+        Mesh::build_refined(scene, &settings, &factors),
+        summary,
+        factors,
+    ))
 }
 
 /// Solves `scene` over the ranks of `comm` (every rank calls this with the
@@ -853,7 +1058,20 @@ pub fn render_on(
         ..Default::default()
     };
     let t = Instant::now();
-    let (mesh, refinement) = refined_mesh(gpu, scene, opts, comm, progress)?;
+    let fingerprint = fingerprint(scene, opts);
+    let (mesh, refinement, factors) = match &opts.resume {
+        Some(c) => {
+            if c.header.fingerprint != fingerprint {
+                return Err(RenderError::Checkpoint(format!(
+                    "it was saved from {} with other geometry or settings (resolution, form factors, subdivision and split shots must match)",
+                    c.header.scene
+                )));
+            }
+            let mesh = Mesh::build_refined(scene, &mesh_settings(opts), &c.header.factors);
+            (mesh, c.header.refinement.clone(), c.header.factors.clone())
+        }
+        None => refined_mesh(gpu, scene, opts, comm, progress)?,
+    };
     // The passes' solves count as solve time, below.
     timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
     // Their exchanges are not the final solve's.
@@ -875,13 +1093,45 @@ pub fn render_on(
 
     let mut solver = Solver::partitioned(&mesh, rank, ranks);
     let mut trace = Trace::default();
-    let nodes = &scene.nodes;
-    // The refinement passes count as solve time (set-up excluded), so the
-    // trace's times are the honest time to each accuracy.
-    let passes = Duration::from_secs_f64(refinement.seconds);
+    // The refinement passes (and, resuming, the solve before the checkpoint)
+    // count as solve time (set-up excluded), so the trace's times are the
+    // honest time to each accuracy.
+    let mut so_far = refinement.seconds;
+    if let Some(c) = &opts.resume {
+        solver.restore(&c.state).map_err(RenderError::Checkpoint)?;
+        trace.resume(c.header.trace.clone(), c.state.shots);
+        so_far = c.header.seconds;
+        if rank == 0 {
+            log::info!(
+                "resuming after {} shots ({so_far:.2} s of solve)",
+                c.state.shots
+            );
+        }
+    }
     let solve_start = Instant::now()
-        .checked_sub(passes)
+        .checked_sub(Duration::from_secs_f64(so_far))
         .unwrap_or_else(Instant::now);
+    let mut hooks = SolveHooks {
+        comm,
+        mesh: &mesh,
+        nodes: &scene.nodes,
+        ambient: opts.ambient,
+        solve_start,
+        trace,
+        progress,
+        plan: opts.checkpoint.as_ref(),
+        interrupt: opts.interrupt.as_deref(),
+        last_save: Instant::now(),
+        header: Header {
+            scene: scene.name.clone(),
+            fingerprint,
+            counts: [mesh.patches.len(), mesh.elements.len()],
+            factors,
+            refinement: refinement.clone(),
+            seconds: 0.0,
+            trace: Vec::new(),
+        },
+    };
     let stats = shoot_until(
         &mesh,
         &opts.stop,
@@ -889,19 +1139,10 @@ pub fn render_on(
         comm,
         &mut source,
         &mut solver,
-        &mut |solver, unshot_fraction| {
-            if trace.due(solver.shots()) {
-                trace.record(comm, solver, nodes, opts.ambient, solve_start);
-            }
-            if rank == 0 {
-                progress(&Progress {
-                    shots: solver.shots(),
-                    unshot_fraction,
-                    elapsed: solve_start.elapsed(),
-                });
-            }
-        },
+        &mut hooks,
     )?;
+    let trace = hooks.trace;
+    let interrupted = stats.interrupted;
     let LoopStats {
         select,
         update,
@@ -1020,6 +1261,16 @@ pub fn render_on(
     );
     report.convergence = trace.finish(&report, solve_seconds);
     report.refinement = refinement;
+    if interrupted {
+        report.warnings.push(match &opts.checkpoint {
+            Some(plan) => format!(
+                "interrupted after {shots} shots; the state is saved in {}: resume with --resume {}",
+                plan.path.display(),
+                plan.path.display()
+            ),
+            None => format!("interrupted after {shots} shots (no checkpoint to resume from)"),
+        });
+    }
     let radiosity = solver.display_radiosity(opts.ambient);
     drop(solver);
     Ok(Some(Rendered {
@@ -1027,6 +1278,7 @@ pub fn render_on(
         radiosity,
         image,
         report,
+        interrupted,
     }))
 }
 
@@ -1170,6 +1422,15 @@ impl Trace {
     /// The trace with its last point made equal to the final result.
     pub fn finish(self, report: &Report, seconds: f64) -> Vec<TracePoint> {
         self.ending_with(report, seconds)
+    }
+
+    /// Continues a trace saved after `shots` shots (its points, and the
+    /// schedule of the points to come, as if it had run here).
+    pub fn resume(&mut self, points: Vec<TracePoint>, shots: u64) {
+        self.points = points;
+        for s in 1..=shots {
+            self.due(s);
+        }
     }
 
     /// The points so far, the last made equal to `report` (which the trace keeps going after).

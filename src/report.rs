@@ -124,7 +124,7 @@ pub struct Counts {
 }
 
 /// What refinement by need did (`crate::refine`) before the final solve.
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, serde::Deserialize)]
 pub struct Refinement {
     /// Coarse solves run (each until no shooter left could be refined).
     pub passes: u32,

@@ -99,6 +99,21 @@ impl Candidate {
     }
 }
 
+/// A solver's whole state between shots (see [`Solver::state`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SolverState {
+    /// Radiosity per element.
+    pub radiosity: Vec<[f64; 3]>,
+    /// Unshot radiosity per patch.
+    pub unshot: Vec<[f64; 3]>,
+    /// Unshot radiosity per element.
+    pub element_unshot: Vec<[f64; 3]>,
+    /// Shots taken.
+    pub shots: u64,
+    /// Shot power and landed power so far (the ambient term's retention).
+    pub retention: [f64; 2],
+}
+
 /// Fixed-point scale of unshot power as a fraction of the emitted power, so
 /// the stop rule sums exactly and ranks agree bit for bit.
 pub const UNSHOT_ONE: f64 = (1u64 << 40) as f64;
@@ -347,6 +362,65 @@ impl<'m> Solver<'m> {
         }
         self.rank = 0;
         self.ranks = 1;
+    }
+
+    /// This rank's elements' unshot radiosity, in [`Solver::local_state`]'s
+    /// element order.
+    pub fn local_element_unshot(&self) -> Vec<f64> {
+        let mut out = Vec::new();
+        for i in self.own_patches() {
+            for j in self.mesh.patches[i].elements.clone() {
+                out.extend_from_slice(&self.element_unshot[j as usize]);
+            }
+        }
+        out
+    }
+
+    /// Installs every rank's [`Solver::local_element_unshot`] (rank order).
+    pub fn assemble_element_unshot(&mut self, parts: &[Vec<f64>]) {
+        let ranks = parts.len();
+        for (r, part) in parts.iter().enumerate() {
+            let mut it = part.chunks_exact(3);
+            for i in (r..self.mesh.patches.len()).step_by(ranks) {
+                for j in self.mesh.patches[i].elements.clone() {
+                    if let Some(x) = it.next() {
+                        self.element_unshot[j as usize] = [x[0], x[1], x[2]];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Everything that decides the rest of the solve (of a whole, assembled
+    /// solution), for a checkpoint.
+    pub fn state(&self) -> SolverState {
+        SolverState {
+            radiosity: self.radiosity.clone(),
+            unshot: self.unshot.clone(),
+            element_unshot: self.element_unshot.clone(),
+            shots: self.shots,
+            retention: self.retention,
+        }
+    }
+
+    /// Continues from `state` (every rank takes the whole state and keeps
+    /// updating its own share). Fails when it is for another mesh.
+    pub fn restore(&mut self, state: &SolverState) -> Result<(), String> {
+        let (e, p) = (self.mesh.elements.len(), self.mesh.patches.len());
+        if state.radiosity.len() != e || state.element_unshot.len() != e || state.unshot.len() != p
+        {
+            return Err(format!(
+                "the state is for {} patches and {} elements, the mesh has {p} and {e}",
+                state.unshot.len(),
+                state.radiosity.len()
+            ));
+        }
+        self.radiosity.clone_from(&state.radiosity);
+        self.unshot.clone_from(&state.unshot);
+        self.element_unshot.clone_from(&state.element_unshot);
+        self.shots = state.shots;
+        self.retention = state.retention;
+        Ok(())
     }
 
     /// Sets the shot count (after assembling a distributed solution).

@@ -3,6 +3,7 @@
 
 mod analytic;
 mod bad_input;
+mod checkpoint;
 mod common;
 mod determinism;
 mod furnace;

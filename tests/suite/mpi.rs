@@ -4,6 +4,7 @@
 
 use std::path::Path;
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 fn mpirun(ranks: usize, dir: &Path, tag: &str, extra: &[&str]) -> serde_json::Value {
     let report = dir.join(format!("{tag}.json"));
@@ -231,5 +232,176 @@ fn a_failure_on_one_rank_ends_every_rank_with_a_message_from_rank_zero() {
     assert!(
         !dir.path().join("cornell.json").exists(),
         "no report on failure"
+    );
+}
+
+/// `radiosity render cornell` with the test settings of the fault tests:
+/// slow enough (no row cache) to be stopped mid-solve, short enough to finish.
+fn fault_run(ranks: usize, extra: &[&str]) -> Command {
+    let bin = env!("CARGO_BIN_EXE_radiosity");
+    let mut cmd = if ranks > 1 {
+        let mut c = Command::new("mpirun");
+        c.args(["--oversubscribe", "-n", &ranks.to_string(), bin]);
+        c
+    } else {
+        Command::new(bin)
+    };
+    cmd.args(["render", "cornell", "--width", "0", "--no-cache"])
+        .args(["--threshold", "1e-6", "--max-shots", "2500"])
+        .args(extra)
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_btl", "self,vader,tcp")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped());
+    cmd
+}
+
+fn report_at(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("report written")).expect("json")
+}
+
+/// Waits (bounded) for the child to end; returns its status, stderr and how long it took.
+fn finish(
+    child: std::process::Child,
+    within: Duration,
+) -> (std::process::ExitStatus, String, Duration) {
+    let start = Instant::now();
+    let mut child = child;
+    loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            let mut err = String::new();
+            if let Some(mut e) = child.stderr.take() {
+                use std::io::Read;
+                let _ = e.read_to_string(&mut err);
+            }
+            return (status, err, start.elapsed());
+        }
+        if start.elapsed() > within {
+            let _ = child.kill();
+            panic!("the job did not end within {within:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn sigint_saves_and_a_resume_on_two_ranks_gives_the_same_bits() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = |n: &str| dir.path().join(n);
+    let s = p("straight.json");
+    let status = fault_run(1, &["--report", s.to_str().expect("utf-8")])
+        .status()
+        .expect("run");
+    assert!(status.success());
+    let ck = p("c.ckpt");
+    let stopped = p("stopped.json");
+    let child = fault_run(
+        1,
+        &[
+            "--checkpoint",
+            ck.to_str().expect("utf-8"),
+            "--report",
+            stopped.to_str().expect("utf-8"),
+        ],
+    )
+    .spawn()
+    .expect("run");
+    std::thread::sleep(Duration::from_millis(1500));
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let (status, err, _) = finish(child, Duration::from_secs(60));
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(err.contains("--resume"), "{err}");
+    let partial = report_at(&stopped);
+    assert_eq!(partial["converged"], false);
+    let r = p("resumed.json");
+    let (status, err, _) = finish(
+        fault_run(
+            2,
+            &[
+                "--resume",
+                ck.to_str().expect("utf-8"),
+                "--report",
+                r.to_str().expect("utf-8"),
+            ],
+        )
+        .spawn()
+        .expect("run"),
+        Duration::from_secs(120),
+    );
+    assert!(status.success(), "{err}");
+    same_result(&report_at(&r), &report_at(&s), "resumed on 2 ranks");
+}
+
+#[test]
+fn a_killed_rank_ends_the_job_naming_it_and_the_job_resumes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let p = |n: &str| dir.path().join(n);
+    let s = p("straight.json");
+    assert!(fault_run(1, &["--report", s.to_str().expect("utf-8")])
+        .status()
+        .expect("run")
+        .success());
+    let ck = p("c.ckpt");
+    let child = fault_run(
+        2,
+        &[
+            "--checkpoint",
+            ck.to_str().expect("utf-8"),
+            "--checkpoint-every",
+            "0.2",
+            "--report",
+            p("never.json").to_str().expect("utf-8"),
+        ],
+    )
+    .spawn()
+    .expect("mpirun");
+    // Wait for a checkpoint, then kill one rank (a child of mpirun).
+    let start = Instant::now();
+    while !ck.exists() {
+        assert!(start.elapsed() < Duration::from_secs(60), "no checkpoint");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let ranks = Command::new("pgrep")
+        .args(["-P", &child.id().to_string()])
+        .output()
+        .expect("pgrep (procps)");
+    let pid = String::from_utf8_lossy(&ranks.stdout)
+        .lines()
+        .last()
+        .expect("a rank process")
+        .trim()
+        .to_string();
+    let _ = Command::new("kill").args(["-KILL", &pid]).status();
+    let (status, err, took) = finish(child, Duration::from_secs(30));
+    assert!(!status.success());
+    assert!(took < Duration::from_secs(10), "took {took:?}");
+    assert!(
+        err.contains("rank") && err.contains("signal 9"),
+        "the message should name the rank: {err}"
+    );
+    // The last checkpoint resumes, here on one rank.
+    let r = p("resumed.json");
+    let (status, err, _) = finish(
+        fault_run(
+            1,
+            &[
+                "--resume",
+                ck.to_str().expect("utf-8"),
+                "--report",
+                r.to_str().expect("utf-8"),
+            ],
+        )
+        .spawn()
+        .expect("run"),
+        Duration::from_secs(120),
+    );
+    assert!(status.success(), "{err}");
+    same_result(
+        &report_at(&r),
+        &report_at(&s),
+        "resumed after a killed rank",
     );
 }

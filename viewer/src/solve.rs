@@ -132,7 +132,7 @@ fn solve(
     let opts = &settings.options;
     let single = Single::default();
     // The same mesh `radiosity render` solves (refinement passes included).
-    let (mesh, _) = radiosity::render::refined_mesh(gpu, scene, opts, &single, &mut |_| {})
+    let (mesh, _, _) = radiosity::render::refined_mesh(gpu, scene, opts, &single, &mut |_| {})
         .map_err(|e| e.to_string())?;
     let mesh = Arc::new(mesh);
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())

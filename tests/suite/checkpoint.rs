@@ -1,0 +1,121 @@
+//! Checkpoint and resume: a solve stopped between two shots and resumed (in
+//! another tile layout) ends bit for bit where an uninterrupted one does.
+
+use crate::common::*;
+use radiosity::checkpoint::Checkpoint;
+use radiosity::hemisphere::TileLayout;
+use radiosity::render::{render, CheckpointPlan, RenderOptions, Rendered};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+fn cornell(opts: &RenderOptions, stop_at: Option<u64>) -> Rendered {
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let flag = opts.interrupt.clone();
+    render(gpu(), &scene, opts, Duration::ZERO, &mut |p| {
+        // A signal arriving after shot `stop_at`.
+        if let (Some(f), Some(n)) = (&flag, stop_at) {
+            if p.shots == n {
+                f.store(true, Ordering::Relaxed);
+            }
+        }
+    })
+    .expect("render")
+}
+
+fn same_solution(a: &Rendered, b: &Rendered) {
+    assert!(a.radiosity == b.radiosity, "element radiosities differ");
+    assert_eq!(a.report.surfaces, b.report.surfaces);
+    assert_eq!(a.report.shots, b.report.shots);
+    assert_eq!(
+        a.report.unshot_fraction.to_bits(),
+        b.report.unshot_fraction.to_bits()
+    );
+    let points = |r: &Rendered| -> Vec<_> {
+        r.report
+            .convergence
+            .iter()
+            .map(|p| (p.shots, p.surfaces.clone(), p.unshot_fraction.to_bits()))
+            .collect()
+    };
+    assert_eq!(points(a), points(b), "the convergence traces differ");
+}
+
+#[test]
+fn an_interrupted_solve_resumes_to_the_same_bits() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("cornell.ckpt");
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.threshold = 2e-3;
+    let straight = cornell(&opts, None);
+
+    opts.checkpoint = Some(CheckpointPlan {
+        path: path.clone(),
+        every: None,
+    });
+    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    let stopped = cornell(&opts, Some(150));
+    assert!(stopped.interrupted);
+    assert_eq!(stopped.report.shots, 150);
+    assert!(!stopped.report.converged);
+    assert!(
+        stopped
+            .report
+            .warnings
+            .iter()
+            .any(|w| w.contains("--resume")),
+        "{:?}",
+        stopped.report.warnings
+    );
+    let saved = Checkpoint::read(&path).expect("checkpoint written");
+    assert_eq!(saved.state.shots, 150);
+
+    // Resume in another layout (four ranks' tiles drawn in turn), as a
+    // different number of ranks would.
+    opts.interrupt = None;
+    opts.resume = Some(Arc::new(saved));
+    opts.layout = Some(TileLayout {
+        tile_w: 4,
+        tile_h: 2,
+        px: 2,
+        py: 2,
+    });
+    let resumed = cornell(&opts, None);
+    assert!(!resumed.interrupted);
+    same_solution(&resumed, &straight);
+}
+
+#[test]
+fn a_checkpoint_from_other_settings_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("c.ckpt");
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 20;
+    opts.checkpoint = Some(CheckpointPlan {
+        path: path.clone(),
+        every: Some(Duration::ZERO),
+    });
+    cornell(&opts, None);
+    let saved = Checkpoint::read(&path).expect("saved every shot");
+    assert_eq!(saved.state.shots, 20);
+    opts.checkpoint = None;
+    opts.resolution = radiosity::hemisphere::Resolution {
+        rows: 64,
+        cols: 256,
+    };
+    opts.resume = Some(Arc::new(saved));
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let err = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}
