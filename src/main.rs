@@ -475,7 +475,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             .unwrap_or_else(|| args.out_dir.join(format!("{}.ckpt", stem(&args.scene)))),
         every: args
             .checkpoint_every
-            .map(|s| std::time::Duration::from_secs_f32(s)),
+            .map(std::time::Duration::from_secs_f32),
     });
     if let Some(path) = &args.resume {
         opts.resume = Some(std::sync::Arc::new(Checkpoint::read(path)?));
