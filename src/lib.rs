@@ -11,11 +11,13 @@
 //! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
 //!   MPI implementation (the only module that calls MPI);
 //! - [`render`]: one render from scene to image and report, on one or many ranks;
-//! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume).
+//! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
+//! - [`fuzz`]: broken scenes generated from good ones, for robustness checks.
 
 pub mod checkpoint;
 pub mod comm;
 pub mod formfactor;
+pub mod fuzz;
 pub mod gpu;
 pub mod hemisphere;
 pub mod mesh;

@@ -51,6 +51,20 @@ enum Command {
         #[command(flatten)]
         solve: SolveArgs,
     },
+    /// Robustness run: broken glTF/GLB files made from the Cornell box, each
+    /// loaded and rendered small, and random `render` flag lists parsed; exits
+    /// non-zero on any panic, hang or non-finite report (README "Reliability").
+    Fuzz {
+        /// Scene cases to run.
+        #[arg(long, default_value_t = 10_000)]
+        cases: u64,
+        /// First case's seed (cases are seed, seed + 1, ...).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Random flag lists to parse.
+        #[arg(long, default_value_t = 10_000)]
+        flag_cases: u64,
+    },
 }
 
 /// Settings shared by `render` and `bench`.
@@ -300,6 +314,11 @@ fn main() {
         Command::Bench(args) => bench::run(args),
         Command::BenchReport(args) => bench::report(args),
         Command::Accuracy { args, solve } => accuracy::run(args, solve),
+        Command::Fuzz {
+            cases,
+            seed,
+            flag_cases,
+        } => fuzz(cases, seed, flag_cases),
     };
     if let Err(e) = result {
         if let Some(Interrupted(message)) = e.downcast_ref::<Interrupted>() {
@@ -311,6 +330,119 @@ fn main() {
         }
         std::process::exit(1);
     }
+}
+
+/// `radiosity fuzz`: see [`radiosity::fuzz`].
+fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
+    use radiosity::fuzz::{case, check, Outcome};
+    // Thousands of renders: their progress lines would drown the findings.
+    log::set_max_level(log::LevelFilter::Warn);
+    let gpu: &'static Gpu = Box::leak(Box::new(Gpu::new()?));
+    let base: serde_json::Value = serde_json::from_str(
+        &scene::builtin_gltf("cornell").context("the Cornell box is built in")?,
+    )?;
+    let dir = tempfile::tempdir()?;
+    let (mut rejected, mut rendered, mut failed, mut bugs) = (0u64, 0u64, 0u64, Vec::new());
+    let start = Instant::now();
+    for s in seed..seed + cases {
+        let c = case(&base, s);
+        match check(gpu, &c, dir.path(), std::time::Duration::from_secs(60)) {
+            Outcome::Rejected(_) => rejected += 1,
+            Outcome::Rendered => rendered += 1,
+            Outcome::Failed(_) => failed += 1,
+            bug => {
+                eprintln!("BUG {}: {bug:?}", c.name);
+                bugs.push(c.name);
+            }
+        }
+        if (s - seed + 1) % 500 == 0 {
+            eprintln!(
+                "{} cases in {:.0} s: {rejected} rejected, {rendered} rendered, {failed} failed, {} bugs",
+                s - seed + 1,
+                start.elapsed().as_secs_f64(),
+                bugs.len()
+            );
+        }
+    }
+    // Flags: random lists of real flags with odd values; parsing either
+    // accepts or says why, and never panics.
+    let flags = [
+        "--resolution",
+        "--threshold",
+        "--max-shots",
+        "--patch-size",
+        "--element-size",
+        "--near-field-ratio",
+        "--refine",
+        "--raster-pieces",
+        "--width",
+        "--height",
+        "--tile",
+        "--exchange",
+        "--form-factor",
+        "--shading",
+        "--exposure",
+        "--checkpoint-every",
+        "--max-patches-per-edge",
+    ];
+    let values = [
+        "0",
+        "-1",
+        "1",
+        "1e9",
+        "NaN",
+        "inf",
+        "-inf",
+        "0x0",
+        "128x512",
+        "1x1",
+        "x",
+        "",
+        "1e-300",
+        "4294967296",
+        "hybrid",
+        "sparse",
+        "flat",
+        "0.5",
+        "65536x65536",
+    ];
+    let (mut accepted, mut refused) = (0u64, 0u64);
+    let mut state = seed ^ 0x00f1_a6f1_a65e_ed00;
+    let mut next = move |n: usize| {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 33) % n as u64) as usize
+    };
+    for _ in 0..flag_cases {
+        let mut argv = vec!["radiosity".to_string(), "render".into(), "cornell".into()];
+        for _ in 0..1 + next(4) {
+            argv.push(flags[next(flags.len())].into());
+            argv.push(values[next(values.len())].into());
+        }
+        let outcome = std::panic::catch_unwind(|| Cli::try_parse_from(&argv).is_ok());
+        match outcome {
+            Ok(true) => accepted += 1,
+            Ok(false) => refused += 1,
+            Err(_) => {
+                eprintln!("BUG: flags {argv:?} panicked");
+                bugs.push(argv.join(" "));
+            }
+        }
+    }
+    println!(
+        "{cases} scene cases (seeds {seed}..{}): {rejected} rejected with an error, {rendered} rendered with finite reports, {failed} failed with an error; {flag_cases} flag lists: {accepted} accepted, {refused} refused; {} bugs ({:.0} s)",
+        seed + cases,
+        bugs.len(),
+        start.elapsed().as_secs_f64()
+    );
+    if !bugs.is_empty() {
+        anyhow::bail!(
+            "{} cases panicked, hung or gave non-finite numbers",
+            bugs.len()
+        );
+    }
+    Ok(())
 }
 
 fn write_scene(name: &str, out: &Path) -> Result<()> {

@@ -240,6 +240,32 @@ impl Loader<'_> {
             ));
             return Ok(());
         }
+        // The gltf crate's readers assume the spec's accessor types (and hit
+        // `unreachable!` otherwise): check them first.
+        use gltf::accessor::{DataType, Dimensions};
+        let bad_type = |what: &str, acc: &gltf::Accessor, want: &str| SceneError::Parse {
+            path: self.path.clone(),
+            message: format!(
+                "node '{name}': {what} accessor {} is {:?} {:?}; the glTF spec requires {want}",
+                acc.index(),
+                acc.dimensions(),
+                acc.data_type()
+            ),
+        };
+        if let Some(acc) = prim.get(&gltf::Semantic::Positions) {
+            if acc.data_type() != DataType::F32 || acc.dimensions() != Dimensions::Vec3 {
+                return Err(bad_type("POSITION", &acc, "VEC3 of FLOAT"));
+            }
+        }
+        if let Some(acc) = prim.indices() {
+            let unsigned = matches!(
+                acc.data_type(),
+                DataType::U8 | DataType::U16 | DataType::U32
+            );
+            if !unsigned || acc.dimensions() != Dimensions::Scalar {
+                return Err(bad_type("index", &acc, "SCALAR of unsigned integers"));
+            }
+        }
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
         let Some(positions) = reader.read_positions() else {
             if let Some(acc) = prim.get(&gltf::Semantic::Positions) {

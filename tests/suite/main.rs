@@ -7,6 +7,7 @@ mod checkpoint;
 mod common;
 mod determinism;
 mod furnace;
+mod fuzz;
 mod mpi;
 mod refine;
 mod shaders;
