@@ -24,11 +24,53 @@ pub fn load_slice(bytes: &[u8], name: &str) -> Result<Scene, SceneError> {
     load_with_base(bytes, name, None)
 }
 
+/// gltf-json 1.4's validator indexes `accessors` with a primitive's POSITION
+/// index before checking it, and panics on a file where it is out of range
+/// (found by `radiosity fuzz`): check every primitive's accessor indices first.
+fn check_primitive_indices(bytes: &[u8], name: &str) -> Result<(), SceneError> {
+    let json = if bytes.starts_with(b"glTF") {
+        match gltf::Glb::from_slice(bytes) {
+            Ok(glb) => glb.json,
+            // Not a readable GLB: the full parse below says why.
+            Err(_) => return Ok(()),
+        }
+    } else {
+        std::borrow::Cow::Borrowed(bytes)
+    };
+    let Ok(root) = gltf::json::Root::from_slice(&json) else {
+        return Ok(());
+    };
+    let n = root.accessors.len();
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            let attributes = prim
+                .attributes
+                .iter()
+                .map(|(s, i)| (format!("attributes {s:?}"), i));
+            for (what, index) in
+                attributes.chain(prim.indices.iter().map(|i| ("indices".into(), i)))
+            {
+                if index.value() >= n {
+                    return Err(SceneError::Parse {
+                        path: name.to_string(),
+                        message: format!(
+                            "invalid glTF: meshes[{mi}].primitives[{pi}] {what}: accessor {} does not exist ({n} accessors)",
+                            index.value()
+                        ),
+                    });
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene, SceneError> {
     let parse_err = |e: gltf::Error| SceneError::Parse {
         path: name.to_string(),
         message: e.to_string(),
     };
+    check_primitive_indices(bytes, name)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(parse_err)?;
     let base = base.map(|b| {
         if b.as_os_str().is_empty() {

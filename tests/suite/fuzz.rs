@@ -53,4 +53,11 @@ fn what_the_long_fuzz_run_found_stays_fixed() {
         ),
         other => panic!("{}: {other:?}", c.name),
     }
+    // Case 4590: a POSITION accessor index out of range panicked inside
+    // gltf-json's own validator.
+    let c = case(&base, 4590);
+    match check(gpu(), &c, dir.path(), Duration::from_secs(60)) {
+        Outcome::Rejected(why) => assert!(why.contains("accessor 8000000 does not exist"), "{why}"),
+        other => panic!("{}: {other:?}", c.name),
+    }
 }
