@@ -4,7 +4,6 @@
 //! never a panic, never a hang). `radiosity fuzz` runs thousands of cases;
 //! the test suite runs a fixed corpus of a few hundred.
 
-use base64::Engine;
 use serde_json::Value;
 
 /// One generated input file.
@@ -192,38 +191,6 @@ fn mutate_bytes(bytes: &mut Vec<u8>, rng: &mut Rng, from: usize) -> String {
     }
 }
 
-/// The same document as GLB: the buffer's data URI moved to a BIN chunk.
-pub fn to_glb(doc: &Value) -> Option<Vec<u8>> {
-    let mut doc = doc.clone();
-    let uri = doc.pointer("/buffers/0/uri")?.as_str()?.to_string();
-    let data = base64::engine::general_purpose::STANDARD
-        .decode(uri.split_once(',')?.1)
-        .ok()?;
-    doc.pointer_mut("/buffers/0")?
-        .as_object_mut()?
-        .remove("uri");
-    let mut json = serde_json::to_vec(&doc).ok()?;
-    while json.len() % 4 != 0 {
-        json.push(b' ');
-    }
-    let mut bin = data;
-    while bin.len() % 4 != 0 {
-        bin.push(0);
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
-    Some(out)
-}
-
 /// Case `seed` made from the glTF document `base` (JSON with an embedded
 /// buffer): one to three mutations of its JSON, of its buffer's bytes, or of
 /// the GLB made from it.
@@ -240,7 +207,7 @@ pub fn case(base: &Value, seed: u64) -> Case {
         }
     }
     let (ext, mut bytes) = if glb {
-        ("glb", to_glb(&doc).unwrap_or_default())
+        ("glb", crate::scene::to_glb(&doc).unwrap_or_default())
     } else {
         ("gltf", serde_json::to_vec(&doc).unwrap_or_default())
     };
@@ -375,7 +342,7 @@ mod tests {
         assert!(distinct.len() >= 45, "{} distinct", distinct.len());
         assert!((0..50).any(|s| case(&base, s).ext == "glb"));
         // The unmutated GLB is a good scene.
-        let glb = to_glb(&base).expect("glb");
+        let glb = crate::scene::to_glb(&base).expect("glb");
         let dir = tempfile::tempdir().expect("dir");
         let path = dir.path().join("c.glb");
         std::fs::write(&path, glb).expect("write");

@@ -12,8 +12,10 @@
 //!   MPI implementation (the only module that calls MPI);
 //! - [`render`]: one render from scene to image and report, on one or many ranks;
 //! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
-//! - [`fuzz`]: broken scenes generated from good ones, for robustness checks.
+//! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
+//! - [`bake`]: the solution as glTF with vertex colours.
 
+pub mod bake;
 pub mod checkpoint;
 pub mod comm;
 pub mod formfactor;

@@ -207,6 +207,11 @@ struct RenderArgs {
     /// Also save the state every this many seconds of solving.
     #[arg(long, value_parser = positive)]
     checkpoint_every: Option<f32>,
+    /// Also write the solved scene as glTF (.glb or .gltf): every mesh node
+    /// with its name and transform, re-meshed on its elements, the radiosity
+    /// as linear vertex colours and unlit materials (README "Baking").
+    #[arg(long)]
+    bake: Option<PathBuf>,
     /// Continue a solve from a checkpoint (same scene and settings that
     /// change the numbers; any number of ranks, tiles or exchange). The
     /// result is bit for bit the one an uninterrupted solve gives.
@@ -653,6 +658,18 @@ fn run_render(args: RenderArgs) -> Result<()> {
             "{}: the solution has a non-finite number in {what}; no report written",
             args.scene
         );
+    }
+    let mut rendered = rendered;
+    if let Some(path) = &args.bake {
+        let baked = radiosity::bake::write(path, &scene, &rendered.mesh, &rendered.radiosity)?;
+        eprintln!(
+            "wrote {} ({} nodes, {} triangles, COLOR_0 = min(1, B/pi x {:.4}))",
+            path.display(),
+            baked.nodes,
+            baked.triangles,
+            baked.scale
+        );
+        rendered.report.bake = Some(baked);
     }
     output::write_json(&report_path, &rendered.report)?;
     eprintln!("wrote {}", report_path.display());

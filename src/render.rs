@@ -1310,6 +1310,7 @@ pub fn build_report(
         },
         device: gpu.describe(),
         refinement: Refinement::default(),
+        bake: None,
         counts: Counts {
             polygons: scene.polygons.len(),
             patches: mesh.patches.len(),

@@ -36,6 +36,10 @@ pub struct Report {
     /// then at every power of two and at shot counts growing by 2^(1/4),
     /// and at the end (the last point equals `shots` and `surfaces`).
     pub convergence: Vec<TracePoint>,
+    /// The baked glTF (`--bake`), if one was written: its path and colour
+    /// scale (COLOR_0 = min(1, B / pi x scale)).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bake: Option<crate::bake::Baked>,
     /// Non-fatal problems met on the way.
     pub warnings: Vec<String>,
 }

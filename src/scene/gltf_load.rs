@@ -178,12 +178,14 @@ impl Loader<'_> {
             let subdivision = self.extras(node, &name)?;
             let node_id = self.scene.nodes.len();
             self.scene.nodes.push(name.clone());
+            self.scene.node_transforms.push(world.to_cols_array());
             let before = self.scene.polygons.len();
             for prim in mesh.primitives() {
                 self.primitive(&prim, world, node_id, &name, subdivision)?;
             }
             if self.scene.polygons.len() == before {
                 self.scene.nodes.pop();
+                self.scene.node_transforms.pop();
             }
         }
         for child in node.children() {

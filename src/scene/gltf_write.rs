@@ -104,3 +104,36 @@ pub fn write_gltf(surfaces: &[GltfSurface], camera: Option<(Vec3, Quat, f32, f32
     // shipped scenes can be checked against the generator byte for byte.
     serde_json::to_string_pretty(&doc).unwrap_or_default()
 }
+
+/// The same document as GLB (glTF's binary container): the first buffer's
+/// data URI moved to the BIN chunk. `None` when it has no such buffer.
+pub fn to_glb(doc: &Value) -> Option<Vec<u8>> {
+    let mut doc = doc.clone();
+    let uri = doc.pointer("/buffers/0/uri")?.as_str()?.to_string();
+    let data = base64::engine::general_purpose::STANDARD
+        .decode(uri.split_once(',')?.1)
+        .ok()?;
+    doc.pointer_mut("/buffers/0")?
+        .as_object_mut()?
+        .remove("uri");
+    let mut json = serde_json::to_vec(&doc).ok()?;
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let mut bin = data;
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(&bin);
+    Some(out)
+}

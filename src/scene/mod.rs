@@ -10,7 +10,7 @@ mod gltf_write;
 
 pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};
-pub use gltf_write::{write_gltf, GltfSurface};
+pub use gltf_write::{to_glb, write_gltf, GltfSurface};
 
 use glam::{Quat, Vec3};
 
@@ -84,6 +84,9 @@ pub struct Scene {
     pub name: String,
     /// Names of the glTF nodes that hold surfaces, indexed by [`Polygon::node`].
     pub nodes: Vec<String>,
+    /// Each of those nodes' world transform (column-major, f64, absolute
+    /// world coordinates: `origin` is not subtracted), for writing them back.
+    pub node_transforms: Vec<[f64; 16]>,
     /// Every polygon, both sides of double-sided surfaces included.
     pub polygons: Vec<Polygon>,
     /// The first perspective camera, if any.

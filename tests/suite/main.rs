@@ -3,6 +3,7 @@
 
 mod analytic;
 mod bad_input;
+mod bake;
 mod checkpoint;
 mod common;
 mod determinism;

@@ -405,3 +405,18 @@ fn a_killed_rank_ends_the_job_naming_it_and_the_job_resumes() {
         "resumed after a killed rank",
     );
 }
+
+#[test]
+fn under_mpirun_rank_0_bakes() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("baked.glb");
+    let r = mpirun(
+        2,
+        dir.path(),
+        "bake",
+        &["--bake", path.to_str().expect("utf-8")],
+    );
+    assert_eq!(r["bake"]["path"].as_str(), path.to_str());
+    let scene = radiosity::scene::load(&path).expect("the bake loads");
+    assert_eq!(scene.nodes.len(), 8);
+}
