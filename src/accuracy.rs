@@ -100,31 +100,8 @@ struct Curve {
     points: Vec<Point>,
 }
 
-/// Area-weighted mean and worst relative error of `s` against `reference`
-/// (nodes with a zero reference radiosity are skipped).
 fn error(s: &[Surface], reference: &[Surface]) -> (f64, f64) {
-    let (mut sum, mut area, mut worst) = (0.0, 0.0, 0.0f64);
-    for r in reference {
-        let Some(x) = s.iter().find(|x| x.node == r.node) else {
-            continue;
-        };
-        let mut e = 0.0;
-        let mut n = 0;
-        for c in 0..3 {
-            if r.radiosity[c] > 0.0 {
-                e += (x.radiosity[c] - r.radiosity[c]).abs() / r.radiosity[c];
-                n += 1;
-            }
-        }
-        if n == 0 {
-            continue;
-        }
-        let e = e / n as f64;
-        sum += e * r.area;
-        area += r.area;
-        worst = worst.max(e);
-    }
-    (if area > 0.0 { sum / area } else { 0.0 }, worst)
+    radiosity::report::relative_error(s, reference)
 }
 
 /// Seconds after which the curve's error stays at or below `level`.

@@ -340,3 +340,31 @@ pub fn surfaces(mesh: &Mesh, nodes: &[String], radiosity: &[[f64; 3]]) -> Vec<Su
         })
         .collect()
 }
+
+/// Area-weighted mean and worst relative error per surface of `s` against
+/// `reference` (each surface's error is the mean over its channels; nodes
+/// with a zero reference radiosity, or missing from `s`, are skipped).
+pub fn relative_error(s: &[Surface], reference: &[Surface]) -> (f64, f64) {
+    let (mut sum, mut area, mut worst) = (0.0, 0.0, 0.0f64);
+    for r in reference {
+        let Some(x) = s.iter().find(|x| x.node == r.node) else {
+            continue;
+        };
+        let mut e = 0.0;
+        let mut n = 0;
+        for c in 0..3 {
+            if r.radiosity[c] > 0.0 {
+                e += (x.radiosity[c] - r.radiosity[c]).abs() / r.radiosity[c];
+                n += 1;
+            }
+        }
+        if n == 0 {
+            continue;
+        }
+        let e = e / n as f64;
+        sum += e * r.area;
+        area += r.area;
+        worst = worst.max(e);
+    }
+    (if area > 0.0 { sum / area } else { 0.0 }, worst)
+}

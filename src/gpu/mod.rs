@@ -9,7 +9,7 @@ mod target;
 mod view;
 
 pub use hemisphere::{HemisphereRasterizer, RasterStats};
-pub use view::{render_view, Shading, ViewSettings};
+pub use view::{render_view, Shading, ViewRenderer, ViewSettings};
 
 use std::time::Duration;
 

@@ -6,7 +6,6 @@ use crate::mesh::Mesh;
 use crate::scene::Camera;
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
-use wgpu::util::DeviceExt;
 
 /// The WGSL source of the view pipeline.
 pub const SHADER: &str = include_str!("../../shaders/view.wgsl");
@@ -82,7 +81,8 @@ fn vertices(mesh: &Mesh, radiance: &[[f32; 3]], shading: Shading) -> Vec<Vertex>
 }
 
 /// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2) from `camera`.
-/// Returns `width * height` RGB pixels, top row first.
+/// Returns `width * height` RGB pixels, top row first. (Builds a
+/// [`ViewRenderer`] for one image; keep one to draw many.)
 pub fn render_view(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -91,154 +91,238 @@ pub fn render_view(
     camera: &Camera,
     settings: &ViewSettings,
 ) -> Result<Vec<[f32; 3]>, GpuError> {
-    let ss = settings.supersample.max(1);
-    let (w, h) = (settings.width * ss, settings.height * ss);
-    let max_dim = device.limits().max_texture_dimension_2d;
-    if w > max_dim || h > max_dim || w == 0 || h == 0 {
-        return Err(GpuError::TooLarge(format!(
-            "image {w}x{h} (limit {max_dim})"
-        )));
-    }
-    let verts = vertices(mesh, radiance, settings.shading);
-    let far = mesh
-        .vertices
-        .iter()
-        .map(|v| (*v - camera.position).length())
-        .fold(1e-3f32, f32::max)
-        * 1.5;
-    let near = camera.znear.max(far * 1e-5);
-    let aspect = settings.width as f32 / settings.height as f32;
-    let view = Mat4::from_rotation_translation(camera.rotation, camera.position).inverse();
-    let view_proj = Mat4::perspective_rh(camera.yfov, aspect, near, far) * view;
-    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("camera"),
-        contents: bytemuck::cast_slice(&view_proj.to_cols_array()),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let vbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("view vertices"),
-        contents: if verts.is_empty() {
-            &[0u8; 24]
-        } else {
-            bytemuck::cast_slice(&verts)
-        },
-        usage: wgpu::BufferUsages::VERTEX,
-    });
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("view.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(SHADER.into()),
-    });
-    let make_pipeline = |topology, vs: &str, fs: &str| {
-        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("view"),
-            layout: None,
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some(vs),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<Vertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
-                })],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology,
-                front_face: wgpu::FrontFace::Ccw,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: wgpu::TextureFormat::Depth32Float,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::LessEqual),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some(fs),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::Rgba32Float,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        })
-    };
-    let pipeline = make_pipeline(wgpu::PrimitiveTopology::TriangleList, "vs", "fs");
-    // Element edges, pulled a hair towards the camera in the shader so they win the depth test.
-    let lines: Vec<Vertex> = if settings.wireframe {
-        mesh.elements
-            .iter()
-            .flat_map(|e| {
-                let n = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
-                (0..n).flat_map(move |k| [e.corners[k], e.corners[(k + 1) % n]])
-            })
-            .map(|p| Vertex {
-                pos: p.to_array(),
-                radiance: [0.0; 3],
-            })
-            .collect()
-    } else {
-        Vec::new()
-    };
-    let wire = (!lines.is_empty()).then(|| {
-        let pipeline = make_pipeline(wgpu::PrimitiveTopology::LineList, "vs_line", "fs_line");
-        let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("wireframe"),
-            contents: bytemuck::cast_slice(&lines),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("wireframe"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniform.as_entire_binding(),
-            }],
-        });
-        (pipeline, buffer, group)
-    });
-    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("view"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[wgpu::BindGroupEntry {
-            binding: 0,
-            resource: uniform.as_entire_binding(),
-        }],
-    });
-    let target = RenderTarget::new(device, w, h, wgpu::TextureFormat::Rgba32Float, 16, "view");
-    let mut enc = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = target.begin_pass(&mut enc, wgpu::Color::BLACK);
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &group, &[]);
-        pass.set_vertex_buffer(0, vbuf.slice(..));
-        pass.draw(0..verts.len() as u32, 0..1);
-        if let Some((pipeline, buffer, group)) = &wire {
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, group, &[]);
-            pass.set_vertex_buffer(0, buffer.slice(..));
-            pass.draw(0..lines.len() as u32, 0..1);
+    ViewRenderer::new(device).render(device, queue, mesh, radiance, camera, settings)
+}
+
+/// A buffer that grows as needed and is otherwise reused.
+struct Grown {
+    buffer: Option<wgpu::Buffer>,
+    usage: wgpu::BufferUsages,
+    label: &'static str,
+}
+
+impl Grown {
+    fn new(usage: wgpu::BufferUsages, label: &'static str) -> Self {
+        Self {
+            buffer: None,
+            usage: usage | wgpu::BufferUsages::COPY_DST,
+            label,
         }
     }
-    target.copy_out(&mut enc);
-    let submission = queue.submit([enc.finish()]);
-    let mut out = vec![[0.0f32; 3]; (settings.width * settings.height) as usize];
-    let norm = 1.0 / (ss * ss) as f32;
-    target.read_rows(device, submission, |y, row| {
-        for (x, px) in row.chunks_exact(16).enumerate() {
-            let o = &mut out[(y as u32 / ss * settings.width + x as u32 / ss) as usize];
-            for c in 0..3 {
-                let b = &px[c * 4..c * 4 + 4];
-                o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
+
+    fn write(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        bytes: &[u8],
+    ) -> Option<wgpu::Buffer> {
+        let size = (bytes.len() as u64).max(16).next_multiple_of(4);
+        if self.buffer.as_ref().is_none_or(|b| b.size() < size) {
+            self.buffer = Some(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(self.label),
+                size: size.next_power_of_two(),
+                usage: self.usage,
+                mapped_at_creation: false,
+            }));
+        }
+        let buffer = self.buffer.clone()?;
+        if !bytes.is_empty() {
+            queue.write_buffer(&buffer, 0, bytes);
+        }
+        Some(buffer)
+    }
+}
+
+/// The camera view's pipelines, uniform, vertex buffers and target, made
+/// once and reused for every image (the viewer draws one per change).
+pub struct ViewRenderer {
+    pipeline: wgpu::RenderPipeline,
+    wire_pipeline: wgpu::RenderPipeline,
+    uniform: wgpu::Buffer,
+    group: wgpu::BindGroup,
+    wire_group: wgpu::BindGroup,
+    vertices: Grown,
+    lines: Grown,
+    target: Option<((u32, u32), RenderTarget)>,
+}
+
+impl ViewRenderer {
+    /// Builds the pipelines on `device`.
+    pub fn new(device: &wgpu::Device) -> Self {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("view.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let make_pipeline = |topology, vs: &str, fs: &str| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("view"),
+                layout: None,
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(vs),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<Vertex>() as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3],
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: wgpu::TextureFormat::Depth32Float,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                    stencil: Default::default(),
+                    bias: Default::default(),
+                }),
+                multisample: Default::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some(fs),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: wgpu::TextureFormat::Rgba32Float,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let pipeline = make_pipeline(wgpu::PrimitiveTopology::TriangleList, "vs", "fs");
+        // Element edges, pulled a hair towards the camera in the shader so they win the depth test.
+        let wire_pipeline = make_pipeline(wgpu::PrimitiveTopology::LineList, "vs_line", "fs_line");
+        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("camera"),
+            size: 64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group_for = |p: &wgpu::RenderPipeline| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("view"),
+                layout: &p.get_bind_group_layout(0),
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                }],
+            })
+        };
+        let (group, wire_group) = (group_for(&pipeline), group_for(&wire_pipeline));
+        Self {
+            pipeline,
+            wire_pipeline,
+            uniform,
+            group,
+            wire_group,
+            vertices: Grown::new(wgpu::BufferUsages::VERTEX, "view vertices"),
+            lines: Grown::new(wgpu::BufferUsages::VERTEX, "wireframe"),
+            target: None,
+        }
+    }
+
+    /// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2) from
+    /// `camera`: `width * height` RGB pixels, top row first.
+    pub fn render(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        mesh: &Mesh,
+        radiance: &[[f32; 3]],
+        camera: &Camera,
+        settings: &ViewSettings,
+    ) -> Result<Vec<[f32; 3]>, GpuError> {
+        let ss = settings.supersample.max(1);
+        let (w, h) = (settings.width * ss, settings.height * ss);
+        let max_dim = device.limits().max_texture_dimension_2d;
+        if w > max_dim || h > max_dim || w == 0 || h == 0 {
+            return Err(GpuError::TooLarge(format!(
+                "image {w}x{h} (limit {max_dim})"
+            )));
+        }
+        let verts = vertices(mesh, radiance, settings.shading);
+        let far = mesh
+            .vertices
+            .iter()
+            .map(|v| (*v - camera.position).length())
+            .fold(1e-3f32, f32::max)
+            * 1.5;
+        let near = camera.znear.max(far * 1e-5);
+        let aspect = settings.width as f32 / settings.height as f32;
+        let view = Mat4::from_rotation_translation(camera.rotation, camera.position).inverse();
+        let view_proj = Mat4::perspective_rh(camera.yfov, aspect, near, far) * view;
+        queue.write_buffer(
+            &self.uniform,
+            0,
+            bytemuck::cast_slice(&view_proj.to_cols_array()),
+        );
+        let vbuf = self
+            .vertices
+            .write(device, queue, bytemuck::cast_slice(&verts))
+            .ok_or_else(|| GpuError::Failed("no vertex buffer".into()))?;
+        let lines: Vec<Vertex> = if settings.wireframe {
+            mesh.elements
+                .iter()
+                .flat_map(|e| {
+                    let n = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
+                    (0..n).flat_map(move |k| [e.corners[k], e.corners[(k + 1) % n]])
+                })
+                .map(|p| Vertex {
+                    pos: p.to_array(),
+                    radiance: [0.0; 3],
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let lbuf = if lines.is_empty() {
+            None
+        } else {
+            self.lines
+                .write(device, queue, bytemuck::cast_slice(&lines))
+        };
+        if self.target.as_ref().is_none_or(|(size, _)| *size != (w, h)) {
+            self.target = Some((
+                (w, h),
+                RenderTarget::new(device, w, h, wgpu::TextureFormat::Rgba32Float, 16, "view"),
+            ));
+        }
+        let Some((_, target)) = &self.target else {
+            return Err(GpuError::Failed("no view target".into()));
+        };
+        let mut enc = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = target.begin_pass(&mut enc, wgpu::Color::BLACK);
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.group, &[]);
+            pass.set_vertex_buffer(0, vbuf.slice(..));
+            pass.draw(0..verts.len() as u32, 0..1);
+            if let Some(buffer) = &lbuf {
+                pass.set_pipeline(&self.wire_pipeline);
+                pass.set_bind_group(0, &self.wire_group, &[]);
+                pass.set_vertex_buffer(0, buffer.slice(..));
+                pass.draw(0..lines.len() as u32, 0..1);
             }
         }
-    })?;
-    Ok(out)
+        target.copy_out(&mut enc);
+        let submission = queue.submit([enc.finish()]);
+        let mut out = vec![[0.0f32; 3]; (settings.width * settings.height) as usize];
+        let norm = 1.0 / (ss * ss) as f32;
+        target.read_rows(device, submission, |y, row| {
+            for (x, px) in row.chunks_exact(16).enumerate() {
+                let o = &mut out[(y as u32 / ss * settings.width + x as u32 / ss) as usize];
+                for c in 0..3 {
+                    let b = &px[c * 4..c * 4 + 4];
+                    o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
+                }
+            }
+        })?;
+        Ok(out)
+    }
 }

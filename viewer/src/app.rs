@@ -2,10 +2,11 @@
 //! controls, and the last shot's hemisphere.
 
 use crate::solve::{self, Command, SaveRequest, Settings, Snapshot};
+use crate::view::{Request, ViewWorker};
 use crate::Args;
 use eframe::egui::{self, Color32, ColorImage, TextureHandle, TextureOptions};
 use glam::{EulerRot, Quat, Vec3};
-use radiosity::gpu::{render_view, Gpu, Shading, ViewSettings};
+use radiosity::gpu::{Gpu, Shading, ViewSettings};
 use radiosity::hemisphere::{Resolution, TileLayout, BLOCKED, EMPTY};
 use radiosity::render::RenderOptions;
 use radiosity::scene::{Camera, Scene};
@@ -64,7 +65,6 @@ struct ViewKey {
 /// The viewer's state.
 pub struct Viewer {
     args: Args,
-    gpu: Gpu,
     tx: Sender<Command>,
     shared: Arc<Mutex<Snapshot>>,
     home: Orbit,
@@ -81,6 +81,14 @@ pub struct Viewer {
     /// Patch size for restarts, metres (0: the scene's extras or the automatic rule).
     patch_size: f32,
     view: Option<(TextureHandle, ViewKey)>,
+    /// Per-node radiosities to measure the convergence against (`--reference`).
+    reference: Option<Vec<radiosity::report::Surface>>,
+    /// Draws the 3-D view off the UI thread.
+    worker: ViewWorker<ViewKey>,
+    /// How long the last view image took to draw (on the view thread).
+    view_ms: f64,
+    /// Recent frame times (UI work, and frame to frame), for the status line.
+    frames: FrameTimes,
     hemi: Option<(TextureHandle, u64, bool, u32)>,
     status: String,
     screenshot_requested: bool,
@@ -117,6 +125,12 @@ impl Viewer {
             options,
             pause_at: args.shots,
         };
+        let reference = match &args.reference {
+            Some(path) => Some(read_reference(path)?),
+            None => None,
+        };
+        let view_ctx = cc.egui_ctx.clone();
+        let worker = ViewWorker::start(gpu(), move || view_ctx.request_repaint())?;
         let (solver_gpu, solver_shared, ctx) = (gpu(), shared.clone(), cc.egui_ctx.clone());
         std::thread::Builder::new()
             .name("solve".into())
@@ -131,7 +145,6 @@ impl Viewer {
             threshold: args.threshold,
             patch_size: 0.0,
             args,
-            gpu: gpu(),
             tx,
             shared,
             home,
@@ -144,6 +157,10 @@ impl Viewer {
             ranks: 4,
             plot_time: false,
             view: None,
+            reference,
+            worker,
+            view_ms: 0.0,
+            frames: FrameTimes::default(),
             hemi: None,
             status: String::new(),
             screenshot_requested: false,
@@ -174,8 +191,27 @@ impl Viewer {
         );
     }
 
-    /// Redraws the 3-D view when anything it depends on changed.
+    /// Shows the newest finished view image, and asks the view thread for
+    /// a new one when anything it depends on changed. Never waits on the GPU.
     fn update_view(&mut self, ctx: &egui::Context, snap: &Snapshot, size: [u32; 2]) {
+        if let Some(done) = self.worker.take() {
+            self.view_ms = done.took.as_secs_f64() * 1e3;
+            match done.image {
+                Ok(image) => match &mut self.view {
+                    Some((tex, k)) => {
+                        tex.set(image, TextureOptions::LINEAR);
+                        *k = done.key;
+                    }
+                    None => {
+                        self.view = Some((
+                            ctx.load_texture("view", image, TextureOptions::LINEAR),
+                            done.key,
+                        ))
+                    }
+                },
+                Err(e) => self.status = format!("view: {e}"),
+            }
+        }
         let o = &self.orbit;
         let key = ViewKey {
             version: snap.version,
@@ -192,58 +228,31 @@ impl Viewer {
             highlight: self.highlight,
             wireframe: self.wireframe,
         };
-        if self.view.as_ref().is_some_and(|(_, k)| *k == key) || size[0] < 8 || size[1] < 8 {
+        let shown = self.view.as_ref().is_some_and(|(_, k)| *k == key);
+        if shown || self.worker.busy() || size[0] < 8 || size[1] < 8 {
             return;
         }
         let Some(mesh) = &snap.mesh else { return };
         if snap.radiance.len() != mesh.elements.len() {
             return;
         }
-        let mut radiance = snap.radiance.clone();
-        if let (true, Some(p)) = (self.highlight, snap.shooter) {
-            for e in mesh.patches[p as usize].elements.clone() {
-                radiance[e as usize] = [
-                    radiance[e as usize][0].max(1.0) * 4.0,
-                    0.0,
-                    radiance[e as usize][2].max(1.0) * 4.0,
-                ];
-            }
-        }
         let mut camera = self.orbit.camera();
         camera.aspect = Some(size[0] as f32 / size[1] as f32);
-        let settings = ViewSettings {
-            width: size[0],
-            height: size[1],
-            shading: self.shading,
-            supersample: 1,
-            wireframe: self.wireframe,
-        };
-        match render_view(
-            &self.gpu.device,
-            &self.gpu.queue,
-            mesh,
-            &radiance,
-            &camera,
-            &settings,
-        ) {
-            Ok(pixels) => {
-                let scale =
-                    radiosity::output::auto_exposure(&snap.radiance_pixels_hint(&pixels), self.ev);
-                let bytes = radiosity::output::tone_map(&pixels, scale);
-                let image = ColorImage::from_rgb([size[0] as usize, size[1] as usize], &bytes);
-                match &mut self.view {
-                    Some((tex, k)) => {
-                        tex.set(image, TextureOptions::LINEAR);
-                        *k = key;
-                    }
-                    None => {
-                        self.view =
-                            Some((ctx.load_texture("view", image, TextureOptions::LINEAR), key))
-                    }
-                }
-            }
-            Err(e) => self.status = format!("view: {e}"),
-        }
+        self.worker.request(Request {
+            key,
+            mesh: mesh.clone(),
+            radiance: snap.radiance.clone(),
+            highlight: if self.highlight { snap.shooter } else { None },
+            camera,
+            settings: ViewSettings {
+                width: size[0],
+                height: size[1],
+                shading: self.shading,
+                supersample: 1,
+                wireframe: self.wireframe,
+            },
+            ev: self.ev,
+        });
     }
 
     /// Redraws the hemisphere panel from the last item buffer.
@@ -312,7 +321,7 @@ impl Viewer {
         }
     }
 
-    fn save(&mut self, snap: &Snapshot) {
+    fn save(&mut self, snap: &Snapshot, bake: bool) {
         let stem = std::path::Path::new(&self.args.scene)
             .file_stem()
             .map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned());
@@ -322,6 +331,7 @@ impl Viewer {
             wireframe: self.wireframe,
             ev: self.ev,
             stem: std::path::PathBuf::from("out").join(format!("{stem}-{}", snap.shots)),
+            bake,
         };
         solve::send(&self.tx, Command::Save(req));
         self.status = "saving…".into();
@@ -406,31 +416,76 @@ impl Viewer {
         if ui.button("Reset camera").clicked() {
             self.orbit = self.home;
         }
-        if ui.button("Save image and report").clicked() {
-            self.save(snap);
-        }
+        ui.horizontal(|ui| {
+            if ui.button("Save image and report").clicked() {
+                self.save(snap, false);
+            }
+            if ui.button("… and bake glTF").clicked() {
+                self.save(snap, true);
+            }
+        });
         ui.label(snap.saved.as_deref().unwrap_or(&self.status));
+        let f = self.frames.summary(self.view_ms);
+        ui.label(format!(
+            "frame: {:.1} ms CPU ({:.1} ms UI), {:.1} ms apart (medians of {}); view image {:.1} ms off-thread",
+            f.cpu_ms_median, f.ui_ms_median, f.interval_ms_median, f.frames, f.view_ms
+        ));
         ui.separator();
         ui.horizontal(|ui| {
             ui.heading("Convergence");
             ui.checkbox(&mut self.plot_time, "against time");
         });
-        let points: Vec<[f64; 2]> = snap
-            .history
-            .iter()
-            .filter(|h| h.2 > 0.0)
-            .map(|h| [if self.plot_time { h.1 } else { h.0 as f64 }, h.2.log10()])
-            .collect();
-        egui_plot::Plot::new("convergence")
+        let x = |shots: u64, seconds: f64| {
+            if self.plot_time {
+                seconds
+            } else {
+                shots as f64
+            }
+        };
+        let mut plot = egui_plot::Plot::new("convergence")
             .height(160.0)
-            .x_axis_label(if self.plot_time { "seconds" } else { "shots" })
-            .y_axis_label("log10 unshot fraction")
-            .show(ui, |p| {
+            .x_axis_label(if self.plot_time { "seconds" } else { "shots" });
+        if let Some(reference) = &self.reference {
+            // The trace's per-node radiosities against the reference: the
+            // same error `radiosity accuracy` charts.
+            let (mean, worst): (Vec<[f64; 2]>, Vec<[f64; 2]>) = snap
+                .trace
+                .iter()
+                .filter_map(|p| {
+                    let (m, w) = radiosity::report::relative_error(&p.surfaces, reference);
+                    (m > 0.0 && w > 0.0).then(|| {
+                        let at = x(p.shots, p.seconds);
+                        ([at, m.log10()], [at, w.log10()])
+                    })
+                })
+                .unzip();
+            plot = plot.y_axis_label("log10 relative error");
+            plot.show(ui, |p| {
+                p.line(egui_plot::Line::new(
+                    "mean per surface",
+                    egui_plot::PlotPoints::from(mean),
+                ));
+                p.line(egui_plot::Line::new(
+                    "worst surface",
+                    egui_plot::PlotPoints::from(worst),
+                ));
+                p.hline(egui_plot::HLine::new("1 %", -2.0));
+            });
+        } else {
+            let points: Vec<[f64; 2]> = snap
+                .history
+                .iter()
+                .filter(|h| h.2 > 0.0)
+                .map(|h| [x(h.0, h.1), h.2.log10()])
+                .collect();
+            plot = plot.y_axis_label("log10 unshot fraction");
+            plot.show(ui, |p| {
                 p.line(egui_plot::Line::new(
                     "unshot",
                     egui_plot::PlotPoints::from(points),
                 ))
             });
+        }
         ui.separator();
         ui.horizontal(|ui| {
             ui.heading("Hemisphere");
@@ -493,21 +548,6 @@ impl Viewer {
     }
 }
 
-trait HintExt {
-    fn radiance_pixels_hint(&self, pixels: &[[f32; 3]]) -> Vec<[f32; 3]>;
-}
-
-impl HintExt for Snapshot {
-    /// Exposure follows the image itself, shooter highlight excluded.
-    fn radiance_pixels_hint(&self, pixels: &[[f32; 3]]) -> Vec<[f32; 3]> {
-        pixels
-            .iter()
-            .filter(|p| !(p[1] == 0.0 && p[0] > 0.0 && p[2] > 0.0))
-            .copied()
-            .collect()
-    }
-}
-
 /// A stable, bright colour per id.
 fn hashed(id: u32) -> Color32 {
     let h = id.wrapping_mul(2_654_435_761);
@@ -519,7 +559,12 @@ fn hashed(id: u32) -> Color32 {
 }
 
 impl eframe::App for Viewer {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let frame_start = std::time::Instant::now();
+        // The previous frame's whole CPU time (UI, tessellation, painting).
+        if let Some(cpu) = frame.info().cpu_usage {
+            self.frames.record_cpu(cpu as f64 * 1e3);
+        }
         let ctx = ui.ctx().clone();
         let snap = self.snapshot();
         self.update_hemisphere(&ctx, &snap);
@@ -555,9 +600,106 @@ impl eframe::App for Viewer {
             }
         });
         self.take_screenshot_when_ready(&ctx, &snap);
+        self.frames.record(frame_start);
+        if self.args.frame_stats.is_some() {
+            // Benchmark: paint continuously, so frame-to-frame time is the
+            // frame rate the viewer can keep up while it solves.
+            ctx.request_repaint();
+        }
     }
 
     fn on_exit(&mut self) {
+        if let Some(path) = &self.args.frame_stats {
+            let stats = self.frames.summary(self.view_ms);
+            if let Err(e) = radiosity::output::write_json(path, &stats) {
+                eprintln!("cannot write {}: {e}", path.display());
+            }
+        }
         solve::send(&self.tx, Command::Quit);
     }
+}
+
+/// Frame times over the last few hundred frames.
+#[derive(Default)]
+struct FrameTimes {
+    /// Milliseconds spent in `ui` per frame.
+    ui: std::collections::VecDeque<f64>,
+    /// Milliseconds from one frame's start to the next's.
+    interval: std::collections::VecDeque<f64>,
+    /// eframe's CPU time per frame (UI, tessellation, painting), ms.
+    cpu: std::collections::VecDeque<f64>,
+    last: Option<std::time::Instant>,
+    count: u64,
+}
+
+/// What `--frame-stats` writes (and the side panel shows).
+#[derive(serde::Serialize)]
+struct FrameSummary {
+    frames: u64,
+    ui_ms_median: f64,
+    ui_ms_max: f64,
+    cpu_ms_median: f64,
+    cpu_ms_p95: f64,
+    interval_ms_median: f64,
+    interval_ms_p95: f64,
+    view_ms: f64,
+}
+
+impl FrameTimes {
+    const KEEP: usize = 600;
+
+    fn record_cpu(&mut self, ms: f64) {
+        self.cpu.push_back(ms);
+        while self.cpu.len() > Self::KEEP {
+            self.cpu.pop_front();
+        }
+    }
+
+    fn record(&mut self, start: std::time::Instant) {
+        let now = std::time::Instant::now();
+        self.ui.push_back((now - start).as_secs_f64() * 1e3);
+        if let Some(last) = self.last {
+            self.interval.push_back((start - last).as_secs_f64() * 1e3);
+        }
+        self.last = Some(start);
+        self.count += 1;
+        for q in [&mut self.ui, &mut self.interval] {
+            while q.len() > Self::KEEP {
+                q.pop_front();
+            }
+        }
+    }
+
+    fn summary(&self, view_ms: f64) -> FrameSummary {
+        let quantile = |q: &std::collections::VecDeque<f64>, f: f64| {
+            let mut v: Vec<f64> = q.iter().copied().collect();
+            v.sort_by(f64::total_cmp);
+            v.get(((v.len() as f64 - 1.0) * f).round().max(0.0) as usize)
+                .copied()
+                .unwrap_or(0.0)
+        };
+        FrameSummary {
+            frames: self.count,
+            ui_ms_median: quantile(&self.ui, 0.5),
+            ui_ms_max: quantile(&self.ui, 1.0),
+            cpu_ms_median: quantile(&self.cpu, 0.5),
+            cpu_ms_p95: quantile(&self.cpu, 0.95),
+            interval_ms_median: quantile(&self.interval, 0.5),
+            interval_ms_p95: quantile(&self.interval, 0.95),
+            view_ms,
+        }
+    }
+}
+
+/// The `surfaces` of a report or of a `radiosity accuracy` reference.
+fn read_reference(path: &std::path::Path) -> Result<Vec<radiosity::report::Surface>, String> {
+    #[derive(serde::Deserialize)]
+    struct WithSurfaces {
+        surfaces: Vec<radiosity::report::Surface>,
+    }
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read the reference {}: {e}", path.display()))?;
+    serde_json::from_str::<WithSurfaces>(&text)
+        .map(|r| r.surfaces)
+        .map_err(|e| format!("{}: not a report or reference ({e})", path.display()))
 }

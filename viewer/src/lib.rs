@@ -4,6 +4,7 @@
 
 pub mod app;
 pub mod solve;
+pub mod view;
 
 use radiosity::hemisphere::Resolution;
 use std::path::PathBuf;
@@ -27,6 +28,15 @@ pub struct Args {
     /// After --shots shots, save a PNG of the window here and exit.
     #[arg(long, requires = "shots")]
     pub screenshot: Option<PathBuf>,
+    /// On exit, write frame-time statistics (JSON: median UI and
+    /// frame-to-frame milliseconds, the last view image's drawing time) here.
+    #[arg(long)]
+    pub frame_stats: Option<PathBuf>,
+    /// Compare the convergence plot with this reference (a report or a
+    /// `radiosity accuracy` reference JSON with `surfaces`): the plot then
+    /// shows the area-weighted mean error per surface against time.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
     /// Window size in logical pixels, WxH.
     #[arg(long, default_value = "1280x760")]
     pub size: String,

@@ -39,6 +39,8 @@ pub struct SaveRequest {
     pub wireframe: bool,
     /// PNG exposure adjustment in stops.
     pub ev: f32,
+    /// Also bake the solution to glTF (`STEM.glb`, as `radiosity render --bake`).
+    pub bake: bool,
     /// Output paths without extension (".exr", ".png", ".json" are added).
     pub stem: std::path::PathBuf,
 }
@@ -59,8 +61,9 @@ pub struct Snapshot {
     pub version: u64,
     /// The mesh being solved (replaced on restart).
     pub mesh: Option<Arc<Mesh>>,
-    /// Display radiance per element (B plus ambient, over pi).
-    pub radiance: Vec<[f32; 3]>,
+    /// Display radiance per element (B plus ambient, over pi). Shared, so
+    /// the UI's copy of a snapshot each frame copies no arrays.
+    pub radiance: Arc<Vec<[f32; 3]>>,
     /// Shots so far.
     pub shots: u64,
     /// Unshot power fraction.
@@ -68,9 +71,12 @@ pub struct Snapshot {
     /// Solve time so far.
     pub elapsed: Duration,
     /// (shots, seconds, unshot fraction) after every shot.
-    pub history: Vec<(u64, f64, f64)>,
+    pub history: Arc<Vec<(u64, f64, f64)>>,
+    /// The convergence trace so far (as in the report: per-node radiosities
+    /// at log-spaced shot counts).
+    pub trace: Arc<Vec<radiosity::report::TracePoint>>,
     /// The last shot's item buffer and resolution (rows, cols), and its shooter patch.
-    pub items: Vec<u32>,
+    pub items: Arc<Vec<u32>>,
     /// Hemisphere rows and columns.
     pub resolution: (u32, u32),
     /// The last shooter patch.
@@ -147,7 +153,7 @@ fn solve(
             resolution: (res.rows, res.cols),
             ..Snapshot::default()
         };
-        s.radiance = display(&solver);
+        s.radiance = Arc::new(display(&solver));
     }
     wake();
     let mut paused = false;
@@ -213,6 +219,9 @@ fn solve(
             if trace.due(solver.shots()) {
                 let seconds = solve_time.as_secs_f64();
                 trace.record_at(&single, &solver, &scene.nodes, opts.ambient, seconds);
+                if let Ok(mut s) = shared.lock() {
+                    s.trace = Arc::new(trace.points.clone());
+                }
             }
             if let Some(n) = steps_left.as_mut() {
                 *n = n.saturating_sub(1);
@@ -222,12 +231,12 @@ fn solve(
             s.unshot_fraction = solver.unshot_fraction();
             s.elapsed = solve_time;
             let point = (s.shots, solve_time.as_secs_f64(), s.unshot_fraction);
-            s.history.push(point);
+            Arc::make_mut(&mut s.history).push(point);
             s.shooter = Some(shooter);
             // Small scenes publish every shot; large ones at about 10 Hz.
             if mesh.elements.len() < 20_000 || last_publish.elapsed() > Duration::from_millis(100) {
-                s.radiance = display(&solver);
-                s.items = source.last_items().to_vec();
+                s.radiance = Arc::new(display(&solver));
+                s.items = Arc::new(source.last_items().to_vec());
                 s.version += 1;
                 last_publish = Instant::now();
             }
@@ -242,8 +251,8 @@ fn solve(
             let converged = solver.done(&opts.stop);
             if now_idle && (s.paused != now_idle || s.converged != converged) {
                 // Publish the final state of a run of shots.
-                s.radiance = display(&solver);
-                s.items = source.last_items().to_vec();
+                s.radiance = Arc::new(display(&solver));
+                s.items = Arc::new(source.last_items().to_vec());
                 s.version += 1;
                 wake();
             }
@@ -295,9 +304,18 @@ fn save(
     let mut report =
         radiosity::render::build_report(scene, mesh, opts, solver, gpu, [w, h], timings, parallel);
     report.convergence = trace.ending_with(&report, solve_time.as_secs_f64());
+    let mut wrote = format!("wrote {}, .png and .json", exr.display());
+    if req.bake {
+        let glb = req.stem.with_extension("glb");
+        let radiosity = solver.display_radiosity(opts.ambient);
+        let baked =
+            radiosity::bake::write(&glb, scene, mesh, &radiosity).map_err(|e| e.to_string())?;
+        wrote += &format!(" and {}", glb.display());
+        report.bake = Some(baked);
+    }
     let json = req.stem.with_extension("json");
     radiosity::output::write_json(&json, &report).map_err(|e| e.to_string())?;
-    Ok(format!("wrote {}, .png and .json", exr.display()))
+    Ok(wrote)
 }
 
 fn display(solver: &Solver) -> Vec<[f32; 3]> {

@@ -96,6 +96,7 @@ fn pause_step_resume_restart_quit() {
             wireframe: true,
             ev: 0.0,
             stem: stem.clone(),
+            bake: true,
         }),
     );
     let s = wait_for(&shared, "the save", |s| s.saved.is_some());
@@ -104,7 +105,7 @@ fn pause_step_resume_restart_quit() {
         "{:?}",
         s.saved
     );
-    for ext in ["exr", "png", "json"] {
+    for ext in ["exr", "png", "json", "glb"] {
         assert!(stem.with_extension(ext).exists(), "{ext} missing");
     }
     let report: serde_json::Value = serde_json::from_str(
@@ -113,6 +114,12 @@ fn pause_step_resume_restart_quit() {
     .expect("json");
     assert_eq!(report["shots"].as_u64(), Some(s.shots));
     assert_eq!(report["surfaces"].as_array().map(Vec::len), Some(8));
+    // The bake of the current state, as `radiosity render --bake` writes it.
+    assert!(report["bake"]["scale"].as_f64().is_some_and(|x| x > 0.0));
+    let baked = radiosity::scene::load(&stem.with_extension("glb")).expect("the bake loads");
+    assert_eq!(baked.nodes.len(), 8);
+    // The snapshot carries the trace the plot draws.
+    assert!(s.trace.len() >= 2, "{} trace points", s.trace.len());
     // The convergence trace, as `radiosity render` writes it: ends at the report.
     let trace = report["convergence"].as_array().expect("trace");
     let last = trace.last().expect("a point");

@@ -18,9 +18,12 @@ fn viewer() -> Command {
 fn screenshot_shows_the_cornell_box_the_right_way_round() {
     let dir = tempfile::tempdir().expect("temp dir");
     let shot = dir.path().join("viewer.png");
+    let stats = dir.path().join("frames.json");
     let out = viewer()
         .args(["cornell", "--shots", "40", "--screenshot"])
         .arg(&shot)
+        .arg("--frame-stats")
+        .arg(&stats)
         .output()
         .unwrap_or_else(|e| {
             panic!("cannot run xvfb-run ({e}): install xvfb (scripts/setup.sh does)")
@@ -28,6 +31,13 @@ fn screenshot_shows_the_cornell_box_the_right_way_round() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "viewer failed: {stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
+    // Frame times are measured (a benchmark, not a pass condition).
+    let f: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).expect("frame stats written"))
+            .expect("json");
+    assert!(f["frames"].as_u64().is_some_and(|n| n >= 2), "{f}");
+    assert!(f["ui_ms_median"].as_f64().is_some_and(|x| x > 0.0), "{f}");
+    eprintln!("frame times: {f}");
     let img = image::open(&shot).expect("a PNG screenshot").to_rgb8();
     // Not blank: many distinct colours.
     let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
