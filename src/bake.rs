@@ -55,7 +55,6 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
     let (mut nodes, mut meshes, mut materials, mut accessors, mut views) =
         (vec![], vec![], vec![], vec![], vec![]);
     let mut triangles = 0usize;
-    let mut strength_used = false;
     let mut view = |bin: &mut Vec<u8>, bytes: &[u8], target: u32| -> usize {
         let offset = bin.len();
         bin.extend_from_slice(bytes);
@@ -129,17 +128,12 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
             "extensions": {"KHR_materials_unlit": {}},
             "extras": {"reflectance": reflectance, "emitted_radiance": radiance},
         });
-        // Emitters stay emitters (for renderers that light with them, and so
-        // the file loads back here as a scene).
+        // Emitters stay emitters (so the file loads back here as a scene),
+        // normalised: KHR_materials_emissive_strength beside unlit draws a
+        // validator warning, and the radiance itself is in the extras.
         let peak = radiance.iter().copied().fold(0.0f64, f64::max);
         if peak > 0.0 {
-            let strength = peak.max(1.0);
-            material["emissiveFactor"] = json!(radiance.map(|x| x / strength));
-            if strength > 1.0 {
-                material["extensions"]["KHR_materials_emissive_strength"] =
-                    json!({"emissiveStrength": strength});
-                strength_used = true;
-            }
+            material["emissiveFactor"] = json!(radiance.map(|x| x / peak.max(1.0)));
         }
         materials.push(material);
         meshes.push(json!({"name": name, "primitives": [{"attributes": {"POSITION": a, "COLOR_0": a + 1}, "indices": a + 2, "material": m, "mode": 4}]}));
@@ -151,11 +145,7 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
     }
     let mut doc = json!({
         "asset": {"version": "2.0", "generator": "radiosity (baked solution)"},
-        "extensionsUsed": if strength_used {
-            json!(["KHR_materials_unlit", "KHR_materials_emissive_strength"])
-        } else {
-            json!(["KHR_materials_unlit"])
-        },
+        "extensionsUsed": ["KHR_materials_unlit"],
         "scene": 0,
         "scenes": [{"nodes": (0..nodes.len()).collect::<Vec<_>>()}],
         "nodes": nodes, "meshes": meshes, "materials": materials,

@@ -58,12 +58,12 @@ fn a_baked_cornell_box_carries_the_report_and_the_geometry() {
                 assert!(sum.iter().all(|s| rel(s / area, 1.0) < 1e-6), "{name}");
                 continue;
             }
-            for k in 0..3 {
+            for (k, s) in sum.iter().enumerate() {
                 let want = surface.radiosity[k] / std::f64::consts::PI * baked.scale;
                 assert!(
-                    rel(sum[k] / area, want) < 1e-4,
+                    rel(s / area, want) < 1e-4,
                     "{name}[{k}]: mean colour {} against {want}",
-                    sum[k] / area
+                    s / area
                 );
             }
         }
