@@ -126,28 +126,54 @@ fn inverse_bilinear(h: vec2<f32>, ex: f32, f: vec2<f32>, g: vec2<f32>) -> vec2<f
     return vec2<f32>(u, v);
 }
 
-// The element of a quad grid at the hit point p (shooter frame).
-fn grid_element(in: VsOut, p: vec3<f32>) -> u32 {
-    let x = in.axis.xyz;
-    let y = cross(in.plane.xyz, x);
-    let q = p - in.origin.xyz;
+// The element of a quad grid at the hit point p (shooter frame): `first` is
+// the grid's first element, the rest as in `Rect`.
+fn grid_element_of(
+    first: u32,
+    normal: vec3<f32>,
+    origin: vec4<f32>,
+    axis: vec4<f32>,
+    bilinear: vec4<f32>,
+    grid: vec4<u32>,
+    p: vec3<f32>,
+) -> u32 {
+    let x = axis.xyz;
+    let y = cross(normal, x);
+    let q = p - origin.xyz;
     let uv = inverse_bilinear(
         vec2<f32>(dot(q, x), dot(q, y)),
-        in.bilinear.x,
-        in.bilinear.yz,
-        vec2<f32>(in.bilinear.w, in.origin.w),
+        bilinear.x,
+        bilinear.yz,
+        vec2<f32>(bilinear.w, origin.w),
     );
-    let n = in.grid.xy;
+    let n = grid.xy;
     let iu = min(u32(max(uv.x, 0.0) * f32(n.x)), n.x - 1u);
     let iv = min(u32(max(uv.y, 0.0) * f32(n.y)), n.y - 1u);
-    let per = in.grid.zw;
+    let per = grid.zw;
     let cell_patch = (iv / per.y) * (n.x / per.x) + iu / per.x;
-    return in.item.x + cell_patch * per.x * per.y + (iv % per.y) * per.x + iu % per.x;
+    return first + cell_patch * per.x * per.y + (iv % per.y) * per.x + iu % per.x;
+}
+
+fn grid_element(in: VsOut, p: vec3<f32>) -> u32 {
+    return grid_element_of(in.item.x, in.plane.xyz, in.origin, in.axis, in.bilinear, in.grid, p);
 }
 
 struct FsOut {
     @location(0) item: u32,
     @builtin(frag_depth) depth: f32,
+}
+
+// Cell-centre direction in the shooter's frame, from the f64 table.
+fn cell_direction(cell: vec2<u32>) -> vec3<f32> {
+    let polar = trig[cell.y];
+    let azimuth = trig[shot.res.x + cell.x];
+    return vec3<f32>(polar.x * azimuth.x, polar.x * azimuth.y, polar.y);
+}
+
+// Whether this rank's tiles hold the cell (full-size image, not the lattice).
+fn owns_cell(cell: vec2<u32>) -> bool {
+    let owner = vec2<u32>((cell.x / shot.tiles.x) % shot.tiles.z, (cell.y / shot.tiles.y) % shot.tiles.w);
+    return all(owner == shot.own.xy) && cell.x < shot.res.y && cell.y < shot.res.x;
 }
 
 @fragment
@@ -158,16 +184,10 @@ fn fs(in: VsOut) -> FsOut {
         if (cell.x >= shot.res.y || cell.y >= shot.res.x) {
             discard;
         }
-    } else {
-        let owner = vec2<u32>((cell.x / shot.tiles.x) % shot.tiles.z, (cell.y / shot.tiles.y) % shot.tiles.w);
-        if (any(owner != shot.own.xy)) {
-            discard;
-        }
+    } else if (!owns_cell(cell)) {
+        discard;
     }
-    // Cell-centre direction in the shooter's frame.
-    let polar = trig[cell.y];
-    let azimuth = trig[shot.res.x + cell.x];
-    let dir = vec3<f32>(polar.x * azimuth.x, polar.x * azimuth.y, polar.y);
+    let dir = cell_direction(cell);
     if (dot(dir, in.e0) < -EDGE_TOL || dot(dir, in.e1) < -EDGE_TOL || dot(dir, in.e2) < -EDGE_TOL || dot(dir, in.e3) < -EDGE_TOL) {
         discard;
     }
@@ -193,4 +213,84 @@ fn fs(in: VsOut) -> FsOut {
         }
     }
     return out;
+}
+
+// ---------------------------------------------------------------------------
+// The tessellated projection (`--projection tessellated`): the CPU cuts each
+// piece into triangles fine enough that every edge's equal-angle image is
+// within a tolerance of its chord (clipped at the horizon, split at the
+// seam and around the pole), and the vertex shader maps each vertex to
+// (theta, phi) cell coordinates with depth = distance; fixed-function
+// rasterisation does the rest (no per-cell edge test, no depth write).
+
+struct Piece {
+    plane: vec4<f32>,    // normal (shooter frame), offset
+    item: vec4<u32>,     // first element, back-facing flag, -, -
+    origin: vec4<f32>,
+    axis: vec4<f32>,
+    bilinear: vec4<f32>,
+    grid: vec4<u32>,
+}
+
+@group(0) @binding(3) var<storage, read> pieces: array<Piece>;
+
+struct TessVertex {
+    @location(0) p: vec3<f32>,       // shooter frame
+    @location(1) x_override: f32,    // >= 0: the column coordinate (pole vertices)
+    @location(2) x_offset: f32,      // added to the column (seam unwrap and copies)
+    @location(3) piece: u32,
+}
+
+struct TessOut {
+    @builtin(position) pos: vec4<f32>,
+    @location(0) @interpolate(flat) piece: u32,
+}
+
+@vertex
+fn vs_tess(v: TessVertex) -> TessOut {
+    let rho = length(v.p.xy);
+    var theta = atan2(v.p.y, v.p.x);
+    if (theta < 0.0) {
+        theta = theta + 6.28318530717959;
+    }
+    var x = theta / 6.28318530717959 * f32(shot.res.y);
+    if (v.x_override >= 0.0) {
+        x = v.x_override;
+    }
+    x = x + v.x_offset;
+    let y = atan2(rho, v.p.z) / 1.57079632679490 * f32(shot.res.x);
+    var depth = min(length(v.p) * shot.depth.x, 1.0);
+    if (pieces[v.piece].item.y != 0u) {
+        // Back faces lose a tie with a coincident front face.
+        depth = min(depth * (1.0 + 1.0e-5), 1.0);
+    }
+    var out: TessOut;
+    out.pos = vec4<f32>(x / f32(shot.res.y) * 2.0 - 1.0, 1.0 - y / f32(shot.res.x) * 2.0, depth, 1.0);
+    out.piece = v.piece;
+    return out;
+}
+
+@fragment
+fn fs_tess(in: TessOut) -> @location(0) u32 {
+    let cell = vec2<u32>(in.pos.xy);
+    if (!owns_cell(cell)) {
+        discard;
+    }
+    let pc = pieces[in.piece];
+    if (pc.item.y != 0u) {
+        return BLOCKED;
+    }
+    var id = pc.item.x;
+    if (pc.grid.x != 0u) {
+        let dir = cell_direction(cell);
+        let cosine = dot(pc.plane.xyz, dir);
+        let t = pc.plane.w / cosine;
+        if (t > 0.0 && abs(cosine) > 1.0e-12) {
+            id = grid_element_of(pc.item.x, pc.plane.xyz, pc.origin, pc.axis, pc.bilinear, pc.grid, dir * t);
+        }
+    }
+    if (shot.own.w == 1u) {
+        atomicAdd(&coverage[id], 1u);
+    }
+    return id;
 }

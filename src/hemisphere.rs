@@ -288,6 +288,329 @@ pub fn direction_table(res: Resolution) -> Vec<[f32; 2]> {
     rows.chain(cols).collect()
 }
 
+/// A vertex the tessellated projection draws: a point in the shooter's
+/// frame, with its column given outright (`x_override >= 0`: a vertex at the
+/// pole, whose azimuth is that of its neighbour) and an offset added to its
+/// column (unwrapping across the theta = 0 seam, or a copy one turn over).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TessPoint {
+    /// Shooter frame, relative to the hemisphere centre.
+    pub p: Vec3,
+    /// The column coordinate to use instead of the azimuth (negative: none).
+    pub x_override: f32,
+    /// Added to the column coordinate.
+    pub x_offset: f32,
+}
+
+/// Most cuts along a piece's edge in the tessellated projection.
+pub const MAX_TESSELLATION: u32 = 64;
+
+/// (column, row) in cell units of the direction `p` (column in [0, cols)).
+pub fn cell_coords(p: Vec3, res: Resolution) -> (f32, f32) {
+    use std::f32::consts::{FRAC_PI_2 as HALF_PI, TAU};
+    let mut theta = p.y.atan2(p.x);
+    if theta < 0.0 {
+        theta += TAU;
+    }
+    let rho = p.x.hypot(p.y);
+    (
+        theta / TAU * res.cols as f32,
+        rho.atan2(p.z) / HALF_PI * res.rows as f32,
+    )
+}
+
+/// How far the image of the segment a-b bends away from the chord of its
+/// end points' images at its middle, in row heights (a column's share
+/// weighted by its width on the sphere); 0 below the horizon.
+fn bend(a: Vec3, b: Vec3, res: Resolution) -> f32 {
+    let m = 0.5 * (a + b);
+    if a.z <= 0.0 || b.z <= 0.0 || m.z <= 0.0 {
+        return 0.0;
+    }
+    let cols = res.cols as f32;
+    let near = |x: f32, to: f32| {
+        if x - to > 0.5 * cols {
+            x - cols
+        } else if to - x > 0.5 * cols {
+            x + cols
+        } else {
+            x
+        }
+    };
+    let (ax, ay) = cell_coords(a, res);
+    let (bx, by) = cell_coords(b, res);
+    let (mx, my) = cell_coords(m, res);
+    let (bx, mx) = (near(bx, ax), near(mx, ax));
+    // Columns are narrower than rows by sin(phi) on the sphere: measure the
+    // column error at its true angular size, in row heights (near the pole
+    // a column's width in angle goes to 0, and so does its error).
+    let column =
+        (0.5 * std::f32::consts::PI * my / res.rows as f32).sin() * (4.0 * res.rows as f32 / cols);
+    ((mx - 0.5 * (ax + bx)) * column).hypot(my - 0.5 * (ay + by))
+}
+
+/// Cuts the planar piece `d` (corners in the shooter's frame; a triangle
+/// repeats its last corner) into triangles whose edges' equal-angle images
+/// are within `tolerance` cells of their chords (row heights; see `bend`) (a uniform grid of 1 to
+/// [`MAX_TESSELLATION`] cuts per edge, the same for every edge of the piece,
+/// so it has no cracks inside), clipped at the horizon (z >= 0), with
+/// triangles across the theta = 0 seam drawn twice (unwrapped, and one turn
+/// over) and a triangle holding the pole drawn as a fan of quads from row 0.
+/// `emit` gets three vertices per triangle.
+pub fn tessellate(d: &[Vec3; 4], res: Resolution, tolerance: f32, mut emit: impl FnMut(TessPoint)) {
+    let tri = d[3] == d[2];
+    let corners: &[Vec3] = if tri { &d[..3] } else { &d[..] };
+    if let Some(pole) = pole_point(corners) {
+        // The piece holds the pole: a fan of quads from row 0, one per cut
+        // of its outline. Their sides are meridians, straight in cell
+        // space, so only the outline needs cutting.
+        let m = corners.len();
+        for k in 0..m {
+            let (a, b) = (corners[k], corners[(k + 1) % m]);
+            let mut n = 1u32;
+            while n < MAX_TESSELLATION
+                && (0..n).any(|i| {
+                    let (s, t) = (i as f32 / n as f32, (i + 1) as f32 / n as f32);
+                    bend(a + (b - a) * s, a + (b - a) * t, res) > tolerance
+                })
+            {
+                n *= 2;
+            }
+            for i in 0..n {
+                let (s, t) = (i as f32 / n as f32, (i + 1) as f32 / n as f32);
+                pole_quad(pole, a + (b - a) * s, a + (b - a) * t, res, &mut emit);
+            }
+        }
+        return;
+    }
+    let at = |u: f32, v: f32| -> Vec3 {
+        if tri {
+            d[0] + (d[1] - d[0]) * u + (d[2] - d[0]) * v
+        } else {
+            crate::mesh::bilinear(d, u, v)
+        }
+    };
+    // Lines whose bend decides the cut count: the edges and two middle lines.
+    let lines: Vec<(Vec3, Vec3)> = if tri {
+        vec![
+            (d[0], d[1]),
+            (d[1], d[2]),
+            (d[2], d[0]),
+            (0.5 * (d[0] + d[1]), d[2]),
+        ]
+    } else {
+        vec![
+            (d[0], d[1]),
+            (d[3], d[2]),
+            (d[0], d[3]),
+            (d[1], d[2]),
+            (at(0.0, 0.5), at(1.0, 0.5)),
+            (at(0.5, 0.0), at(0.5, 1.0)),
+        ]
+    };
+    let mut n = 1u32;
+    while n < MAX_TESSELLATION {
+        let fine = lines.iter().all(|&(a, b)| {
+            (0..n).all(|k| {
+                let (s, t) = (k as f32 / n as f32, (k + 1) as f32 / n as f32);
+                bend(a + (b - a) * s, a + (b - a) * t, res) <= tolerance
+            })
+        });
+        if fine {
+            break;
+        }
+        n *= 2;
+    }
+    let f = n as f32;
+    let mut out = |a: Vec3, b: Vec3, c: Vec3| clip_and_emit([a, b, c], res, &mut emit);
+    if tri {
+        for j in 0..n {
+            for i in 0..(n - j) {
+                let p = |i: u32, j: u32| at(i as f32 / f, j as f32 / f);
+                out(p(i, j), p(i + 1, j), p(i, j + 1));
+                if i + j + 1 < n {
+                    out(p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+                }
+            }
+        }
+    } else {
+        for j in 0..n {
+            for i in 0..n {
+                let p = |i: u32, j: u32| at(i as f32 / f, j as f32 / f);
+                let (p00, p10, p11, p01) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+                out(p00, p10, p11);
+                out(p00, p11, p01);
+            }
+        }
+    }
+}
+
+/// Clips a triangle to z >= 0 and emits what is left (see [`tessellate`]).
+fn clip_and_emit(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoint)) {
+    if t.iter().all(|p| p.z <= 0.0) {
+        return;
+    }
+    let mut poly: Vec<Vec3> = Vec::with_capacity(4);
+    for k in 0..3 {
+        let (a, b) = (t[k], t[(k + 1) % 3]);
+        if a.z >= 0.0 {
+            poly.push(a);
+        }
+        if (a.z > 0.0) != (b.z > 0.0) && a.z != b.z {
+            let s = a.z / (a.z - b.z);
+            let mut x = a + (b - a) * s;
+            x.z = 0.0;
+            if a.z > 0.0 || b.z > 0.0 {
+                poly.push(x);
+            }
+        }
+    }
+    poly.dedup();
+    for k in 1..poly.len().saturating_sub(1) {
+        project_triangle([poly[0], poly[k], poly[k + 1]], res, emit);
+    }
+}
+
+/// Emits one triangle above the horizon: unwrapped across the seam, or as
+/// a fan of quads when it holds the pole.
+fn project_triangle(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoint)) {
+    let cols = res.cols as f32;
+    if let Some(pole) = pole_point(&t) {
+        for k in 0..3 {
+            pole_quad(pole, t[k], t[(k + 1) % 3], res, emit);
+        }
+        return;
+    }
+    let x = t.map(|p| cell_coords(p, res).0);
+    // A vertex on the pole axis has no azimuth: it takes its neighbours'.
+    let on_axis = t.map(|p| p.x.hypot(p.y) <= 1e-7 * p.length());
+    // Unwrap around the triangle: each vertex's column taken within half a
+    // turn of the previous one (a triangle that does not hold the pole spans
+    // less than half a turn, so this finds its true extent).
+    let near = |x: f32, to: f32| {
+        if x - to > 0.5 * cols {
+            x - cols
+        } else if to - x > 0.5 * cols {
+            x + cols
+        } else {
+            x
+        }
+    };
+    let mut pts = [TessPoint {
+        p: Vec3::ZERO,
+        x_override: -1.0,
+        x_offset: 0.0,
+    }; 3];
+    let mut last: Option<f32> = None;
+    let mut unwrapped = [0.0f32; 3];
+    for k in 0..3 {
+        if on_axis[k] {
+            continue;
+        }
+        let u = last.map_or(x[k], |l| near(x[k], l));
+        unwrapped[k] = u;
+        pts[k] = TessPoint {
+            p: t[k],
+            x_override: -1.0,
+            x_offset: u - x[k],
+        };
+        last = Some(u);
+    }
+    let placed: Vec<f32> = (0..3)
+        .filter(|&k| !on_axis[k])
+        .map(|k| unwrapped[k])
+        .collect();
+    if placed.is_empty() {
+        return;
+    }
+    let mean = placed.iter().sum::<f32>() / placed.len() as f32;
+    for k in 0..3 {
+        if on_axis[k] {
+            pts[k] = TessPoint {
+                p: t[k],
+                x_override: mean.rem_euclid(cols),
+                x_offset: mean - mean.rem_euclid(cols),
+            };
+        }
+    }
+    let (lo, hi) = placed
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    for turn in [0.0, -cols, cols] {
+        // Copies one turn over only where the triangle leaves [0, cols).
+        if (turn < 0.0 && hi <= cols) || (turn > 0.0 && lo >= 0.0) {
+            continue;
+        }
+        for q in pts {
+            emit(TessPoint {
+                x_offset: q.x_offset + turn,
+                ..q
+            });
+        }
+    }
+}
+
+/// Where the pole axis (+z) meets the convex planar polygon `c` (shooter
+/// frame), if it passes strictly inside and above the horizon.
+fn pole_point(c: &[Vec3]) -> Option<Vec3> {
+    let z_of = |a: Vec3, b: Vec3| a.x * b.y - a.y * b.x;
+    let m = c.len();
+    let s: Vec<f32> = (0..m).map(|k| z_of(c[k], c[(k + 1) % m])).collect();
+    let inside = s.iter().all(|&x| x > 0.0) || s.iter().all(|&x| x < 0.0);
+    let n = (c[1] - c[0]).cross(c[2] - c[0]);
+    if !inside || n.z == 0.0 {
+        return None;
+    }
+    let t = n.dot(c[0]) / n.z;
+    (t > 0.0).then(|| Vec3::new(0.0, 0.0, t))
+}
+
+/// The quad P|u, u, v, P|v between the pole `pole` and the segment u-v,
+/// from row 0 (P takes the column of its neighbour), with a copy one turn
+/// over where it leaves [0, cols).
+fn pole_quad(pole: Vec3, u: Vec3, v: Vec3, res: Resolution, emit: &mut impl FnMut(TessPoint)) {
+    let cols = res.cols as f32;
+    let (xu, _) = cell_coords(u, res);
+    let (xv, _) = cell_coords(v, res);
+    let shift = if xv - xu > 0.5 * cols {
+        -cols
+    } else if xu - xv > 0.5 * cols {
+        cols
+    } else {
+        0.0
+    };
+    let lo = xu.min(xv + shift);
+    let hi = xu.max(xv + shift);
+    for turn in [0.0, -cols, cols] {
+        if (turn < 0.0 && hi <= cols) || (turn > 0.0 && lo >= 0.0) {
+            continue;
+        }
+        let pu = TessPoint {
+            p: pole,
+            x_override: xu,
+            x_offset: turn,
+        };
+        let pv = TessPoint {
+            p: pole,
+            x_override: xv,
+            x_offset: shift + turn,
+        };
+        let uu = TessPoint {
+            p: u,
+            x_override: -1.0,
+            x_offset: turn,
+        };
+        let vv = TessPoint {
+            p: v,
+            x_override: -1.0,
+            x_offset: shift + turn,
+        };
+        for q in [pu, uu, vv, pu, vv, pv] {
+            emit(q);
+        }
+    }
+}
+
 /// A conservative rectangle of cells holding a planar piece's projection:
 /// columns `x0..x1` and rows `y0..y1` in cell units (cell (p, t) spans
 /// `t..t+1` by `p..p+1`). `x1` may exceed R_theta: the rectangle then wraps

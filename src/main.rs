@@ -98,6 +98,16 @@ pub struct SolveArgs {
     /// nearest polygon that faces it (smaller: more accurate, slower).
     #[arg(long, default_value_t = 0.2, value_parser = positive)]
     near_field_ratio: f32,
+    /// How each piece's hemisphere cells are found: exact (a conservative
+    /// cell rectangle and an exact per-cell ray test) or tessellated (pieces
+    /// cut until each edge's curved image is within --tessellation-tolerance
+    /// cells of its chords, projected in the vertex shader). README
+    /// "Projections" compares them.
+    #[arg(long, value_enum, default_value = "exact")]
+    projection: radiosity::render::Projection,
+    /// The tessellated projection's tolerance, in cells.
+    #[arg(long, default_value_t = radiosity::render::DEFAULT_TESSELLATION_TOLERANCE, value_parser = positive)]
+    tessellation_tolerance: f32,
     /// Refinement passes by need: the mesh starts 2^N times coarser than the
     /// automatic rule's (or at the scene's own subdivision), each pass solves
     /// it roughly and doubles the patch grid of polygons whose shooters cast
@@ -149,6 +159,8 @@ impl SolveArgs {
                 ..MeshSettings::default()
             },
             raster_pieces: self.raster_pieces,
+            projection: self.projection,
+            tessellation_tolerance: self.tessellation_tolerance,
             cache_rows: !self.no_cache,
             split_shots: !self.no_split,
             ..RenderOptions::default()

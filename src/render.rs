@@ -37,6 +37,23 @@ pub enum FormFactorMethod {
 /// (chosen by `radiosity bench`; see README "Performance").
 pub const DEFAULT_RASTER_PIECES: u32 = 1;
 
+/// How a piece's cells are found on the hemisphere (`--projection`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Projection {
+    /// A conservative cell rectangle per piece, and an exact per-cell ray
+    /// test in the fragment shader (depth written per cell).
+    #[default]
+    Exact,
+    /// Pieces cut into triangles fine enough that each edge's curved image
+    /// is within a tolerance of its chord, projected in the vertex shader;
+    /// fixed-function rasterisation and depth.
+    Tessellated,
+}
+
+/// Default tolerance of the tessellated projection, in cells.
+pub const DEFAULT_TESSELLATION_TOLERANCE: f32 = 0.1;
+
 /// Everything a render can be told.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
@@ -48,6 +65,11 @@ pub struct RenderOptions {
     pub stop: StopRule,
     /// How to subdivide.
     pub mesh: MeshSettings,
+    /// How cells are found: exact per-cell test, or tessellation.
+    pub projection: Projection,
+    /// The tessellated projection's tolerance (cells between an edge's
+    /// curved image and its chords).
+    pub tessellation_tolerance: f32,
     /// What the hemisphere rasteriser draws: quad polygons as at most N x N
     /// pieces (the element is found per fragment), or every element (0).
     pub raster_pieces: u32,
@@ -102,6 +124,8 @@ impl Default for RenderOptions {
             stop: StopRule::default(),
             mesh: MeshSettings::default(),
             raster_pieces: DEFAULT_RASTER_PIECES,
+            projection: Projection::Exact,
+            tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
             layout: None,
             tile: (1, 1),
             exchange: Exchange::Hemispheres,
@@ -235,6 +259,9 @@ impl<'a> GpuFormFactors<'a> {
         }
         let mut raster =
             HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_pieces, extent)?;
+        if opts.projection == Projection::Tessellated {
+            raster.use_tessellation(&gpu.device, opts.tessellation_tolerance)?;
+        }
         let hybrid = opts.form_factor == FormFactorMethod::Hybrid;
         raster.set_count_coverage(hybrid);
         let weights = if hybrid {
@@ -920,11 +947,13 @@ fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         geometry.extend_from_slice(format!("{} {:?};", p.node, p.subdivision).as_bytes());
     }
     let settings = format!(
-        "{} {:?} {:?} {}",
+        "{} {:?} {:?} {} {:?} {}",
         opts.resolution,
         opts.form_factor,
         mesh_settings(opts),
-        opts.split_shots
+        opts.split_shots,
+        opts.projection,
+        opts.tessellation_tolerance
     );
     crate::checkpoint::fingerprint(&[
         &geometry,
@@ -1304,6 +1333,9 @@ pub fn build_report(
             max_shots: opts.stop.max_shots,
             mesh: mesh_settings(opts),
             raster_pieces: opts.raster_pieces,
+            projection: opts.projection,
+            tessellation_tolerance: (opts.projection == Projection::Tessellated)
+                .then_some(opts.tessellation_tolerance),
             image_size,
             shading: opts.shading,
             ambient: opts.ambient,

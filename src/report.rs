@@ -89,6 +89,10 @@ pub struct Settings {
     pub mesh: crate::mesh::MeshSettings,
     /// Pieces per quad polygon edge drawn by the hemisphere rasteriser (0: every element).
     pub raster_pieces: u32,
+    /// How cells were found: `exact` or `tessellated`.
+    pub projection: crate::render::Projection,
+    /// The tessellated projection's tolerance in cells (null with `exact`).
+    pub tessellation_tolerance: Option<f32>,
     /// Image size.
     pub image_size: [u32; 2],
     /// Smooth or flat.

@@ -43,12 +43,47 @@ struct Instance {
     grid: [u32; 4],
 }
 
+/// One piece as the tessellated projection's fragment shader reads it (see
+/// the shader's `Piece`).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct PieceGpu {
+    plane: [f32; 4],
+    item: [u32; 4],
+    origin: [f32; 4],
+    axis: [f32; 4],
+    bilinear: [f32; 4],
+    grid: [u32; 4],
+}
+
+/// A vertex of the tessellated projection (see the shader's `TessVertex`).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct TessVertex {
+    p: [f32; 3],
+    x_override: f32,
+    x_offset: f32,
+    piece: u32,
+}
+
+/// The tessellated projection's pipeline and per-shot data.
+struct Tessellation {
+    pipeline: wgpu::RenderPipeline,
+    group: wgpu::BindGroup,
+    pieces_buf: wgpu::Buffer,
+    vertex_buf: Option<wgpu::Buffer>,
+    tolerance: f32,
+    pieces: Vec<PieceGpu>,
+    vertices: Vec<TessVertex>,
+}
+
 /// Time spent in the phases of one rasterisation.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RasterStats {
     /// Finding the cell rectangles on the CPU.
     pub bounds: Duration,
-    /// Rectangles drawn (seam copies included).
+    /// Rectangles drawn (seam copies included), or triangles with the
+    /// tessellated projection.
     pub rects: u32,
     /// Uploading, drawing and waiting for the GPU.
     pub rasterise: Duration,
@@ -144,6 +179,10 @@ pub struct HemisphereRasterizer {
     /// (hybrid form factors' visibility denominator), and its readback copy.
     coverage_buf: wgpu::Buffer,
     coverage_read: wgpu::Buffer,
+    /// Cell directions (f64 table), shared by both projections.
+    trig: wgpu::Buffer,
+    /// The tessellated projection, when chosen (see [`HemisphereRasterizer::use_tessellation`]).
+    tess: Option<Tessellation>,
     /// Whether to count coverage this shot.
     count_coverage: bool,
     /// The last shot's coverage per element (empty unless counting).
@@ -369,10 +408,161 @@ impl HemisphereRasterizer {
             target,
             coverage_buf,
             coverage_read,
+            trig,
+            tess: None,
             count_coverage: false,
             coverage: Vec::new(),
             elements: mesh.elements.len(),
         })
+    }
+
+    /// Switches to the tessellated projection: pieces are cut into triangles
+    /// until every edge's equal-angle image is within `tolerance` cells of
+    /// its chord, and the vertex shader projects them (see the shader). Builds
+    /// its pipeline and buffers once.
+    pub fn use_tessellation(
+        &mut self,
+        device: &wgpu::Device,
+        tolerance: f32,
+    ) -> Result<(), GpuError> {
+        if !(tolerance.is_finite() && tolerance > 0.0) {
+            return Err(GpuError::Failed(format!(
+                "tessellation tolerance {tolerance} must be a positive number of cells"
+            )));
+        }
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("hemisphere.wgsl (tessellated)"),
+            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("hemisphere (tessellated)"),
+            layout: None,
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_tess"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<TessVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![
+                        0 => Float32x3, 1 => Float32, 2 => Float32, 3 => Uint32
+                    ],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: wgpu::TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_tess"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: wgpu::TextureFormat::R32Uint,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let piece_bytes = (self.corners.len().max(1) * std::mem::size_of::<PieceGpu>()) as u64;
+        let pieces = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pieces"),
+            size: piece_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("hemisphere (tessellated)"),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: self.coverage_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: self.trig.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: pieces.as_entire_binding(),
+                },
+            ],
+        });
+        self.tess = Some(Tessellation {
+            pipeline,
+            group,
+            pieces_buf: pieces,
+            vertex_buf: None,
+            tolerance,
+            pieces: Vec::new(),
+            vertices: Vec::new(),
+        });
+        Ok(())
+    }
+
+    /// Fills the tessellation's pieces and triangles for every proxy the
+    /// shooter can see, in proxy order (so depth ties break alike every run).
+    fn collect_triangles(&mut self, shooter: &ShooterFrame) {
+        let Some(t) = self.tess.as_mut() else {
+            return;
+        };
+        t.pieces.clear();
+        t.vertices.clear();
+        for (k, poly) in self.polygons.iter().enumerate() {
+            if k as u32 == shooter.polygon
+                || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
+            {
+                continue;
+            }
+            let n = shooter.to_local(poly.normal);
+            let lookup = poly.quad.map_or_else(Lookup::default, |q| {
+                Lookup::new(&self.quads[q as usize], shooter, n)
+            });
+            for i in poly.proxies.clone() {
+                let d = self.corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
+                if d.iter().all(|c| c.z <= 0.0) {
+                    continue;
+                }
+                let offset = n.dot(d[0]);
+                let piece = t.pieces.len() as u32;
+                t.pieces.push(PieceGpu {
+                    plane: [n.x, n.y, n.z, offset],
+                    item: [self.element[i as usize], (offset >= 0.0) as u32, 0, 0],
+                    origin: lookup.origin,
+                    axis: lookup.axis,
+                    bilinear: lookup.bilinear,
+                    grid: lookup.grid,
+                });
+                let before = t.vertices.len();
+                crate::hemisphere::tessellate(&d, self.res, t.tolerance, |v| {
+                    t.vertices.push(TessVertex {
+                        p: v.p.to_array(),
+                        x_override: v.x_override,
+                        x_offset: v.x_offset,
+                        piece,
+                    })
+                });
+                if t.vertices.len() == before {
+                    t.pieces.pop();
+                }
+            }
+        }
     }
 
     /// Whether each shot also counts, per element, every cell whose ray hits
@@ -505,7 +695,11 @@ impl HemisphereRasterizer {
         let start = Instant::now();
         // With 1 x 1 tiles over several ranks, draw only this rank's cells,
         // packed (see the shader); otherwise draw all and discard others' cells.
-        let lattice = layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1;
+        // The tessellated projection always draws the full image: packing
+        // would move its vertices relative to the rasteriser's sub-pixel
+        // grid, and rank counts would no longer agree bit for bit.
+        let lattice =
+            layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1 && self.tess.is_none();
         // Over several ranks, skip rectangles that hold none of this rank's cells.
         let ownership = (layout.ranks() > 1).then_some(Ownership {
             tile: [layout.tile_w as f32, layout.tile_h as f32],
@@ -513,7 +707,11 @@ impl HemisphereRasterizer {
             own: [own.0 as f32, own.1 as f32],
             cells: [self.res.cols as f32, self.res.rows as f32],
         });
-        self.collect_rects(shooter, ownership);
+        if self.tess.is_some() {
+            self.collect_triangles(shooter);
+        } else {
+            self.collect_rects(shooter, ownership);
+        }
         let bounds = start.elapsed();
         let u = ShotUniform {
             res: [self.res.rows, self.res.cols, 0, 0],
@@ -527,9 +725,31 @@ impl HemisphereRasterizer {
             depth: [1.0 / self.far, 0.0, 0.0, 0.0],
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
-        let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
-        if !bytes.is_empty() {
-            queue.write_buffer(&self.instance_buf, 0, bytes);
+        if let Some(t) = self.tess.as_mut() {
+            if !t.vertices.is_empty() {
+                let bytes: &[u8] = bytemuck::cast_slice(&t.vertices);
+                // Grows to the largest shot, then is reused.
+                if t.vertex_buf
+                    .as_ref()
+                    .is_none_or(|b| b.size() < bytes.len() as u64)
+                {
+                    t.vertex_buf = Some(device.create_buffer(&wgpu::BufferDescriptor {
+                        label: Some("tessellated vertices"),
+                        size: (bytes.len() as u64).next_power_of_two(),
+                        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    }));
+                }
+                if let Some(b) = &t.vertex_buf {
+                    queue.write_buffer(b, 0, bytes);
+                }
+                queue.write_buffer(&t.pieces_buf, 0, bytemuck::cast_slice(&t.pieces));
+            }
+        } else {
+            let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
+            if !bytes.is_empty() {
+                queue.write_buffer(&self.instance_buf, 0, bytes);
+            }
         }
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("shot"),
@@ -547,11 +767,22 @@ impl HemisphereRasterizer {
                     a: 0.0,
                 },
             );
-            if !self.instances.is_empty() {
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &self.group, &[]);
-                pass.set_vertex_buffer(0, self.instance_buf.slice(..));
-                pass.draw(0..4, 0..self.instances.len() as u32);
+            match &self.tess {
+                Some(t) => {
+                    if let (Some(b), false) = (&t.vertex_buf, t.vertices.is_empty()) {
+                        pass.set_pipeline(&t.pipeline);
+                        pass.set_bind_group(0, &t.group, &[]);
+                        pass.set_vertex_buffer(0, b.slice(..));
+                        pass.draw(0..t.vertices.len() as u32, 0..1);
+                    }
+                }
+                None if !self.instances.is_empty() => {
+                    pass.set_pipeline(&self.pipeline);
+                    pass.set_bind_group(0, &self.group, &[]);
+                    pass.set_vertex_buffer(0, self.instance_buf.slice(..));
+                    pass.draw(0..4, 0..self.instances.len() as u32);
+                }
+                None => {}
             }
         }
         self.target.copy_out(&mut enc);
@@ -616,7 +847,10 @@ impl HemisphereRasterizer {
         let rasterise = read_start - start - bounds;
         Ok(RasterStats {
             bounds,
-            rects: self.instances.len() as u32,
+            rects: match &self.tess {
+                Some(t) => (t.vertices.len() / 3) as u32,
+                None => self.instances.len() as u32,
+            },
             rasterise,
             readback: read_start.elapsed(),
         })

@@ -10,6 +10,7 @@ mod determinism;
 mod furnace;
 mod fuzz;
 mod mpi;
+mod projections;
 mod refine;
 mod shaders;
 mod traps;
