@@ -16,7 +16,7 @@ use clap::Args;
 use radiosity::gpu::Gpu;
 use radiosity::hemisphere::Resolution;
 use radiosity::output;
-use radiosity::render::{render, FormFactorMethod, RenderOptions};
+use radiosity::render::{render, FormFactorMethod, Projection, RenderOptions};
 use radiosity::report::Surface;
 use radiosity::scene::{self, GltfSurface, Scene};
 use serde::{Deserialize, Serialize};
@@ -37,9 +37,13 @@ pub struct AccuracyArgs {
     /// at 128 x 512), as fractions 1/N of the scene's extent, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "16,8")]
     patch_fractions: Vec<f32>,
-    /// Where the CSV, the charts and the cached references go.
+    /// Where the CSV and the charts go (default docs/bench/accuracy, or
+    /// docs/bench/projections with --projections).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Where the cached references are (computed there when missing).
     #[arg(long, default_value = "docs/bench/accuracy")]
-    out: PathBuf,
+    references: PathBuf,
     /// Recompute the references even when cached.
     #[arg(long)]
     recompute_reference: bool,
@@ -59,10 +63,30 @@ pub struct AccuracyArgs {
     /// installed, else scalar_rgb, which runs anywhere) or a variant name.
     #[arg(long, default_value = "auto")]
     variant: String,
+    /// Chart the two projections instead (`exact`, `tessellated`): each over
+    /// the hemisphere resolutions 64x256 to 512x2048, and the tessellated
+    /// one over its tolerance at 128x512, with the pure hemisphere method on
+    /// `squares` (its form factors are the cells a projection finds) and the
+    /// default method on the others. Writes to docs/bench/projections unless
+    /// --out is given; no path tracer.
+    #[arg(long)]
+    projections: bool,
     /// Largest samples per sensor for the path tracer (it also stops once a
     /// level takes more than a minute).
     #[arg(long, default_value_t = 1 << 24)]
     max_spp: u32,
+}
+
+impl AccuracyArgs {
+    fn out_dir(&self) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| {
+            PathBuf::from(if self.projections {
+                "docs/bench/projections"
+            } else {
+                "docs/bench/accuracy"
+            })
+        })
+    }
 }
 
 /// A file-name-safe name for a scene (a file's stem; built-in names as they are).
@@ -182,7 +206,7 @@ fn reference(
     args: &AccuracyArgs,
 ) -> Result<Vec<Surface>> {
     let path = args
-        .out
+        .references
         .join(format!("reference-{}.json", stem(&scene.name)));
     if !args.recompute_reference {
         if let Ok(text) = std::fs::read_to_string(&path) {
@@ -349,7 +373,7 @@ fn path_tracer(
     if let Some(l) = last {
         output::write_json(
             &args
-                .out
+                .references
                 .join(format!("pathtracer-{}.json", stem(&scene.name))),
             &Reference {
                 scene: scene.name.clone(),
@@ -370,6 +394,61 @@ fn path_tracer(
         elements: 0,
         points,
     })
+}
+
+/// Labels, CSV rows, summary rows and the chart of one scene's curves.
+fn finish_scene(
+    args: &AccuracyArgs,
+    scene: &Scene,
+    mut curves: Vec<Curve>,
+    csv: &mut String,
+    summary: &mut String,
+) -> Result<()> {
+    for c in &mut curves {
+        if c.method != "pathtracer" {
+            c.label = format!(
+                "{} ({} patches, {} elements)",
+                c.label, c.patches, c.elements
+            );
+        }
+    }
+    for c in &curves {
+        for p in &c.points {
+            *csv += &format!(
+                "{},\"{}\",{},{},{},{},{},{:.6},{:.6e},{:.6e}\n",
+                scene.name,
+                c.label,
+                c.method,
+                c.resolution,
+                c.patches,
+                c.elements,
+                p.shots,
+                p.seconds,
+                p.mean,
+                p.max
+            );
+        }
+        let fmt = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3}"));
+        let last = c.points.last().copied().unwrap_or(Point {
+            seconds: 0.0,
+            mean: f64::NAN,
+            max: f64::NAN,
+            shots: 0,
+        });
+        *summary += &format!(
+            "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.3} |\n",
+            scene.name,
+            c.label,
+            c.patches,
+            c.elements,
+            fmt(time_to(&c.points, 0.01, |p| p.mean)),
+            fmt(time_to(&c.points, 0.01, |p| p.max)),
+            100.0 * last.mean,
+            last.seconds
+        );
+    }
+    chart(&args.out_dir(), &stem(&scene.name), &curves)?;
+    Ok(())
 }
 
 fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
@@ -475,7 +554,8 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
 /// Runs the accuracy benchmark.
 pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
     let gpu = Gpu::new()?;
-    std::fs::create_dir_all(&args.out)?;
+    let out = args.out_dir();
+    std::fs::create_dir_all(&out)?;
     let tmp = tempfile::tempdir()?;
     let base = options(&solve, &args);
     let mut csv = String::from(
@@ -496,6 +576,42 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
             None => reference(&gpu, &scene, &base, &args)?,
         };
         let mut curves = Vec::new();
+        if args.projections {
+            let method = if name == "squares" {
+                FormFactorMethod::Hemisphere
+            } else {
+                FormFactorMethod::Hybrid
+            };
+            let m = format!("{method:?}").to_lowercase();
+            for projection in [Projection::Exact, Projection::Tessellated] {
+                for rows in [64u32, 128, 256, 512] {
+                    let mut o = base.clone();
+                    o.form_factor = method;
+                    o.projection = projection;
+                    o.resolution = Resolution {
+                        rows,
+                        cols: 4 * rows,
+                    };
+                    eprintln!(
+                        "projections: {} {projection:?} {}",
+                        scene.name, o.resolution
+                    );
+                    let label = format!("{m} {projection:?} {}", o.resolution).to_lowercase();
+                    curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+                }
+            }
+            for tol in [0.05f32, 0.5, 2.0] {
+                let mut o = base.clone();
+                o.form_factor = method;
+                o.projection = Projection::Tessellated;
+                o.tessellation_tolerance = tol;
+                eprintln!("projections: {} tessellated, tolerance {tol}", scene.name);
+                let label = format!("{m} tessellated 128x512, tolerance {tol} cells");
+                curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+            }
+            finish_scene(&args, &scene, curves, &mut csv, &mut summary)?;
+            continue;
+        }
         for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
             for &res in &args.resolutions {
                 let mut o = base.clone();
@@ -534,53 +650,10 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 Err(e) => eprintln!("accuracy: no path-tracer curve for {}: {e:#}", scene.name),
             }
         }
-        for c in &mut curves {
-            if c.method != "pathtracer" {
-                c.label = format!(
-                    "{} ({} patches, {} elements)",
-                    c.label, c.patches, c.elements
-                );
-            }
-        }
-        for c in &curves {
-            for p in &c.points {
-                csv += &format!(
-                    "{},\"{}\",{},{},{},{},{},{:.6},{:.6e},{:.6e}\n",
-                    scene.name,
-                    c.label,
-                    c.method,
-                    c.resolution,
-                    c.patches,
-                    c.elements,
-                    p.shots,
-                    p.seconds,
-                    p.mean,
-                    p.max
-                );
-            }
-            let fmt = |t: Option<f64>| t.map_or("not reached".to_string(), |t| format!("{t:.3}"));
-            let last = c.points.last().copied().unwrap_or(Point {
-                seconds: 0.0,
-                mean: f64::NAN,
-                max: f64::NAN,
-                shots: 0,
-            });
-            summary += &format!(
-                "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.3} |\n",
-                scene.name,
-                c.label,
-                c.patches,
-                c.elements,
-                fmt(time_to(&c.points, 0.01, |p| p.mean)),
-                fmt(time_to(&c.points, 0.01, |p| p.max)),
-                100.0 * last.mean,
-                last.seconds
-            );
-        }
-        chart(&args.out, &stem(&scene.name), &curves)?;
+        finish_scene(&args, &scene, curves, &mut csv, &mut summary)?;
     }
-    output::write_atomic(&args.out.join("accuracy.csv"), csv.as_bytes())?;
-    output::write_atomic(&args.out.join("summary.md"), summary.as_bytes())?;
+    output::write_atomic(&out.join("accuracy.csv"), csv.as_bytes())?;
+    output::write_atomic(&out.join("summary.md"), summary.as_bytes())?;
     println!("device: {}\n\n{summary}", gpu.describe());
     Ok(())
 }
