@@ -50,6 +50,9 @@ impl Orbit {
     }
 }
 
+/// Least time between view redraws that only new radiosities ask for.
+const VIEW_REFRESH: std::time::Duration = std::time::Duration::from_millis(250);
+
 /// What the last drawn view was drawn from, to redraw only on change.
 #[derive(Clone, Copy, PartialEq)]
 struct ViewKey {
@@ -85,6 +88,8 @@ pub struct Viewer {
     reference: Option<Vec<radiosity::report::Surface>>,
     /// Draws the 3-D view off the UI thread.
     worker: ViewWorker<ViewKey>,
+    /// When the last view image was asked for.
+    last_request: std::time::Instant,
     /// How long the last view image took to draw (on the view thread).
     view_ms: f64,
     /// Recent frame times (UI work, and frame to frame), for the status line.
@@ -160,6 +165,7 @@ impl Viewer {
             reference,
             worker,
             view_ms: 0.0,
+            last_request: std::time::Instant::now(),
             frames: FrameTimes::default(),
             hemi: None,
             status: String::new(),
@@ -232,6 +238,19 @@ impl Viewer {
         if shown || self.worker.busy() || size[0] < 8 || size[1] < 8 {
             return;
         }
+        // While it solves, new radiosities alone redraw the view at most
+        // VIEW_REFRESH apart: each image costs the view thread tens of ms of
+        // a shared core, which the frames and the solve need more. A camera
+        // or setting change redraws at once.
+        let only_newer = self
+            .view
+            .as_ref()
+            .is_some_and(|(_, k)| ViewKey { version: key.version, ..*k } == key);
+        if only_newer && self.last_request.elapsed() < VIEW_REFRESH {
+            ctx.request_repaint_after(VIEW_REFRESH - self.last_request.elapsed());
+            return;
+        }
+        self.last_request = std::time::Instant::now();
         let Some(mesh) = &snap.mesh else { return };
         if snap.radiance.len() != mesh.elements.len() {
             return;
