@@ -71,6 +71,12 @@ pub struct AccuracyArgs {
     /// --out is given; no path tracer.
     #[arg(long)]
     projections: bool,
+    /// Chart the failure regimes instead (docs/accuracy.md): single
+    /// polygons at the seam, the pole, the horizon, grazing, tiny near the
+    /// pole and small and far, for both projections at 128x512 and 512x2048,
+    /// to docs/bench/regimes.{svg,png,csv} (or --out).
+    #[arg(long)]
+    regimes: bool,
     /// Largest samples per sensor for the path tracer (it also stops once a
     /// level takes more than a minute).
     #[arg(long, default_value_t = 1 << 24)]
@@ -554,6 +560,14 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
 /// Runs the accuracy benchmark.
 pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
     let gpu = Gpu::new()?;
+    if args.regimes {
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("docs/bench"));
+        std::fs::create_dir_all(&out)?;
+        return crate::regimes::run(&gpu, &out);
+    }
     let out = args.out_dir();
     std::fs::create_dir_all(&out)?;
     let tmp = tempfile::tempdir()?;

@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 
 mod accuracy;
 mod bench;
+mod regimes;
 
 /// Progressive radiosity with equal-angle hemisphere form factors rasterised by wgpu.
 #[derive(Parser)]

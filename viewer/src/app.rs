@@ -242,10 +242,12 @@ impl Viewer {
         // VIEW_REFRESH apart: each image costs the view thread tens of ms of
         // a shared core, which the frames and the solve need more. A camera
         // or setting change redraws at once.
-        let only_newer = self
-            .view
-            .as_ref()
-            .is_some_and(|(_, k)| ViewKey { version: key.version, ..*k } == key);
+        let only_newer = self.view.as_ref().is_some_and(|(_, k)| {
+            ViewKey {
+                version: key.version,
+                ..*k
+            } == key
+        });
         if only_newer && self.last_request.elapsed() < VIEW_REFRESH {
             ctx.request_repaint_after(VIEW_REFRESH - self.last_request.elapsed());
             return;
