@@ -88,6 +88,8 @@ pub struct Viewer {
     reference: Option<Vec<radiosity::report::Surface>>,
     /// Draws the 3-D view off the UI thread.
     worker: ViewWorker<ViewKey>,
+    /// When the window opened.
+    started: std::time::Instant,
     /// When the last view image was asked for.
     last_request: std::time::Instant,
     /// How long the last view image took to draw (on the view thread).
@@ -166,6 +168,7 @@ impl Viewer {
             worker,
             view_ms: 0.0,
             last_request: std::time::Instant::now(),
+            started: std::time::Instant::now(),
             frames: FrameTimes::default(),
             hemi: None,
             status: String::new(),
@@ -626,6 +629,13 @@ impl eframe::App for Viewer {
             // Benchmark: paint continuously, so frame-to-frame time is the
             // frame rate the viewer can keep up while it solves.
             ctx.request_repaint();
+        }
+        if self
+            .args
+            .exit_after
+            .is_some_and(|s| self.started.elapsed().as_secs_f64() >= s)
+        {
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         }
     }
 

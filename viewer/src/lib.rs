@@ -32,6 +32,9 @@ pub struct Args {
     /// frame-to-frame milliseconds, the last view image's drawing time) here.
     #[arg(long)]
     pub frame_stats: Option<PathBuf>,
+    /// Close the window after this many seconds (for benchmarks).
+    #[arg(long)]
+    pub exit_after: Option<f64>,
     /// Compare the convergence plot with this reference (a report or a
     /// `radiosity accuracy` reference JSON with `surfaces`): the plot then
     /// shows the area-weighted mean error per surface against time.
