@@ -116,7 +116,7 @@ pub struct SolveArgs {
     /// quads whose neighbouring elements differ a lot (README "Refinement by
     /// need"). 0: the mesh as given. Hybrid form factors only; `--patch-size`
     /// fixes the mesh.
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=6))]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=6))]
     refine: u32,
     /// Cap on patches along one polygon edge (automatic subdivision).
     #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=4096))]

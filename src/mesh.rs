@@ -48,7 +48,7 @@ impl Default for MeshSettings {
             near_field_ratio: 0.2,
             max_patches_per_edge: 32,
             max_elements_per_edge: 16,
-            refine: 2,
+            refine: 1,
         }
     }
 }
