@@ -600,7 +600,14 @@ impl eframe::App for Viewer {
         egui::CentralPanel::default().show(ui, |ui| {
             let avail = ui.available_size();
             let ppp = ctx.pixels_per_point();
-            let size = [(avail.x * ppp) as u32, (avail.y * ppp) as u32];
+            // While it solves, the view is drawn at half the window's pixels
+            // (a quarter of the work for the view thread, which shares the
+            // cores with the solve and the window); full size once it stops.
+            let scale = if snap.paused || snap.converged { 1.0 } else { 0.5 };
+            let size = [
+                (avail.x * ppp * scale) as u32,
+                (avail.y * ppp * scale) as u32,
+            ];
             self.update_view(&ctx, &snap, size);
             if let Some((tex, _)) = &self.view {
                 let response = ui
