@@ -603,7 +603,11 @@ impl eframe::App for Viewer {
             // While it solves, the view is drawn at half the window's pixels
             // (a quarter of the work for the view thread, which shares the
             // cores with the solve and the window); full size once it stops.
-            let scale = if snap.paused || snap.converged { 1.0 } else { 0.5 };
+            let scale = if snap.paused || snap.converged {
+                1.0
+            } else {
+                0.5
+            };
             let size = [
                 (avail.x * ppp * scale) as u32,
                 (avail.y * ppp * scale) as u32,
