@@ -319,6 +319,17 @@ pub fn cell_coords(p: Vec3, res: Resolution) -> (f32, f32) {
     )
 }
 
+/// The column `x` moved by a whole turn of `cols` to within half a turn of `to`.
+fn within_half_turn(x: f32, to: f32, cols: f32) -> f32 {
+    if x - to > 0.5 * cols {
+        x - cols
+    } else if to - x > 0.5 * cols {
+        x + cols
+    } else {
+        x
+    }
+}
+
 /// How far the image of the segment a-b bends away from the chord of its
 /// end points' images at its middle, in row heights (a column's share
 /// weighted by its width on the sphere); 0 below the horizon.
@@ -328,15 +339,7 @@ fn bend(a: Vec3, b: Vec3, res: Resolution) -> f32 {
         return 0.0;
     }
     let cols = res.cols as f32;
-    let near = |x: f32, to: f32| {
-        if x - to > 0.5 * cols {
-            x - cols
-        } else if to - x > 0.5 * cols {
-            x + cols
-        } else {
-            x
-        }
-    };
+    let near = |x: f32, to: f32| within_half_turn(x, to, cols);
     let (ax, ay) = cell_coords(a, res);
     let (bx, by) = cell_coords(b, res);
     let (mx, my) = cell_coords(m, res);
@@ -391,22 +394,27 @@ pub fn tessellate(d: &[Vec3; 4], res: Resolution, tolerance: f32, mut emit: impl
         }
     };
     // Lines whose bend decides the cut count: the edges and two middle lines.
-    let lines: Vec<(Vec3, Vec3)> = if tri {
-        vec![
+    let quad_lines;
+    let lines: &[(Vec3, Vec3)] = if tri {
+        quad_lines = [
             (d[0], d[1]),
             (d[1], d[2]),
             (d[2], d[0]),
             (0.5 * (d[0] + d[1]), d[2]),
-        ]
+            (d[0], d[0]),
+            (d[0], d[0]),
+        ];
+        &quad_lines[..4]
     } else {
-        vec![
+        quad_lines = [
             (d[0], d[1]),
             (d[3], d[2]),
             (d[0], d[3]),
             (d[1], d[2]),
             (at(0.0, 0.5), at(1.0, 0.5)),
             (at(0.5, 0.0), at(0.5, 1.0)),
-        ]
+        ];
+        &quad_lines
     };
     let mut n = 1u32;
     while n < MAX_TESSELLATION {
@@ -450,23 +458,27 @@ fn clip_and_emit(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoint)
     if t.iter().all(|p| p.z <= 0.0) {
         return;
     }
-    let mut poly: Vec<Vec3> = Vec::with_capacity(4);
+    // At most four corners survive one plane; no allocation per triangle.
+    let (mut poly, mut n) = ([Vec3::ZERO; 6], 0usize);
+    let mut push = |p: Vec3| {
+        if n == 0 || poly[n - 1] != p {
+            poly[n] = p;
+            n += 1;
+        }
+    };
     for k in 0..3 {
         let (a, b) = (t[k], t[(k + 1) % 3]);
         if a.z >= 0.0 {
-            poly.push(a);
+            push(a);
         }
         if (a.z > 0.0) != (b.z > 0.0) && a.z != b.z {
             let s = a.z / (a.z - b.z);
             let mut x = a + (b - a) * s;
             x.z = 0.0;
-            if a.z > 0.0 || b.z > 0.0 {
-                poly.push(x);
-            }
+            push(x);
         }
     }
-    poly.dedup();
-    for k in 1..poly.len().saturating_sub(1) {
+    for k in 1..n.saturating_sub(1) {
         project_triangle([poly[0], poly[k], poly[k + 1]], res, emit);
     }
 }
@@ -487,15 +499,7 @@ fn project_triangle(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoi
     // Unwrap around the triangle: each vertex's column taken within half a
     // turn of the previous one (a triangle that does not hold the pole spans
     // less than half a turn, so this finds its true extent).
-    let near = |x: f32, to: f32| {
-        if x - to > 0.5 * cols {
-            x - cols
-        } else if to - x > 0.5 * cols {
-            x + cols
-        } else {
-            x
-        }
-    };
+    let near = |x: f32, to: f32| within_half_turn(x, to, cols);
     let mut pts = [TessPoint {
         p: Vec3::ZERO,
         x_override: -1.0,
@@ -516,14 +520,12 @@ fn project_triangle(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoi
         };
         last = Some(u);
     }
-    let placed: Vec<f32> = (0..3)
-        .filter(|&k| !on_axis[k])
-        .map(|k| unwrapped[k])
-        .collect();
-    if placed.is_empty() {
+    let placed = || (0..3).filter(|&k| !on_axis[k]).map(|k| unwrapped[k]);
+    let count = placed().count();
+    if count == 0 {
         return;
     }
-    let mean = placed.iter().sum::<f32>() / placed.len() as f32;
+    let mean = placed().sum::<f32>() / count as f32;
     for k in 0..3 {
         if on_axis[k] {
             pts[k] = TessPoint {
@@ -533,9 +535,7 @@ fn project_triangle(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoi
             };
         }
     }
-    let (lo, hi) = placed
-        .iter()
-        .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    let (lo, hi) = placed().fold((f32::MAX, f32::MIN), |(l, h), x| (l.min(x), h.max(x)));
     for turn in [0.0, -cols, cols] {
         // Copies one turn over only where the triangle leaves [0, cols).
         if (turn < 0.0 && hi <= cols) || (turn > 0.0 && lo >= 0.0) {
@@ -555,8 +555,8 @@ fn project_triangle(t: [Vec3; 3], res: Resolution, emit: &mut impl FnMut(TessPoi
 fn pole_point(c: &[Vec3]) -> Option<Vec3> {
     let z_of = |a: Vec3, b: Vec3| a.x * b.y - a.y * b.x;
     let m = c.len();
-    let s: Vec<f32> = (0..m).map(|k| z_of(c[k], c[(k + 1) % m])).collect();
-    let inside = s.iter().all(|&x| x > 0.0) || s.iter().all(|&x| x < 0.0);
+    let s = || (0..m).map(|k| z_of(c[k], c[(k + 1) % m]));
+    let inside = s().all(|x| x > 0.0) || s().all(|x| x < 0.0);
     let n = (c[1] - c[0]).cross(c[2] - c[0]);
     if !inside || n.z == 0.0 {
         return None;
@@ -572,13 +572,7 @@ fn pole_quad(pole: Vec3, u: Vec3, v: Vec3, res: Resolution, emit: &mut impl FnMu
     let cols = res.cols as f32;
     let (xu, _) = cell_coords(u, res);
     let (xv, _) = cell_coords(v, res);
-    let shift = if xv - xu > 0.5 * cols {
-        -cols
-    } else if xu - xv > 0.5 * cols {
-        cols
-    } else {
-        0.0
-    };
+    let shift = within_half_turn(xv, xu, cols) - xv;
     let lo = xu.min(xv + shift);
     let hi = xu.max(xv + shift);
     for turn in [0.0, -cols, cols] {

@@ -9,31 +9,8 @@ use glam::{DVec3, Vec3};
 use radiosity::gpu::{Gpu, HemisphereRasterizer};
 use radiosity::hemisphere::{Resolution, TileLayout};
 use radiosity::mesh::{Mesh, MeshSettings, ShooterFrame};
-use radiosity::scene::{polygon_normal, Polygon, Scene, Subdivision};
+use radiosity::scene::{axis_rect as rect, polygon_normal, Polygon, Scene, Subdivision};
 use std::path::Path;
-
-/// An axis-aligned rectangle in the plane `axis = at`, facing +axis when
-/// `positive` (the test suite's `rect`).
-fn rect(axis: usize, at: f32, lo: [f32; 2], hi: [f32; 2], positive: bool) -> Vec<Vec3> {
-    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-    let p = |a: f32, b: f32| {
-        let mut x = [0.0f32; 3];
-        x[axis] = at;
-        x[u] = a;
-        x[v] = b;
-        Vec3::from(x)
-    };
-    let mut q = vec![
-        p(lo[0], lo[1]),
-        p(hi[0], lo[1]),
-        p(hi[0], hi[1]),
-        p(lo[0], hi[1]),
-    ];
-    if !positive {
-        q.reverse();
-    }
-    q
-}
 
 /// The regimes: name and polygon, seen from the origin facing +z.
 pub fn cases() -> Vec<(&'static str, Vec<Vec3>)> {

@@ -181,6 +181,8 @@ pub struct HemisphereRasterizer {
     coverage_read: wgpu::Buffer,
     /// Cell directions (f64 table), shared by both projections.
     trig: wgpu::Buffer,
+    /// The compiled shader, shared by both projections' pipelines.
+    module: wgpu::ShaderModule,
     /// The tessellated projection, when chosen (see [`HemisphereRasterizer::use_tessellation`]).
     tess: Option<Tessellation>,
     /// Whether to count coverage this shot.
@@ -324,67 +326,22 @@ impl HemisphereRasterizer {
             label: Some("hemisphere.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("hemisphere"),
-            layout: None,
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<Instance>() as u64,
-                    step_mode: wgpu::VertexStepMode::Instance,
-                    attributes: &wgpu::vertex_attr_array![
-                        0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
-                        4 => Float32x3, 5 => Float32x4, 6 => Uint32x2, 7 => Float32x4,
-                        8 => Float32x4, 9 => Float32x4, 10 => Uint32x4
-                    ],
-                })],
+        let pipeline = item_pipeline(
+            device,
+            &module,
+            ("vs", "fs"),
+            wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Instance>() as u64,
+                step_mode: wgpu::VertexStepMode::Instance,
+                attributes: &wgpu::vertex_attr_array![
+                    0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
+                    4 => Float32x3, 5 => Float32x4, 6 => Uint32x2, 7 => Float32x4,
+                    8 => Float32x4, 9 => Float32x4, 10 => Uint32x4
+                ],
             },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleStrip,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: wgpu::TextureFormat::Depth32Float,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::R32Uint,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("hemisphere"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: coverage_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: trig.as_entire_binding(),
-                },
-            ],
-        });
+            wgpu::PrimitiveTopology::TriangleStrip,
+        );
+        let group = item_bind_group(device, &pipeline, &[&uniform, &coverage_buf, &trig]);
         let target = RenderTarget::new(
             device,
             res.cols,
@@ -409,6 +366,7 @@ impl HemisphereRasterizer {
             coverage_buf,
             coverage_read,
             trig,
+            module,
             tess: None,
             count_coverage: false,
             coverage: Vec::new(),
@@ -430,51 +388,19 @@ impl HemisphereRasterizer {
                 "tessellation tolerance {tolerance} must be a positive number of cells"
             )));
         }
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("hemisphere.wgsl (tessellated)"),
-            source: wgpu::ShaderSource::Wgsl(SHADER.into()),
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("hemisphere (tessellated)"),
-            layout: None,
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_tess"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<TessVertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![
-                        0 => Float32x3, 1 => Float32, 2 => Float32, 3 => Uint32
-                    ],
-                })],
+        let pipeline = item_pipeline(
+            device,
+            &self.module,
+            ("vs_tess", "fs_tess"),
+            wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<TessVertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &wgpu::vertex_attr_array![
+                    0 => Float32x3, 1 => Float32, 2 => Float32, 3 => Uint32
+                ],
             },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: wgpu::TextureFormat::Depth32Float,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_tess"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: wgpu::TextureFormat::R32Uint,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+            wgpu::PrimitiveTopology::TriangleList,
+        );
         let piece_bytes = (self.corners.len().max(1) * std::mem::size_of::<PieceGpu>()) as u64;
         let pieces = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("pieces"),
@@ -482,28 +408,11 @@ impl HemisphereRasterizer {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("hemisphere (tessellated)"),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: self.coverage_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: self.trig.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: pieces.as_entire_binding(),
-                },
-            ],
-        });
+        let group = item_bind_group(
+            device,
+            &pipeline,
+            &[&self.uniform, &self.coverage_buf, &self.trig, &pieces],
+        );
         self.tess = Some(Tessellation {
             pipeline,
             group,
@@ -944,4 +853,71 @@ fn push_piece(
             ..inst
         });
     }
+}
+
+/// A pipeline that draws element ids into the R32Uint item buffer with a
+/// depth test (both projections: the entry points and vertex layout differ).
+fn item_pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    (vs, fs): (&str, &str),
+    vertices: wgpu::VertexBufferLayout,
+    topology: wgpu::PrimitiveTopology,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(vs),
+        layout: None,
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some(vs),
+            compilation_options: Default::default(),
+            buffers: &[Some(vertices)],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: wgpu::TextureFormat::Depth32Float,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fs),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: wgpu::TextureFormat::R32Uint,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// Group 0 of `pipeline`: `buffers` at bindings 0, 1, 2, ... in order.
+fn item_bind_group(
+    device: &wgpu::Device,
+    pipeline: &wgpu::RenderPipeline,
+    buffers: &[&wgpu::Buffer],
+) -> wgpu::BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = buffers
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            resource: b.as_entire_binding(),
+        })
+        .collect();
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("hemisphere"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
 }

@@ -10,7 +10,7 @@ mod gltf_write;
 
 pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};
-pub use gltf_write::{to_glb, write_gltf, GltfSurface};
+pub use gltf_write::{axis_rect, to_glb, write_gltf, GltfSurface};
 
 use glam::{Quat, Vec3};
 

@@ -34,28 +34,10 @@ pub fn surface(
     }
 }
 
-/// Axis-aligned rectangle in the plane `axis = at`, facing `+axis` when `positive`.
-/// `lo`/`hi` are the bounds on the other two axes (in cyclic order after `axis`).
+/// Axis-aligned rectangle in the plane `axis = at`, facing `+axis` when `positive`
+/// (the library's [`radiosity::scene::axis_rect`]).
 pub fn rect(axis: usize, at: f32, lo: [f32; 2], hi: [f32; 2], positive: bool) -> Vec<Vec3> {
-    let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
-    let p = |u: f32, v: f32| {
-        let mut c = [0.0; 3];
-        c[axis] = at;
-        c[a] = u;
-        c[b] = v;
-        Vec3::from(c)
-    };
-    // (a, b, axis) is right-handed, so counter-clockwise in (a, b) faces +axis.
-    let mut q = vec![
-        p(lo[0], lo[1]),
-        p(hi[0], lo[1]),
-        p(hi[0], hi[1]),
-        p(lo[0], hi[1]),
-    ];
-    if !positive {
-        q.reverse();
-    }
-    q
+    radiosity::scene::axis_rect(axis, at, lo, hi, positive)
 }
 
 /// A regular polygon approximating a disk of radius `r` in the plane z = `z`.

@@ -285,6 +285,26 @@ fn finish(
     }
 }
 
+/// Resumes the fault tests' solve from `ck` on `ranks` ranks; its report.
+fn resume(ranks: usize, ck: &Path, report: &Path) -> serde_json::Value {
+    let (status, err, _) = finish(
+        fault_run(
+            ranks,
+            &[
+                "--resume",
+                ck.to_str().expect("utf-8"),
+                "--report",
+                report.to_str().expect("utf-8"),
+            ],
+        )
+        .spawn()
+        .expect("run"),
+        Duration::from_secs(120),
+    );
+    assert!(status.success(), "{err}");
+    report_at(report)
+}
+
 #[test]
 fn sigint_saves_and_a_resume_on_two_ranks_gives_the_same_bits() {
     let dir = tempfile::tempdir().expect("temp dir");
@@ -316,23 +336,8 @@ fn sigint_saves_and_a_resume_on_two_ranks_gives_the_same_bits() {
     assert!(err.contains("--resume"), "{err}");
     let partial = report_at(&stopped);
     assert_eq!(partial["converged"], false);
-    let r = p("resumed.json");
-    let (status, err, _) = finish(
-        fault_run(
-            2,
-            &[
-                "--resume",
-                ck.to_str().expect("utf-8"),
-                "--report",
-                r.to_str().expect("utf-8"),
-            ],
-        )
-        .spawn()
-        .expect("run"),
-        Duration::from_secs(120),
-    );
-    assert!(status.success(), "{err}");
-    same_result(&report_at(&r), &report_at(&s), "resumed on 2 ranks");
+    let resumed = resume(2, &ck, &p("resumed.json"));
+    same_result(&resumed, &report_at(&s), "resumed on 2 ranks");
 }
 
 #[test]
@@ -383,27 +388,8 @@ fn a_killed_rank_ends_the_job_naming_it_and_the_job_resumes() {
         "the message should name the rank: {err}"
     );
     // The last checkpoint resumes, here on one rank.
-    let r = p("resumed.json");
-    let (status, err, _) = finish(
-        fault_run(
-            1,
-            &[
-                "--resume",
-                ck.to_str().expect("utf-8"),
-                "--report",
-                r.to_str().expect("utf-8"),
-            ],
-        )
-        .spawn()
-        .expect("run"),
-        Duration::from_secs(120),
-    );
-    assert!(status.success(), "{err}");
-    same_result(
-        &report_at(&r),
-        &report_at(&s),
-        "resumed after a killed rank",
-    );
+    let resumed = resume(1, &ck, &p("resumed.json"));
+    same_result(&resumed, &report_at(&s), "resumed after a killed rank");
 }
 
 #[test]
