@@ -7,6 +7,7 @@
 //! point gets, exactly. Pure maths: nothing here knows about GPUs or ranks.
 
 use crate::mesh::{element_centre, Mesh};
+use crate::solver::{ShotRegion, Transfer};
 use glam::DVec3;
 
 /// How one visible cell counts in a hybrid shot's per-element sums: visible
@@ -81,21 +82,35 @@ pub struct Row {
 }
 
 impl Row {
-    /// (element, F_ij) pairs for shooter-element weights `weights` (see
-    /// [`crate::solver::ShotRegion::weights`]; empty: all 1).
-    pub fn combine(&self, weights: &[f64], out: &mut Vec<(u32, f64)>) {
+    /// What the shot `region` sends each receiver: F_ij (the columns summed)
+    /// and sum_k F_ij,k * S_k per channel, with each column's own shot
+    /// radiosity where the region gives one per element (and this row has a
+    /// column per element), else the patch's.
+    pub fn combine(&self, region: &ShotRegion, out: &mut Vec<Transfer>) {
         out.clear();
         let m = self.columns.max(1);
-        let uniform = weights.len() != m;
+        let per_element = region.elements.len() == m && m > 1;
         for (&id, v) in self.ids.iter().zip(self.values.chunks_exact(m)) {
-            let f = if uniform {
-                v.iter().sum()
-            } else {
-                v.iter().zip(weights).map(|(a, w)| a * w).sum()
-            };
-            if f > 0.0 {
-                out.push((id, f));
+            let f: f64 = v.iter().sum();
+            if f <= 0.0 {
+                continue;
             }
+            let radiosity = if per_element {
+                let mut r = [0.0; 3];
+                for (a, s) in v.iter().zip(&region.elements) {
+                    for c in 0..3 {
+                        r[c] += a * s[c];
+                    }
+                }
+                r
+            } else {
+                region.shoot.map(|s| f * s)
+            };
+            out.push(Transfer {
+                element: id,
+                form_factor: f,
+                radiosity,
+            });
         }
     }
 
@@ -444,6 +459,38 @@ mod tests {
             DVec3::new(half, half, z),
             DVec3::new(-half, half, z),
         ]
+    }
+
+    #[test]
+    fn each_shooter_element_shoots_its_own_colour() {
+        // Two shooter elements, one red and one blue: a receiver that sees
+        // only the first gets red only, whatever the patch's mean colour.
+        let row = Row {
+            columns: 2,
+            ids: vec![4, 9],
+            values: vec![0.3, 0.0, 0.1, 0.2],
+            ..Row::default()
+        };
+        let region = ShotRegion {
+            shoot: [0.5, 0.0, 0.5],
+            elements: vec![[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+            ..ShotRegion::default()
+        };
+        let mut out = Vec::new();
+        row.combine(&region, &mut out);
+        assert_eq!(out.len(), 2);
+        assert_eq!((out[0].element, out[0].form_factor), (4, 0.3));
+        assert_eq!(out[0].radiosity, [0.3, 0.0, 0.0]);
+        assert_eq!(out[1].radiosity, [0.1, 0.0, 0.2]);
+        // Uniform: F times the patch's shot radiosity.
+        let uniform = ShotRegion {
+            shoot: [2.0, 1.0, 0.0],
+            ..ShotRegion::default()
+        };
+        row.combine(&uniform, &mut out);
+        assert!((out[1].radiosity[0] - 0.6).abs() < 1e-12);
+        assert!((out[1].radiosity[1] - 0.3).abs() < 1e-12);
+        assert_eq!(out[1].radiosity[2], 0.0);
     }
 
     #[test]

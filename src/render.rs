@@ -14,7 +14,9 @@ use crate::report::{
     TracePoint,
 };
 use crate::scene::Scene;
-use crate::solver::{Candidate, FormFactorSource, ShotRegion, Solver, StopRule, UNSHOT_ONE};
+use crate::solver::{
+    Candidate, FormFactorSource, NetUnshot, ShotRegion, Solver, StopRule, Transfer, UNSHOT_ONE,
+};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -36,6 +38,16 @@ pub enum FormFactorMethod {
 /// Pieces per quad polygon edge the hemisphere rasteriser draws by default
 /// (chosen by `radiosity bench`; see README "Performance").
 pub const DEFAULT_RASTER_PIECES: u32 = 1;
+
+/// The hemisphere resolution of weak shooters (`--coarse-resolution`).
+pub const DEFAULT_COARSE_RESOLUTION: Resolution = Resolution {
+    rows: 64,
+    cols: 256,
+};
+
+/// Shooters below this fraction of the emitted power draw the coarse
+/// hemisphere (`--coarse-below`; README "Coarse hemispheres for weak shooters").
+pub const DEFAULT_COARSE_BELOW: f64 = 3e-3;
 
 /// How a piece's cells are found on the hemisphere (`--projection`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
@@ -96,6 +108,15 @@ pub struct RenderOptions {
     /// Split a hybrid shot into one hemisphere per group of shooter elements
     /// where a near receiver is partly hidden from the shooter's centre.
     pub split_shots: bool,
+    /// The hemisphere resolution of weak shooters (see `coarse_below`).
+    pub coarse: Option<Resolution>,
+    /// Shooters whose unshot power is below this fraction of the emitted
+    /// power draw their hemisphere at `coarse` (0: every shot at `resolution`).
+    pub coarse_below: f64,
+    /// Shooters overshoot by rho times the ambient term (Feda & Purgathofer
+    /// 1992): fewer shots to the same error, not less time on lavapipe (see
+    /// [`crate::solver`]; off by default).
+    pub overshoot: bool,
     /// Draw element edges over the image.
     pub wireframe: bool,
     /// Where and how often to save the solve's state (`None`: never).
@@ -135,6 +156,9 @@ impl Default for RenderOptions {
             ambient: true,
             cache_rows: true,
             split_shots: true,
+            overshoot: false,
+            coarse: Some(DEFAULT_COARSE_RESOLUTION),
+            coarse_below: DEFAULT_COARSE_BELOW,
             wireframe: false,
             checkpoint: None,
             interrupt: None,
@@ -176,6 +200,8 @@ pub struct PhaseTimes {
     pub cached: u64,
     /// Shots split into one hemisphere per group of shooter elements.
     pub split: u64,
+    /// Shots drawn at the coarse resolution (weak shooters).
+    pub coarse: u64,
 }
 
 /// Memory the form-factor row cache may use, in bytes per rank (summed over
@@ -189,26 +215,24 @@ pub struct GpuFormFactors<'a> {
     gpu: &'a Gpu,
     mesh: &'a Mesh,
     comm: &'a dyn Collectives,
-    raster: HemisphereRasterizer,
-    layout: TileLayout,
+    /// The hemisphere at the shot resolution, and at the coarse one for weak
+    /// shooters (see [`RenderOptions::coarse_below`]).
+    tiers: Vec<Tier>,
+    /// Shooters with less unshot power than this (W, sum over RGB) draw the
+    /// coarse tier's hemisphere.
+    coarse_below: f64,
+    /// The tier the last hemisphere was drawn in.
+    last_tier: usize,
     exchange: Exchange,
     method: FormFactorMethod,
-    /// What one cell adds to the element it shows, per row: its delta form
-    /// factor in fixed point (hemisphere) or one visible cell (hybrid).
-    weights: Vec<u64>,
     /// Whether this rank owns each element.
     owned: Vec<bool>,
     /// Rank owning each element (sparse exchange).
     element_rank: Vec<u32>,
-    /// Cells (row-major indices) of each rank's tiles (hemisphere exchange).
-    cells_of: Vec<Vec<u32>>,
-    /// How many cells each rank owns (known to all, so never exchanged).
-    cell_counts: Vec<usize>,
     /// This rank's cell values, packed for the all-gather (reused every shot).
     packed: Vec<u32>,
     acc: FormFactorAccumulator,
     items: Vec<u32>,
-    full: Vec<u32>,
     pairs: Vec<(u32, u64)>,
     /// Time spent so far.
     pub timings: PhaseTimes,
@@ -219,9 +243,12 @@ pub struct GpuFormFactors<'a> {
     pub penumbra: Vec<[u64; 2]>,
     /// Form-factor rows of patches that have shot, for when they shoot again
     /// (the same shooter gives the same row, so a hit changes no result).
-    cache: std::collections::HashMap<(u32, [u32; 3]), Row>,
+    /// Keyed by shooter, hemisphere centre and tier: a weak shot of a patch
+    /// that first shot strong draws (once) at the coarse tier, so that the
+    /// cache, and a resumed solve's empty one, change no number.
+    cache: std::collections::HashMap<RowKey, Row>,
     /// The last row computed, until it is known whether it fits.
-    pending: Option<((u32, [u32; 3]), Row)>,
+    pending: Option<(RowKey, Row)>,
     /// Whether shots split where visibility varies across the shooter.
     split: bool,
     /// Bytes the cache holds over all ranks, and may hold.
@@ -229,18 +256,35 @@ pub struct GpuFormFactors<'a> {
     cache_budget: u64,
 }
 
-impl<'a> GpuFormFactors<'a> {
-    /// Uploads the mesh and builds the pipelines. With one process and a
-    /// multi-rank `layout`, every rank's tiles are drawn here in turn.
-    pub fn new(
-        gpu: &'a Gpu,
-        mesh: &'a Mesh,
+/// A cached row's shooter patch, hemisphere centre (f32 bits) and tier.
+type RowKey = (u32, [u32; 3], u8);
+
+/// Everything of a hemisphere that depends on its resolution.
+struct Tier {
+    raster: HemisphereRasterizer,
+    layout: TileLayout,
+    /// What one cell adds to the element it shows, per row: its delta form
+    /// factor in fixed point (hemisphere) or one visible cell (hybrid).
+    weights: Vec<u64>,
+    /// Cells (row-major indices) of each rank's tiles (hemisphere exchange).
+    cells_of: Vec<Vec<u32>>,
+    /// How many cells each rank owns (known to all, so never exchanged).
+    cell_counts: Vec<usize>,
+    /// The whole hemisphere's cells, assembled from every rank's.
+    full: Vec<u32>,
+}
+
+impl Tier {
+    /// Uploads the mesh and builds the pipelines for resolution `res`.
+    fn new(
+        gpu: &Gpu,
+        mesh: &Mesh,
         opts: &RenderOptions,
-        comm: &'a dyn Collectives,
+        res: Resolution,
+        ranks: usize,
         extent: f32,
     ) -> Result<Self, RenderError> {
-        let res = opts.resolution;
-        let n = comm.size();
+        let n = ranks;
         let layout = if n > 1 {
             let (px, py) = rank_grid(n);
             TileLayout {
@@ -269,13 +313,6 @@ impl<'a> GpuFormFactors<'a> {
         } else {
             res.delta_form_factors_fixed()
         };
-        let rank = comm.rank();
-        let element_rank: Vec<u32> = mesh
-            .elements
-            .iter()
-            .map(|e| (e.patch as usize % n) as u32)
-            .collect();
-        let owned = element_rank.iter().map(|&r| r as usize == rank).collect();
         let mut cells_of = vec![Vec::new(); n];
         if n > 1 && layout.ranks() as usize == n {
             for p in 0..res.rows {
@@ -286,22 +323,63 @@ impl<'a> GpuFormFactors<'a> {
             }
         }
         Ok(Self {
+            raster,
+            layout,
+            weights,
+            cell_counts: cells_of.iter().map(Vec::len).collect(),
+            cells_of,
+            full: vec![crate::hemisphere::EMPTY; res.cells()],
+        })
+    }
+}
+
+impl<'a> GpuFormFactors<'a> {
+    /// Uploads the mesh and builds the pipelines. With one process and a
+    /// multi-rank `layout`, every rank's tiles are drawn here in turn.
+    pub fn new(
+        gpu: &'a Gpu,
+        mesh: &'a Mesh,
+        opts: &RenderOptions,
+        comm: &'a dyn Collectives,
+        extent: f32,
+    ) -> Result<Self, RenderError> {
+        let n = comm.size();
+        let mut tiers = vec![Tier::new(gpu, mesh, opts, opts.resolution, n, extent)?];
+        let coarse = opts
+            .coarse
+            .filter(|c| opts.coarse_below > 0.0 && c.cells() < opts.resolution.cells());
+        if let Some(res) = coarse {
+            tiers.push(Tier::new(gpu, mesh, opts, res, n, extent)?);
+        }
+        let emitted: f64 = mesh
+            .patches
+            .iter()
+            .map(|p| {
+                let e = mesh.polygons[p.polygon as usize].exitance;
+                (e[0] + e[1] + e[2]) * p.area
+            })
+            .sum();
+        let rank = comm.rank();
+        let element_rank: Vec<u32> = mesh
+            .elements
+            .iter()
+            .map(|e| (e.patch as usize % n) as u32)
+            .collect();
+        let owned = element_rank.iter().map(|&r| r as usize == rank).collect();
+        Ok(Self {
             gpu,
             mesh,
             comm,
-            raster,
-            layout,
+            tiers,
+            coarse_below: opts.coarse_below * emitted,
+            last_tier: 0,
             exchange: opts.exchange,
             method: opts.form_factor,
-            weights,
             owned,
             element_rank,
-            cell_counts: cells_of.iter().map(Vec::len).collect(),
             packed: Vec::new(),
-            cells_of,
             acc: FormFactorAccumulator::new(mesh.elements.len()),
             items: Vec::new(),
-            full: vec![crate::hemisphere::EMPTY; res.cells()],
             pairs: Vec::new(),
             timings: PhaseTimes::default(),
             busy: Vec::new(),
@@ -324,29 +402,45 @@ impl<'a> GpuFormFactors<'a> {
         self.pending.as_ref().map_or(0, |(_, r)| r.bytes() as u64)
     }
 
-    /// Draws the hemisphere of `shooter` at `centre` (every rank its tiles),
-    /// exchanges, and leaves this rank's per-element sums in `self.pairs`.
-    /// Returns the time spent in the exchange.
-    fn hemisphere(&mut self, shooter: u32, centre: glam::Vec3) -> Result<Duration, GpuError> {
+    /// The tier a shooter of unshot power `power` draws in: the coarse one
+    /// (when there is one) below [`RenderOptions::coarse_below`].
+    fn tier_for(&self, power: f64) -> usize {
+        if self.tiers.len() > 1 && power < self.coarse_below {
+            1
+        } else {
+            0
+        }
+    }
+
+    /// Draws the hemisphere of `shooter` at `centre` (every rank its tiles)
+    /// in tier `tier`, exchanges, and leaves this rank's per-element sums in
+    /// `self.pairs`. Returns the time spent in the exchange.
+    fn hemisphere(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+    ) -> Result<Duration, GpuError> {
         let frame = self.mesh.shooter_frame_at(shooter, centre);
-        let cols = self.raster.resolution().cols as usize;
-        let exchange = if self.comm.size() == 1 && self.layout.ranks() > 1 {
+        self.last_tier = tier;
+        let layout = self.tiers[tier].layout;
+        let exchange = if self.comm.size() == 1 && layout.ranks() > 1 {
             // One process standing in for a rank grid: draw every rank's tiles.
-            for ry in 0..self.layout.py {
-                for rx in 0..self.layout.px {
+            for ry in 0..layout.py {
+                for rx in 0..layout.px {
                     self.draw(&frame, (rx, ry))?;
-                    self.add_own(cols);
+                    self.add_own();
                 }
             }
             Duration::ZERO
         } else if self.comm.size() == 1 {
             self.draw(&frame, (0, 0))?;
-            self.add_own(cols);
+            self.add_own();
             Duration::ZERO
         } else {
             let rank = self.comm.rank() as u32;
-            self.draw(&frame, (rank % self.layout.px, rank / self.layout.px))?;
-            self.exchange(cols)
+            self.draw(&frame, (rank % layout.px, rank / layout.px))?;
+            self.exchange()
         };
         if self.acc.take_overflow() {
             return Err(GpuError::Failed(format!(
@@ -368,27 +462,28 @@ impl<'a> GpuFormFactors<'a> {
         }
     }
 
-    /// The rasteriser (for inspection: proxies, resolution).
+    /// The rasteriser at the shot resolution (for inspection: proxies, resolution).
     pub fn rasterizer(&self) -> &HemisphereRasterizer {
-        &self.raster
+        &self.tiers[0].raster
     }
 
     /// The tile layout in use.
     pub fn layout(&self) -> TileLayout {
-        self.layout
+        self.tiers[0].layout
     }
 
-    /// The item buffer of the last hemisphere this rank drew.
-    pub fn last_items(&self) -> &[u32] {
-        &self.items
+    /// The item buffer of the last hemisphere this rank drew, and its resolution.
+    pub fn last_items(&self) -> (&[u32], Resolution) {
+        (&self.items, self.tiers[self.last_tier].raster.resolution())
     }
 
     fn draw(&mut self, frame: &crate::mesh::ShooterFrame, own: (u32, u32)) -> Result<(), GpuError> {
-        let stats = self.raster.render(
+        let tier = &mut self.tiers[self.last_tier];
+        let stats = tier.raster.render(
             &self.gpu.device,
             &self.gpu.queue,
             frame,
-            &self.layout,
+            &tier.layout,
             own,
             &mut self.items,
         )?;
@@ -402,60 +497,64 @@ impl<'a> GpuFormFactors<'a> {
     /// Adds this rank's cells of the last drawing to the accumulator: each
     /// cell's weight to the element it shows and, for hybrid form factors,
     /// every element's covered cells.
-    fn add_own(&mut self, cols: usize) {
+    fn add_own(&mut self) {
+        let tier = &self.tiers[self.last_tier];
+        let cols = tier.raster.resolution().cols as usize;
         self.acc
-            .add_cells(&self.items, cols, 0, &self.weights, None);
+            .add_cells(&self.items, cols, 0, &tier.weights, None);
         self.add_coverage();
     }
 
     fn add_coverage(&mut self) {
-        for (id, c) in self.raster.coverage_pairs() {
+        for (id, c) in self.tiers[self.last_tier].raster.coverage_pairs() {
             self.acc.add(id, c);
         }
     }
 
     /// Adds this rank's cells to the accumulator, exchanges, and leaves the
     /// sums for this rank's elements in the accumulator.
-    fn exchange(&mut self, cols: usize) -> Duration {
+    fn exchange(&mut self) -> Duration {
         let (comm, owned) = (self.comm, &self.owned[..]);
         let mut exchange = Duration::ZERO;
         match self.exchange {
             Exchange::Hemispheres => {
+                let tier = &mut self.tiers[self.last_tier];
+                let cols = tier.raster.resolution().cols as usize;
                 self.packed.clear();
                 self.packed.extend(
-                    self.cells_of[comm.rank()]
+                    tier.cells_of[comm.rank()]
                         .iter()
                         .map(|&i| self.items[i as usize]),
                 );
                 let t = Instant::now();
-                let all = comm.all_gather_u32(&self.packed, Some(&self.cell_counts));
+                let all = comm.all_gather_u32(&self.packed, Some(&tier.cell_counts));
                 exchange += t.elapsed();
-                for (cells, values) in self.cells_of.iter().zip(&all) {
+                for (cells, values) in tier.cells_of.iter().zip(&all) {
                     for (&c, &v) in cells.iter().zip(values) {
-                        self.full[c as usize] = v;
+                        tier.full[c as usize] = v;
                     }
                 }
                 self.acc
-                    .add_cells(&self.full, cols, 0, &self.weights, Some(owned));
+                    .add_cells(&tier.full, cols, 0, &tier.weights, Some(owned));
                 if self.method == FormFactorMethod::Hybrid {
                     // Coverage counts are per rank: send them to the owners.
                     exchange += send_to_owners(
                         comm,
                         &self.element_rank,
                         &mut self.acc,
-                        self.raster.coverage_pairs(),
+                        tier.raster.coverage_pairs(),
                     );
                 }
             }
             Exchange::FormFactors => {
-                self.add_own(cols);
+                self.add_own();
                 let t = Instant::now();
                 comm.reduce_broadcast_sum(self.acc.dense_mut());
                 exchange += t.elapsed();
                 self.acc.retouch(&self.owned);
             }
             Exchange::Sparse => {
-                self.add_own(cols);
+                self.add_own();
                 self.acc.drain_fixed(&mut self.pairs);
                 exchange += send_to_owners(
                     comm,
@@ -497,20 +596,24 @@ impl FormFactorSource for GpuFormFactors<'_> {
         &mut self,
         shooter: u32,
         region: &ShotRegion,
-        out: &mut Vec<(u32, f64)>,
+        out: &mut Vec<Transfer>,
     ) -> Result<(), GpuError> {
         let start = Instant::now();
         let centre = region.centre;
-        let key = (shooter, centre.to_array().map(f32::to_bits));
+        let tier = self.tier_for(region.power);
+        let key = (shooter, centre.to_array().map(f32::to_bits), tier as u8);
         if let Some(row) = self.cache.get(&key) {
-            row.combine(&region.weights, out);
+            row.combine(region, out);
             self.timings.cached += 1;
             self.timings.sum += start.elapsed();
             self.busy.push(start.elapsed().as_secs_f64());
             return Ok(());
         }
         let before = self.timings.bounds + self.timings.rasterise + self.timings.read_back;
-        let mut exchange = self.hemisphere(shooter, centre)?;
+        if tier > 0 {
+            self.timings.coarse += 1;
+        }
+        let mut exchange = self.hemisphere(shooter, centre, tier)?;
         let row = match self.method {
             FormFactorMethod::Hemisphere => Row {
                 columns: 1,
@@ -559,7 +662,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
                     };
                     for (group, at) in crate::formfactor::split_groups(self.mesh, shooter, columns)
                     {
-                        exchange += self.hemisphere(shooter, at)?;
+                        exchange += self.hemisphere(shooter, at, tier)?;
                         merged.merge(&crate::formfactor::hybrid_row(
                             self.mesh,
                             shooter,
@@ -573,7 +676,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
                 row
             }
         };
-        row.combine(&region.weights, out);
+        row.combine(region, out);
         if self.cache_budget > 0 {
             self.pending = Some((key, row));
             if self.comm.size() == 1 {
@@ -717,10 +820,13 @@ fn shoot_until(
         // One collective per shot decides both the stop rule and the shooter:
         // every rank's unshot power (fixed point, exact in f64 below 2^53) and
         // its best patch.
-        const W: usize = 13;
-        let mine: [f64; W] = match solver.local_candidate() {
-            Some(c) => [
-                solver.local_unshot_fixed() as f64,
+        const W: usize = 17;
+        let net = solver.local_net_unshot();
+        let mut mine = [0.0; W];
+        mine[0] = solver.local_unshot_fixed() as f64;
+        mine[1] = -1.0;
+        if let Some(c) = solver.local_candidate() {
+            mine[1..10].copy_from_slice(&[
                 c.patch as f64,
                 c.power,
                 c.unshot[0],
@@ -730,20 +836,14 @@ fn shoot_until(
                 c.centre.y as f64,
                 c.centre.z as f64,
                 c.weighted as u8 as f64,
-                landed_fixed,
-                source.pending_bytes() as f64,
-                hooks.flags() as f64,
-            ],
-            None => {
-                let mut v = [0.0; W];
-                v[0] = solver.local_unshot_fixed() as f64;
-                v[1] = -1.0;
-                v[10] = landed_fixed;
-                v[11] = source.pending_bytes() as f64;
-                v[12] = hooks.flags() as f64;
-                v
-            }
-        };
+            ]);
+            mine[13] = c.lit;
+        }
+        mine[10] = landed_fixed;
+        mine[11] = source.pending_bytes() as f64;
+        mine[12] = hooks.flags() as f64;
+        // Signed unshot power per channel, fixed point: exact in f64 below 2^53.
+        mine[14..17].copy_from_slice(&net.map(|x| x as f64));
         let all = comm.all_gather_f64(&mine);
         if ranks > 1 {
             source.settle_cache(all.chunks_exact(W).map(|c| c[11] as u64).sum());
@@ -777,43 +877,66 @@ fn shoot_until(
                 // f32 -> f64 -> f32 is exact, so every rank gets the owner's point.
                 centre: glam::Vec3::new(c[6] as f32, c[7] as f32, c[8] as f32),
                 weighted: c[9] != 0.0,
+                lit: c[13],
             }
         }));
         stats.select += shot_start.elapsed();
         let Some(best) = best.filter(|b| b.power >= floor) else {
             break;
         };
-        let mut region = ShotRegion {
-            centre: best.centre,
-            weights: Vec::new(),
-        };
-        if best.weighted {
-            // Only the owner knows how the unshot radiosity is spread over the
-            // shooter's elements: it tells the others (all know how many).
+        // The whole solution's signed unshot power, summed exactly: every
+        // rank gets the same ambient term, whatever their number.
+        let mut net: NetUnshot = [0; 3];
+        for c in all.chunks_exact(W) {
+            for (n, x) in net.iter_mut().zip(&c[14..17]) {
+                *n += *x as i64;
+            }
+        }
+        let ambient = solver.ambient_from(net);
+        let region = if best.weighted {
+            // Only the owner knows what each of the shooter's elements
+            // shoots: it tells the others (all know how many there are).
             let owner = best.patch as usize % ranks;
             let m = mesh.patches[best.patch as usize].elements.len();
-            let mine = if rank == owner {
-                solver.shooting_region(best.patch).weights
-            } else {
-                vec![0.0; m]
-            };
+            let mut mine = vec![0.0; 3 * m + 3];
+            if rank == owner {
+                let r = solver.shooting_region(best.patch, ambient);
+                mine[..3].copy_from_slice(&r.shoot);
+                for n in 0..m {
+                    mine[3 + 3 * n..6 + 3 * n]
+                        .copy_from_slice(r.elements.get(n).unwrap_or(&r.shoot));
+                }
+            }
             let all = comm.all_gather_f64(&mine);
-            region.weights = all[owner * m..(owner + 1) * m].to_vec();
-        }
+            let theirs = &all[owner * (3 * m + 3)..(owner + 1) * (3 * m + 3)];
+            let elements: Vec<[f64; 3]> = theirs[3..]
+                .chunks_exact(3)
+                .map(|x| [x[0], x[1], x[2]])
+                .collect();
+            let uniform = elements.iter().all(|e| *e == elements[0]);
+            ShotRegion {
+                centre: best.centre,
+                power: best.power,
+                shoot: [theirs[0], theirs[1], theirs[2]],
+                elements: if uniform { Vec::new() } else { elements },
+            }
+        } else {
+            solver.candidate_region(&best, ambient)
+        };
         source.form_factors(best.patch, &region, &mut ff)?;
         let t = Instant::now();
-        let shot = solver.shoot_candidate(&best, &ff);
+        let shot = solver.shoot_candidate(&best, &region, &ff);
         let dt = t.elapsed();
         // This rank's elements' share of what landed, told at the next collective.
         // Each element's F is rounded on its own, so the sum does not depend
         // on how elements are split between ranks.
         let own: u64 = ff
             .iter()
-            .filter(|(j, _)| solver.owns(mesh.elements[*j as usize].patch))
-            .map(|(_, f)| (f.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64)
+            .filter(|t| solver.owns(mesh.elements[t.element as usize].patch))
+            .map(|t| (t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64)
             .sum();
         landed_fixed = own as f64;
-        last_power = Some(shot.power);
+        last_power = Some(shot.shot_power);
         stats.update += dt;
         stats.patch_power[best.patch as usize] += shot.power;
         if let Some(b) = source.busy.last_mut() {
@@ -947,13 +1070,16 @@ fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         geometry.extend_from_slice(format!("{} {:?};", p.node, p.subdivision).as_bytes());
     }
     let settings = format!(
-        "{} {:?} {:?} {} {:?} {}",
+        "{} {:?} {:?} {} {} {:?} {} {:?} {}",
         opts.resolution,
         opts.form_factor,
         mesh_settings(opts),
         opts.split_shots,
+        opts.overshoot,
         opts.projection,
-        opts.tessellation_tolerance
+        opts.tessellation_tolerance,
+        opts.coarse.map(|r| r.to_string()),
+        opts.coarse_below
     );
     crate::checkpoint::fingerprint(&[
         &geometry,
@@ -999,6 +1125,7 @@ pub fn refined_mesh(
         let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
         let started = Instant::now();
         let mut solver = Solver::partitioned(&mesh, comm.rank(), comm.size());
+        solver.set_overshoot(opts.overshoot);
         // Shots after the last one strong enough to be refined change nothing.
         let floor = refine::SHOOTER_TOL * solver.emitted_power();
         let stats = shoot_until(
@@ -1121,6 +1248,7 @@ pub fn render_on(
     let layout = source.layout();
 
     let mut solver = Solver::partitioned(&mesh, rank, ranks);
+    solver.set_overshoot(opts.overshoot);
     let mut trace = Trace::default();
     // The refinement passes (and, resuming, the solve before the checkpoint)
     // count as solve time (set-up excluded), so the trace's times are the
@@ -1212,6 +1340,7 @@ pub fn render_on(
     timings.rects_per_shot = timings_src.rects as f64 / shots.max(1) as f64;
     timings.cached_shots = timings_src.cached;
     timings.split_shots = timings_src.split;
+    timings.coarse_shots = timings_src.coarse;
     timings.rasterise = timings_src.rasterise.as_secs_f64();
     timings.read_back = timings_src.read_back.as_secs_f64();
     timings.exchange = timings_src.exchange.as_secs_f64();
@@ -1339,6 +1468,11 @@ pub fn build_report(
             image_size,
             shading: opts.shading,
             ambient: opts.ambient,
+            overshoot: opts.overshoot,
+            coarse: opts
+                .coarse
+                .filter(|c| opts.coarse_below > 0.0 && c.cells() < opts.resolution.cells())
+                .map(|c| (c.to_string(), opts.coarse_below)),
         },
         device: gpu.describe(),
         refinement: Refinement::default(),

@@ -100,6 +100,11 @@ pub struct Settings {
     /// Whether the ambient term (the unshot light's estimate) is in the
     /// image and in the reported radiosities.
     pub ambient: bool,
+    /// Whether shooters overshoot by the ambient term.
+    pub overshoot: bool,
+    /// The hemisphere resolution of weak shooters, and below what fraction
+    /// of the emitted power a shooter is weak (absent: every shot at `resolution`).
+    pub coarse: Option<(String, f64)>,
 }
 
 /// One point of the convergence trace.
@@ -170,6 +175,9 @@ pub struct Timings {
     /// Shots split into one hemisphere per group of shooter elements
     /// (visibility varied across the shooter).
     pub split_shots: u64,
+    /// Shots drawn at the coarse hemisphere resolution (weak shooters;
+    /// rasterised shots only).
+    pub coarse_shots: u64,
     /// Drawing hemispheres on the GPU and waiting for them (summed over shots).
     pub rasterise: f64,
     /// Reading item buffers back (summed over shots).

@@ -3,12 +3,16 @@
 //!
 //! 1. pick the patch i with the largest unshot power dB_i * A_i;
 //! 2. get the form factor F_ij from i to every element j (from a [`FormFactorSource`]);
-//! 3. give each element dB_j = rho_j * dB_i * F_ij * A_i / A_j, added to B_j and,
-//!    area-weighted, to its patch's unshot store;
-//! 4. set dB_i = 0; stop when the unshot power is a small fraction of the emitted power.
+//! 3. shoot S_i = dB_i + rho_i * A (overshooting, Feda & Purgathofer 1992:
+//!    A is the ambient term, the light i can expect still to receive; 0 with
+//!    overshooting off): each element gets dB_j = rho_j * S_i * F_ij * A_i / A_j,
+//!    added to B_j and, area-weighted, to its patch's unshot store;
+//! 4. set dB_i = dB_i - S_i (= -rho_i * A: negative, the light shot ahead of
+//!    its arrival, taken back when it arrives); stop when the unshot power
+//!    (of |dB|) is a small fraction of the emitted power.
 //!
-//! The solver knows nothing of GPUs or ranks: form factors arrive as sparse
-//! (element, F) pairs.
+//! Each element of the shooter shoots its own share, per channel. The solver
+//! knows nothing of GPUs or ranks: form factors arrive as sparse [`Transfer`]s.
 
 use crate::mesh::Mesh;
 
@@ -16,34 +20,59 @@ use crate::mesh::Mesh;
 pub trait FormFactorSource {
     /// The error a shot can fail with.
     type Error;
-    /// Fills `out` with (element, F_ij) pairs for shooter patch `shooter`,
-    /// shooting from `region` (see [`Solver::shooting_region`]), sorted by element.
+    /// Fills `out` with what shooter patch `shooter` sends each element it
+    /// reaches, shooting `region` (see [`Solver::shooting_region`]), sorted by element.
     fn form_factors(
         &mut self,
         shooter: u32,
         region: &ShotRegion,
-        out: &mut Vec<(u32, f64)>,
+        out: &mut Vec<Transfer>,
     ) -> Result<(), Self::Error>;
 }
 
-/// How a shooter patch shoots: where its hemisphere goes, and how its unshot
-/// radiosity is spread over its elements.
+/// What one shot sends one receiving element.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Transfer {
+    /// The receiving element.
+    pub element: u32,
+    /// F_ij from the shooter patch to the element, as if the patch shot
+    /// uniformly (the geometry alone: the share of a shot that lands).
+    pub form_factor: f64,
+    /// sum_k F_kj * S_k over the shooter's elements k, per channel: the shot
+    /// radiosity the element receives before its reflectance and the area
+    /// ratio A_i / A_j (F_ij * S_i when the patch shoots uniformly).
+    pub radiosity: [f64; 3],
+}
+
+/// How a shooter patch shoots: where its hemisphere goes, and what radiosity
+/// it and each of its elements shoot.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ShotRegion {
     /// The hemisphere's centre (a point of the patch).
     pub centre: glam::Vec3,
-    /// Per element of the patch (in order), its unshot radiosity over the
-    /// patch's (summed over RGB): the patch shoots each element's own share,
-    /// so a coarse shooter keeps the detail its elements received (hidden
-    /// elements shoot nothing). Empty when all are equal (the whole patch
-    /// shoots uniformly).
-    pub weights: Vec<f64>,
+    /// The shooter's unshot power (of |dB|, sum over RGB), W: how much the
+    /// shot matters (a weak one may draw a coarser hemisphere).
+    pub power: f64,
+    /// The radiosity the patch shoots, per channel (area-weighted over its elements).
+    pub shoot: [f64; 3],
+    /// Per element of the patch (in order), the radiosity it shoots, per
+    /// channel: the patch shoots each element's own share, so a coarse
+    /// shooter keeps the detail its elements received (hidden elements shoot
+    /// nothing). Empty when all equal `shoot` (the patch shoots uniformly).
+    pub elements: Vec<[f64; 3]>,
+}
+
+impl ShotRegion {
+    /// Whether the patch shoots the same radiosity from every element.
+    pub fn uniform(&self) -> bool {
+        self.elements.is_empty()
+    }
 }
 
 /// When to stop shooting.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct StopRule {
-    /// Stop once unshot power / emitted power is at most this.
+    /// Stop once unshot power (of |dB|) / emitted power is at most this.
     pub threshold: f64,
     /// Stop after this many shots regardless.
     pub max_shots: u64,
@@ -63,8 +92,11 @@ impl Default for StopRule {
 pub struct Shot {
     /// The patch that shot.
     pub shooter: u32,
-    /// Its unshot power before the shot (sum over RGB), W.
+    /// Its unshot power before the shot (of |dB|, sum over RGB), W.
     pub power: f64,
+    /// The power it shot (sum over RGB; with overshooting, more than `power`,
+    /// or negative where it takes back light shot ahead), W.
+    pub shot_power: f64,
     /// Sum of F_ij over all elements (1 in a closed scene).
     pub form_factor_sum: f64,
 }
@@ -74,14 +106,17 @@ pub struct Shot {
 pub struct Candidate {
     /// The patch.
     pub patch: u32,
-    /// Its unshot power (sum over RGB), W.
+    /// Its unshot power (of |dB|, sum over RGB), W.
     pub power: f64,
     /// Its unshot radiosity dB.
     pub unshot: [f64; 3],
     /// Where its hemisphere goes (see [`Solver::shooting_region`]).
     pub centre: glam::Vec3,
-    /// Whether its elements' unshot radiosities differ (see [`ShotRegion::weights`]).
+    /// Whether its elements shoot different radiosities (see [`ShotRegion::elements`]).
     pub weighted: bool,
+    /// The area share of its elements that have received light (only they
+    /// overshoot: an element hidden under an object never receives any).
+    pub lit: f64,
 }
 
 impl Candidate {
@@ -114,6 +149,11 @@ pub struct SolverState {
     pub retention: [f64; 2],
 }
 
+/// The signed unshot power per channel, over the emitted power, in
+/// [`UNSHOT_ONE`] fixed point (so ranks sum it exactly): what the ambient
+/// term and overshooting are computed from.
+pub type NetUnshot = [i64; 3];
+
 /// Fixed-point scale of unshot power as a fraction of the emitted power, so
 /// the stop rule sums exactly and ranks agree bit for bit.
 pub const UNSHOT_ONE: f64 = (1u64 << 40) as f64;
@@ -135,11 +175,40 @@ pub struct Solver<'m> {
     shots: u64,
     /// Shot power so far, and landed power so far (see [`Solver::note_retention`]).
     retention: [f64; 2],
-    ff: Vec<(u32, f64)>,
+    /// Whether shooters overshoot by the ambient term (see the module docs).
+    overshoot: bool,
+    /// Area-weighted mean reflectance (the ambient term's rho_avg).
+    mean_reflectance: [f64; 3],
+    /// The mesh's area.
+    total_area: f64,
+    ff: Vec<Transfer>,
 }
 
+/// The area-weighted mean reflectance of a mesh, per channel.
+fn mean_reflectance(mesh: &Mesh) -> [f64; 3] {
+    let total_area = mesh.total_area();
+    let mut out = [0.0; 3];
+    if total_area <= 0.0 {
+        return out;
+    }
+    for e in &mesh.elements {
+        let rho = mesh.polygons[e.polygon as usize].reflectance;
+        for c in 0..3 {
+            out[c] += rho[c] * e.area;
+        }
+    }
+    out.map(|x| x / total_area)
+}
+
+/// Power of a radiosity over an area, sum over RGB (signed).
 fn power(b: &[f64; 3], area: f64) -> f64 {
     (b[0] + b[1] + b[2]) * area
+}
+
+/// Power of |b| over an area, sum over RGB: how much a residual still
+/// matters, whatever its sign.
+fn abs_power(b: &[f64; 3], area: f64) -> f64 {
+    (b[0].abs() + b[1].abs() + b[2].abs()) * area
 }
 
 impl<'m> Solver<'m> {
@@ -175,8 +244,22 @@ impl<'m> Solver<'m> {
             emitted_power,
             shots: 0,
             retention: [0.0; 2],
+            overshoot: false,
+            mean_reflectance: mean_reflectance(mesh),
+            total_area: mesh.total_area(),
             ff: Vec::new(),
         }
+    }
+
+    /// Turns overshooting by the ambient term on or off (off by default here;
+    /// the renderer's default is on).
+    pub fn set_overshoot(&mut self, on: bool) {
+        self.overshoot = on;
+    }
+
+    /// Whether shooters overshoot.
+    pub fn overshoot(&self) -> bool {
+        self.overshoot
     }
 
     /// The mesh this solver works on.
@@ -208,18 +291,35 @@ impl<'m> Solver<'m> {
         (self.rank..self.mesh.patches.len()).step_by(self.ranks)
     }
 
-    /// This rank's unshot power over the emitted power, in [`UNSHOT_ONE`] fixed point.
+    /// This rank's unshot power (of |dB|) over the emitted power, in
+    /// [`UNSHOT_ONE`] fixed point.
     pub fn local_unshot_fixed(&self) -> u64 {
         if self.emitted_power <= 0.0 {
             return 0;
         }
         self.own_patches()
             .map(|i| {
-                (power(&self.unshot[i], self.mesh.patches[i].area) / self.emitted_power
+                (abs_power(&self.unshot[i], self.mesh.patches[i].area) / self.emitted_power
                     * UNSHOT_ONE)
                     .round() as u64
             })
             .sum()
+    }
+
+    /// This rank's signed unshot power per channel (see [`NetUnshot`]); the
+    /// sum over ranks is the whole solution's.
+    pub fn local_net_unshot(&self) -> NetUnshot {
+        let mut out = [0i64; 3];
+        if self.emitted_power <= 0.0 {
+            return out;
+        }
+        for i in self.own_patches() {
+            let (b, a) = (&self.unshot[i], self.mesh.patches[i].area);
+            for c in 0..3 {
+                out[c] += (b[c] * a / self.emitted_power * UNSHOT_ONE).round() as i64;
+            }
+        }
+        out
     }
 
     /// Unshot power / emitted power (one rank: this solver's; see [`Solver::local_unshot_fixed`]).
@@ -240,50 +340,114 @@ impl<'m> Solver<'m> {
     /// This rank's patch with the largest unshot power (lowest index on ties), if any has some.
     pub fn local_candidate(&self) -> Option<Candidate> {
         Candidate::best(self.own_patches().filter_map(|i| {
-            let w = power(&self.unshot[i], self.mesh.patches[i].area);
+            let w = abs_power(&self.unshot[i], self.mesh.patches[i].area);
             (w > 0.0).then_some(Candidate {
                 patch: i as u32,
                 power: w,
                 unshot: self.unshot[i],
                 centre: glam::Vec3::ZERO,
                 weighted: false,
+                lit: 0.0,
             })
         }))
         .map(|c| {
-            let region = self.shooting_region(c.patch);
+            let p = &self.mesh.patches[c.patch as usize];
+            let lit_area: f64 = p
+                .elements
+                .clone()
+                .filter(|&j| self.lit(j))
+                .map(|j| self.mesh.elements[j as usize].area)
+                .sum();
+            let first = self.element_unshot[p.elements.start as usize];
+            let all_lit = p.elements.clone().all(|j| self.lit(j));
+            let none_lit = !p.elements.clone().any(|j| self.lit(j));
             Candidate {
-                centre: region.centre,
-                weighted: !region.weights.is_empty(),
+                centre: self.shooting_centre(c.patch),
+                weighted: !(all_lit || none_lit)
+                    || p.elements
+                        .clone()
+                        .any(|j| self.element_unshot[j as usize] != first),
+                lit: if all_lit { 1.0 } else { lit_area / p.area },
                 ..c
             }
         })
     }
 
-    /// How patch `patch` shoots. The hemisphere sits at the patch's centre,
-    /// unless some of its elements have no radiosity at all (hidden, e.g. under
-    /// an object resting on the patch's polygon): then at the area-weighted
-    /// centre of the others, since a hemisphere at a hidden point would see
-    /// nothing. Each element shoots its own unshot radiosity (the weights).
-    /// Needs this rank to own `patch`.
-    pub fn shooting_region(&self, patch: u32) -> ShotRegion {
+    /// Whether element `j` has received (or emits) any light.
+    fn lit(&self, j: u32) -> bool {
+        self.radiosity[j as usize].iter().any(|&b| b > 0.0)
+    }
+
+    /// Where patch `patch`'s hemisphere goes: the patch's centre, unless some
+    /// of its elements have no radiosity at all (hidden, e.g. under an object
+    /// resting on the patch's polygon): then the area-weighted centre of the
+    /// others, since a hemisphere at a hidden point would see nothing.
+    fn shooting_centre(&self, patch: u32) -> glam::Vec3 {
         let p = &self.mesh.patches[patch as usize];
-        let total: f64 = self.unshot[patch as usize].iter().sum();
-        let share = |j: u32| self.element_unshot[j as usize].iter().sum::<f64>() / total;
-        let first = share(p.elements.start);
-        let weights = if total > 0.0 && p.elements.clone().any(|j| share(j) != first) {
-            p.elements.clone().map(share).collect()
-        } else {
-            Vec::new()
-        };
-        let lit = |j: &u32| self.radiosity[*j as usize].iter().any(|&b| b > 0.0);
-        let centre = if p.elements.clone().all(|j| lit(&j)) {
+        if p.elements.clone().all(|j| self.lit(j)) {
             p.centre
         } else {
-            let lit_elements = p.elements.clone().filter(lit);
+            let lit_elements = p.elements.clone().filter(|&j| self.lit(j));
             crate::mesh::area_centroid(lit_elements.map(|j| &self.mesh.elements[j as usize]))
                 .unwrap_or(p.centre)
-        };
-        ShotRegion { centre, weights }
+        }
+    }
+
+    /// The overshoot of a patch of reflectance `rho` whose lit share is `lit`,
+    /// given the ambient term `ambient` (0 when overshooting is off).
+    fn overshoot_by(&self, rho: [f64; 3], lit: f64, ambient: [f64; 3]) -> [f64; 3] {
+        if !self.overshoot {
+            return [0.0; 3];
+        }
+        [0, 1, 2].map(|c| rho[c] * ambient[c] * lit)
+    }
+
+    /// How `candidate` shoots, for a rank that knows only the candidate
+    /// (uniform shooters; a weighted one's elements come from its owner's
+    /// [`Solver::shooting_region`]). `ambient` is [`Solver::ambient_from`]
+    /// of the whole solution's [`NetUnshot`].
+    pub fn candidate_region(&self, candidate: &Candidate, ambient: [f64; 3]) -> ShotRegion {
+        let p = &self.mesh.patches[candidate.patch as usize];
+        let rho = self.mesh.polygons[p.polygon as usize].reflectance;
+        let over = self.overshoot_by(rho, candidate.lit, ambient);
+        ShotRegion {
+            centre: candidate.centre,
+            power: candidate.power,
+            shoot: [0, 1, 2].map(|c| candidate.unshot[c] + over[c]),
+            elements: Vec::new(),
+        }
+    }
+
+    /// How patch `patch` shoots (see [`Solver::shooting_centre`]): each element
+    /// its own unshot radiosity, plus, with overshooting, rho times the ambient
+    /// term `ambient` if it has received light. Needs this rank to own `patch`.
+    pub fn shooting_region(&self, patch: u32, ambient: [f64; 3]) -> ShotRegion {
+        let p = &self.mesh.patches[patch as usize];
+        let rho = self.mesh.polygons[p.polygon as usize].reflectance;
+        let over = self.overshoot_by(rho, 1.0, ambient);
+        let elements: Vec<[f64; 3]> = p
+            .elements
+            .clone()
+            .map(|j| {
+                let u = self.element_unshot[j as usize];
+                let o = if self.lit(j) { over } else { [0.0; 3] };
+                [0, 1, 2].map(|c| u[c] + o[c])
+            })
+            .collect();
+        let mut shoot = [0.0; 3];
+        for (j, s) in p.elements.clone().zip(&elements) {
+            let share = self.mesh.elements[j as usize].area / p.area;
+            for c in 0..3 {
+                shoot[c] += s[c] * share;
+            }
+        }
+        let uniform = elements.iter().all(|s| *s == elements[0]);
+        ShotRegion {
+            centre: self.shooting_centre(patch),
+            power: abs_power(&self.unshot[patch as usize], p.area),
+            shoot: if uniform { elements[0] } else { shoot },
+            elements: if uniform { Vec::new() } else { elements },
+        }
     }
 
     /// The patch with the largest unshot power (one rank).
@@ -291,32 +455,51 @@ impl<'m> Solver<'m> {
         self.local_candidate().map(|c| c.patch)
     }
 
-    /// Distributes the unshot radiosity of `shooter` through the form factors
-    /// `ff`, updating only this rank's elements.
-    pub fn shoot_candidate(&mut self, shooter: &Candidate, ff: &[(u32, f64)]) -> Shot {
+    /// Shoots `region` from `shooter` through the transfers `ff`, updating
+    /// only this rank's elements (and the shooter's residual, on its owner).
+    pub fn shoot_candidate(
+        &mut self,
+        shooter: &Candidate,
+        region: &ShotRegion,
+        ff: &[Transfer],
+    ) -> Shot {
         let mesh = self.mesh;
         let i = shooter.patch as usize;
-        if self.owns(shooter.patch) {
+        let p = &mesh.patches[i];
+        if self.owns(shooter.patch) && !self.overshoot {
             self.unshot[i] = [0.0; 3];
-            for k in mesh.patches[i].elements.clone() {
+            for k in p.elements.clone() {
                 self.element_unshot[k as usize] = [0.0; 3];
             }
+        } else if self.owns(shooter.patch) {
+            // What each element did not shoot stays: minus its overshoot.
+            let mut rest = [0.0; 3];
+            for (n, k) in p.elements.clone().enumerate() {
+                let s = region.elements.get(n).unwrap_or(&region.shoot);
+                let u = &mut self.element_unshot[k as usize];
+                for c in 0..3 {
+                    u[c] -= s[c];
+                    rest[c] += u[c] * mesh.elements[k as usize].area / p.area;
+                }
+            }
+            self.unshot[i] = rest;
         }
-        let (db, area) = (shooter.unshot, mesh.patches[i].area);
+        let area = p.area;
         let mut form_factor_sum = 0.0;
-        for &(j, f) in ff {
-            form_factor_sum += f;
-            let el = &mesh.elements[j as usize];
+        for t in ff {
+            form_factor_sum += t.form_factor;
+            let j = t.element as usize;
+            let el = &mesh.elements[j];
             if !self.owns(el.patch) {
                 continue;
             }
             let rho = mesh.polygons[el.polygon as usize].reflectance;
-            let scale = f * area / el.area;
+            let scale = area / el.area;
             let patch_share = el.area / mesh.patches[el.patch as usize].area;
             for c in 0..3 {
-                let d = rho[c] * db[c] * scale;
-                self.radiosity[j as usize][c] += d;
-                self.element_unshot[j as usize][c] += d;
+                let d = rho[c] * t.radiosity[c] * scale;
+                self.radiosity[j][c] += d;
+                self.element_unshot[j][c] += d;
                 self.unshot[el.patch as usize][c] += d * patch_share;
             }
         }
@@ -324,6 +507,7 @@ impl<'m> Solver<'m> {
         Shot {
             shooter: shooter.patch,
             power: shooter.power,
+            shot_power: power(&region.shoot, area),
             form_factor_sum,
         }
     }
@@ -428,38 +612,33 @@ impl<'m> Solver<'m> {
         self.shots = shots;
     }
 
-    /// Distributes the shooter's unshot radiosity through the form factors `ff` (one rank).
-    pub fn shoot(&mut self, shooter: u32, ff: &[(u32, f64)]) -> Shot {
-        let i = shooter as usize;
-        let unshot = self.unshot[i];
-        let c = Candidate {
-            patch: shooter,
-            power: power(&unshot, self.mesh.patches[i].area),
-            unshot,
-            centre: glam::Vec3::ZERO,
-            weighted: false,
-        };
-        let shot = self.shoot_candidate(&c, ff);
-        self.note_retention(shot.power, shot.form_factor_sum);
-        shot
-    }
-
-    /// One whole shot: select, get form factors, distribute. `None` when nothing is left to shoot.
+    /// One whole shot (one rank): select, get form factors, distribute.
+    /// `None` when nothing is left to shoot.
     pub fn step<S: FormFactorSource>(&mut self, source: &mut S) -> Result<Option<Shot>, S::Error> {
-        let Some(shooter) = self.select_shooter() else {
+        let Some(candidate) = self.local_candidate() else {
             return Ok(None);
         };
+        // The same region the ranks' loop builds (`render::shoot_until`).
+        let ambient = self.ambient();
+        let region = if candidate.weighted {
+            self.shooting_region(candidate.patch, ambient)
+        } else {
+            self.candidate_region(&candidate, ambient)
+        };
         let mut ff = std::mem::take(&mut self.ff);
-        source.form_factors(shooter, &self.shooting_region(shooter), &mut ff)?;
-        let shot = self.shoot(shooter, &ff);
+        source.form_factors(candidate.patch, &region, &mut ff)?;
+        let shot = self.shoot_candidate(&candidate, &region, &ff);
+        self.note_retention(shot.shot_power, shot.form_factor_sum);
         self.ff = ff;
         Ok(Some(shot))
     }
 
-    /// Records that a shot of `power` landed the fraction `landed` of it on
-    /// the scene (the sum of its form factors over all elements; below 1 where
-    /// light escapes an open scene). The ambient term uses the power-weighted mean.
+    /// Records that a shot of `power` (of either sign) landed the fraction
+    /// `landed` of it on the scene (the sum of its form factors over all
+    /// elements; below 1 where light escapes an open scene). The ambient term
+    /// uses the |power|-weighted mean.
     pub fn note_retention(&mut self, power: f64, landed: f64) {
+        let power = power.abs();
         if power > 0.0 && landed.is_finite() {
             self.retention[0] += power;
             self.retention[1] += power * landed.clamp(0.0, 1.0);
@@ -486,30 +665,24 @@ impl<'m> Solver<'m> {
     /// U f / (A (1 - rho_avg f)) per channel (Cohen's 1 / (1 - rho_avg) in a
     /// closed scene). It estimates the light not yet shot; it is kept apart
     /// from [`Solver::radiosity`] and added by [`Solver::display_radiosity`].
+    /// Needs the whole solution (one rank, or assembled); ranks use
+    /// [`Solver::ambient_from`] with the sum of their [`Solver::local_net_unshot`].
     pub fn ambient(&self) -> [f64; 3] {
+        self.ambient_from(self.local_net_unshot())
+    }
+
+    /// The ambient term (see [`Solver::ambient`]) for the whole solution's signed
+    /// unshot power `net`: the same on every rank, whatever their number.
+    pub fn ambient_from(&self, net: NetUnshot) -> [f64; 3] {
         let f = self.retention();
-        let mesh = self.mesh;
-        let total_area = mesh.total_area();
-        let mut out = [0.0; 3];
+        let total_area = self.total_area;
         if total_area <= 0.0 {
-            return out;
+            return [0.0; 3];
         }
-        for c in 0..3 {
-            let unshot: f64 = self
-                .unshot
-                .iter()
-                .zip(&mesh.patches)
-                .map(|(b, p)| b[c] * p.area)
-                .sum();
-            let rho: f64 = mesh
-                .elements
-                .iter()
-                .map(|e| mesh.polygons[e.polygon as usize].reflectance[c] * e.area)
-                .sum::<f64>()
-                / total_area;
-            out[c] = unshot * f / total_area / (1.0 - rho * f).max(1e-3);
-        }
-        out
+        [0, 1, 2].map(|c| {
+            let unshot = net[c] as f64 / UNSHOT_ONE * self.emitted_power;
+            unshot * f / total_area / (1.0 - self.mean_reflectance[c] * f).max(1e-3)
+        })
     }
 
     /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.

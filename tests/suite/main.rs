@@ -10,6 +10,7 @@ mod determinism;
 mod furnace;
 mod fuzz;
 mod mpi;
+mod overshoot;
 mod projections;
 mod refine;
 mod shaders;

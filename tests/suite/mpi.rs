@@ -430,3 +430,27 @@ fn the_tessellated_projection_is_the_same_on_every_rank_count() {
     let exact = mpirun(1, dir.path(), "e1", &[]);
     assert_ne!(exact["surfaces"], base["surfaces"]);
 }
+
+#[test]
+fn overshooting_and_coarse_shots_agree_across_ranks() {
+    // The ambient term every rank overshoots by is summed in fixed point,
+    // and a weak shooter's coarse hemisphere is chosen from the gathered
+    // power: both the same whatever the rank count.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let args = ["--max-shots", "400", "--overshoot"];
+    let one = mpirun(1, dir.path(), "one", &args);
+    assert!(
+        one["timings"]["coarse_shots"]
+            .as_u64()
+            .expect("coarse count")
+            > 0,
+        "no coarse shot in 400"
+    );
+    assert_eq!(one["settings"]["overshoot"], true);
+    let two = mpirun(2, dir.path(), "two", &args);
+    same_result(&one, &two, "two ranks");
+    assert_eq!(
+        two["timings"]["coarse_shots"],
+        one["timings"]["coarse_shots"]
+    );
+}

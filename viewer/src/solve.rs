@@ -6,7 +6,7 @@ use radiosity::mesh::Mesh;
 use radiosity::parallel::Single;
 use radiosity::render::{GpuFormFactors, RenderOptions};
 use radiosity::scene::Scene;
-use radiosity::solver::{FormFactorSource, Solver};
+use radiosity::solver::Solver;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -144,6 +144,7 @@ fn solve(
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())
         .map_err(|e| e.to_string())?;
     let mut solver = Solver::new(&mesh);
+    solver.set_overshoot(opts.overshoot);
     let res = opts.resolution;
     {
         let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
@@ -160,7 +161,6 @@ fn solve(
     let mut steps_left: Option<u64> = None;
     // The automatic pause applies once: a step or resume goes past it.
     let mut pause_at = settings.pause_at;
-    let mut ff = Vec::new();
     let mut solve_time = Duration::ZERO;
     // The report's convergence trace, as `radiosity render` keeps it.
     let mut trace = radiosity::render::Trace::default();
@@ -207,14 +207,11 @@ fn solve(
             || steps_left == Some(0));
         if shooting {
             let t = Instant::now();
-            let Some(shooter) = solver.select_shooter() else {
+            let Some(shot) = solver.step(&mut source).map_err(|e| e.to_string())? else {
                 paused = true;
                 continue;
             };
-            source
-                .form_factors(shooter, &solver.shooting_region(shooter), &mut ff)
-                .map_err(|e| e.to_string())?;
-            solver.shoot(shooter, &ff);
+            let shooter = shot.shooter;
             solve_time += t.elapsed();
             if trace.due(solver.shots()) {
                 let seconds = solve_time.as_secs_f64();
@@ -236,7 +233,9 @@ fn solve(
             // Small scenes publish every shot; large ones at about 10 Hz.
             if mesh.elements.len() < 20_000 || last_publish.elapsed() > Duration::from_millis(100) {
                 s.radiance = Arc::new(display(&solver));
-                s.items = Arc::new(source.last_items().to_vec());
+                let (items, res) = source.last_items();
+                s.items = Arc::new(items.to_vec());
+                s.resolution = (res.rows, res.cols);
                 s.version += 1;
                 last_publish = Instant::now();
             }
@@ -252,7 +251,9 @@ fn solve(
             if now_idle && (s.paused != now_idle || s.converged != converged) {
                 // Publish the final state of a run of shots.
                 s.radiance = Arc::new(display(&solver));
-                s.items = Arc::new(source.last_items().to_vec());
+                let (items, res) = source.last_items();
+                s.items = Arc::new(items.to_vec());
+                s.resolution = (res.rows, res.cols);
                 s.version += 1;
                 wake();
             }
