@@ -632,7 +632,12 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 o.form_factor = method;
                 o.resolution = res;
                 eprintln!("accuracy: {} {method:?} {res}", scene.name);
-                let label = format!("{} {res}", format!("{method:?}").to_lowercase());
+                let coarse = o
+                    .coarse
+                    .filter(|c| o.coarse_below > 0.0 && c.cells() < res.cells())
+                    .map(|c| format!(", weak shooters {c}"))
+                    .unwrap_or_default();
+                let label = format!("{} {res}{coarse}", format!("{method:?}").to_lowercase());
                 curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
             }
         }
@@ -643,6 +648,26 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
             eprintln!("accuracy: {} hybrid, no refinement", scene.name);
             let label = "hybrid 128x512, no refinement (--refine 0)".to_string();
             curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+        }
+        if base.coarse_below > 0.0 {
+            // Coarse hemispheres for weak shooters against every shot at 128 x 512.
+            let mut o = base.clone();
+            o.coarse_below = 0.0;
+            eprintln!("accuracy: {} hybrid, every shot fine", scene.name);
+            let label = "hybrid 128x512, every shot at 128x512 (--coarse-below 0)".to_string();
+            curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
+        }
+        {
+            // Overshooting (Feda & Purgathofer 1992) against none.
+            let mut o = base.clone();
+            o.overshoot = !base.overshoot;
+            eprintln!("accuracy: {} hybrid, overshoot {}", scene.name, o.overshoot);
+            let label = if o.overshoot {
+                "hybrid 128x512, overshooting (--overshoot)"
+            } else {
+                "hybrid 128x512, no overshooting"
+            };
+            curves.push(run_curve(&gpu, &scene, &o, label.to_string(), &reference)?);
         }
         for &n in &args.patch_fractions {
             let p = scene.extent() / n.max(1.0);

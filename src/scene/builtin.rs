@@ -195,12 +195,13 @@ type Grid = ([u32; 2], [u32; 2]);
 
 // Subdivisions of the Cornell box, fixed in the file as a modeller would, so
 // the default render is quick: the automatic rule would give about 1000
-// patches; these keep every shooter at most an eighth of a wall.
-// 8 x 8 patches of 2 x 2 elements on the walls: every surface within 1 % of a
-// fine solution (6 x 6 left the blocks 2 % low: visibility from large floor
-// patches beside them).
-const CORNELL_WALL: Grid = ([8, 8], [2, 2]);
+// patches. Patches of about 5.5 cm everywhere (10 x 10 on the walls, the
+// tall block's sides 6 high), 2 x 2 elements each: every surface within
+// 0.5 % of a fine solution. (8 x 8 on the walls and 3 x 3 on both blocks
+// left the blocks 0.8-1.05 % low; 6 x 6, 2 % low.)
+const CORNELL_WALL: Grid = ([10, 10], [2, 2]);
 const CORNELL_BLOCK: Grid = ([3, 3], [2, 2]);
+const CORNELL_TALL_BLOCK: Grid = ([6, 3], [2, 2]);
 const CORNELL_LIGHT: Grid = ([2, 2], [2, 2]);
 
 /// The Cornell box from the Cornell Program of Computer Graphics' measured
@@ -365,7 +366,7 @@ fn cornell() -> String {
             oriented(&tall_block, tall_centre, false),
             WHITE,
             [0.0; 3],
-            CORNELL_BLOCK,
+            CORNELL_TALL_BLOCK,
         ),
     ];
     // The camera at (278, 273, -800) mm looks down +Z: glTF cameras look down
