@@ -583,6 +583,10 @@ fn hashed(id: u32) -> Color32 {
 }
 
 impl eframe::App for Viewer {
+    fn clear_color(&self, visuals: &egui::Visuals) -> [f32; 4] {
+        visuals.panel_fill.to_normalized_gamma_f32()
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let frame_start = std::time::Instant::now();
         // The previous frame's whole CPU time (UI, tessellation, painting).
@@ -592,48 +596,57 @@ impl eframe::App for Viewer {
         let ctx = ui.ctx().clone();
         let snap = self.snapshot();
         self.update_hemisphere(&ctx, &snap);
+        // No panel paints a background: the frame's clear colour is the
+        // panels' fill, and the view image covers the central panel. On a
+        // software rasteriser every pixel painted twice costs (1280 x 760,
+        // paused: 53 ms a frame with both fills, 36 ms without the central one).
+        let side = egui::Frame::side_top_panel(ui.style()).fill(Color32::TRANSPARENT);
         egui::Panel::right("controls")
             .min_size(330.0)
+            .frame(side)
             .show(ui, |ui| {
                 egui::ScrollArea::vertical().show(ui, |ui| self.side_panel(ui, &snap));
             });
-        egui::CentralPanel::default().show(ui, |ui| {
-            let avail = ui.available_size();
-            let ppp = ctx.pixels_per_point();
-            // While it solves, the view is drawn at half the window's pixels
-            // (a quarter of the work for the view thread, which shares the
-            // cores with the solve and the window); full size once it stops.
-            let scale = if snap.paused || snap.converged {
-                1.0
-            } else {
-                0.5
-            };
-            let size = [
-                (avail.x * ppp * scale) as u32,
-                (avail.y * ppp * scale) as u32,
-            ];
-            self.update_view(&ctx, &snap, size);
-            if let Some((tex, _)) = &self.view {
-                let response = ui
-                    .add(egui::Image::new((tex.id(), avail)).sense(egui::Sense::click_and_drag()));
-                let d = response.drag_delta();
-                if response.dragged_by(egui::PointerButton::Primary) {
-                    self.orbit.yaw -= d.x * 0.01;
-                    self.orbit.pitch = (self.orbit.pitch - d.y * 0.01).clamp(-1.5, 1.5);
-                } else if response.dragged_by(egui::PointerButton::Secondary) {
-                    let cam = self.orbit.camera();
-                    let k = self.orbit.distance * 0.002;
-                    self.orbit.target += (cam.rotation * Vec3::X) * (-d.x * k)
-                        + (cam.rotation * Vec3::Y) * (d.y * k);
+        egui::CentralPanel::default()
+            .frame(egui::Frame::NONE)
+            .show(ui, |ui| {
+                let avail = ui.available_size();
+                let ppp = ctx.pixels_per_point();
+                // While it solves, the view is drawn at half the window's pixels
+                // (a quarter of the work for the view thread, which shares the
+                // cores with the solve and the window); full size once it stops.
+                let scale = if snap.paused || snap.converged {
+                    1.0
+                } else {
+                    0.5
+                };
+                let size = [
+                    (avail.x * ppp * scale) as u32,
+                    (avail.y * ppp * scale) as u32,
+                ];
+                self.update_view(&ctx, &snap, size);
+                if let Some((tex, _)) = &self.view {
+                    let response = ui.add(
+                        egui::Image::new((tex.id(), avail)).sense(egui::Sense::click_and_drag()),
+                    );
+                    let d = response.drag_delta();
+                    if response.dragged_by(egui::PointerButton::Primary) {
+                        self.orbit.yaw -= d.x * 0.01;
+                        self.orbit.pitch = (self.orbit.pitch - d.y * 0.01).clamp(-1.5, 1.5);
+                    } else if response.dragged_by(egui::PointerButton::Secondary) {
+                        let cam = self.orbit.camera();
+                        let k = self.orbit.distance * 0.002;
+                        self.orbit.target += (cam.rotation * Vec3::X) * (-d.x * k)
+                            + (cam.rotation * Vec3::Y) * (d.y * k);
+                    }
+                    if response.hovered() {
+                        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+                        self.orbit.distance *= (-scroll * 0.002).exp();
+                    }
+                } else {
+                    ui.centered_and_justified(|ui| ui.label("preparing the scene…"));
                 }
-                if response.hovered() {
-                    let scroll = ui.input(|i| i.smooth_scroll_delta.y);
-                    self.orbit.distance *= (-scroll * 0.002).exp();
-                }
-            } else {
-                ui.centered_and_justified(|ui| ui.label("preparing the scene…"));
-            }
-        });
+            });
         self.take_screenshot_when_ready(&ctx, &snap);
         self.frames.record(frame_start);
         if self.args.frame_stats.is_some() {
