@@ -821,7 +821,12 @@ fn shoot_until(
         // every rank's unshot power (fixed point, exact in f64 below 2^53) and
         // its best patch.
         const W: usize = 17;
-        let net = solver.local_net_unshot();
+        // Only overshooting needs the ambient term during the loop.
+        let net = if solver.overshoot() {
+            solver.local_net_unshot()
+        } else {
+            [0; 3]
+        };
         let mut mine = [0.0; W];
         mine[0] = solver.local_unshot_fixed() as f64;
         mine[1] = -1.0;
@@ -1124,8 +1129,9 @@ pub fn refined_mesh(
         }
         let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
         let started = Instant::now();
+        // No overshooting here: the passes only measure the shooters, and
+        // the mesh they choose is then the same with or without it.
         let mut solver = Solver::partitioned(&mesh, comm.rank(), comm.size());
-        solver.set_overshoot(opts.overshoot);
         // Shots after the last one strong enough to be refined change nothing.
         let floor = refine::SHOOTER_TOL * solver.emitted_power();
         let stats = shoot_until(
@@ -1313,6 +1319,12 @@ pub fn render_on(
     let (b, u) = solver.local_state();
     let gathered_b = comm.gather_f64(&b);
     let gathered_u = comm.gather_f64(&u);
+    // With overshooting the unshot fraction sums elements' |unshot|.
+    let gathered_e = if opts.overshoot {
+        comm.gather_f64(&solver.local_element_unshot())
+    } else {
+        None
+    };
     let stats = comm.gather_f64(&stats_vector(
         &source.timings,
         select,
@@ -1332,6 +1344,9 @@ pub fn render_on(
         return Ok(None);
     };
     solver.assemble(&gathered_b, &gathered_u);
+    if let Some(e) = &gathered_e {
+        solver.assemble_element_unshot(e);
+    }
     solver.set_shots(shots);
 
     timings.select_shooter = select.as_secs_f64();
@@ -1562,9 +1577,19 @@ impl Trace {
         } else {
             let (b, u) = solver.local_state();
             let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
+            // With overshooting the unshot fraction sums elements' |unshot|.
+            let ge = if solver.overshoot() {
+                comm.gather_f64(&solver.local_element_unshot())
+            } else {
+                None
+            };
             gb.zip(gu).map(|(gb, gu)| {
                 let mut whole = Solver::new(solver.mesh());
                 whole.assemble(&gb, &gu);
+                if let Some(e) = &ge {
+                    whole.set_overshoot(true);
+                    whole.assemble_element_unshot(e);
+                }
                 whole.copy_retention(solver);
                 (
                     report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),

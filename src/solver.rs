@@ -298,12 +298,30 @@ impl<'m> Solver<'m> {
             return 0;
         }
         self.own_patches()
-            .map(|i| {
-                (abs_power(&self.unshot[i], self.mesh.patches[i].area) / self.emitted_power
-                    * UNSHOT_ONE)
-                    .round() as u64
-            })
+            .map(|i| (self.patch_power(i) / self.emitted_power * UNSHOT_ONE).round() as u64)
             .sum()
+    }
+
+    /// How much patch `i`'s residual still matters (sum over RGB, W). Without
+    /// overshooting every residual is positive and this is the patch's
+    /// unshot power. With it, elements of one patch can hold residuals of
+    /// both signs whose area-weighted mean cancels, and each must still be
+    /// shot: the sum of its elements' |unshot| powers.
+    fn patch_power(&self, i: usize) -> f64 {
+        let p = &self.mesh.patches[i];
+        if self.overshoot {
+            p.elements
+                .clone()
+                .map(|k| {
+                    abs_power(
+                        &self.element_unshot[k as usize],
+                        self.mesh.elements[k as usize].area,
+                    )
+                })
+                .sum()
+        } else {
+            abs_power(&self.unshot[i], p.area)
+        }
     }
 
     /// This rank's signed unshot power per channel (see [`NetUnshot`]); the
@@ -340,7 +358,7 @@ impl<'m> Solver<'m> {
     /// This rank's patch with the largest unshot power (lowest index on ties), if any has some.
     pub fn local_candidate(&self) -> Option<Candidate> {
         Candidate::best(self.own_patches().filter_map(|i| {
-            let w = abs_power(&self.unshot[i], self.mesh.patches[i].area);
+            let w = self.patch_power(i);
             (w > 0.0).then_some(Candidate {
                 patch: i as u32,
                 power: w,
@@ -444,7 +462,7 @@ impl<'m> Solver<'m> {
         let uniform = elements.iter().all(|s| *s == elements[0]);
         ShotRegion {
             centre: self.shooting_centre(patch),
-            power: abs_power(&self.unshot[patch as usize], p.area),
+            power: self.patch_power(patch as usize),
             shoot: if uniform { elements[0] } else { shoot },
             elements: if uniform { Vec::new() } else { elements },
         }
@@ -619,7 +637,11 @@ impl<'m> Solver<'m> {
             return Ok(None);
         };
         // The same region the ranks' loop builds (`render::shoot_until`).
-        let ambient = self.ambient();
+        let ambient = if self.overshoot {
+            self.ambient()
+        } else {
+            [0.0; 3]
+        };
         let region = if candidate.weighted {
             self.shooting_region(candidate.patch, ambient)
         } else {

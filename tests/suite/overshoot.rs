@@ -10,9 +10,9 @@ fn cornell(opts: &RenderOptions) -> Rendered {
     render(gpu(), &scene, opts, Duration::ZERO, &mut |_| {}).expect("render")
 }
 
-/// Largest relative difference between two solutions' elements (those with
-/// a noticeable radiosity), per channel.
-fn worst_element_difference(a: &Rendered, b: &Rendered) -> f64 {
+/// Relative differences between two solutions' elements (those with a
+/// noticeable radiosity), per channel.
+fn element_differences<'a>(a: &'a Rendered, b: &'a Rendered) -> impl Iterator<Item = f64> + 'a {
     let top = a
         .radiosity
         .iter()
@@ -22,9 +22,8 @@ fn worst_element_difference(a: &Rendered, b: &Rendered) -> f64 {
         .iter()
         .zip(&b.radiosity)
         .flat_map(|(x, y)| (0..3).map(move |c| (x[c], y[c])))
-        .filter(|(x, _)| *x > 1e-3 * top)
+        .filter(move |(x, _)| *x > 1e-3 * top)
         .map(|(x, y)| rel(y, x))
-        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -43,10 +42,31 @@ fn overshooting_reaches_the_same_solution_in_fewer_shots() {
     };
     let (a, b) = (cornell(&plain), cornell(&over));
     assert_eq!(a.radiosity.len(), b.radiosity.len(), "same mesh");
-    let worst = worst_element_difference(&a, &b);
     let (sa, sb) = (a.report.shots, b.report.shots);
-    eprintln!("shots {sa} plain, {sb} overshooting; worst element differs by {worst}");
-    assert!(worst < 2e-3, "overshooting ends elsewhere: {worst}");
+    // Per surface: the same answer.
+    for (p, q) in a.report.surfaces.iter().zip(&b.report.surfaces) {
+        let d = (0..3)
+            .map(|c| rel(q.radiosity[c], p.radiosity[c]))
+            .fold(0.0, f64::max);
+        eprintln!("{}: overshooting differs by {d}", p.node);
+        assert!(d < 1e-3, "{}: overshooting ends elsewhere ({d})", p.node);
+    }
+    // Per element: the same up to a handful of elements by a contact (the
+    // tall block's foot), whose patch's hemisphere sits at the centre of its
+    // elements lit so far when it first shoots, which depends on the order of
+    // the shots (3.7 % at most there, measured). Wrong bookkeeping (each
+    // element shooting the patch's mean colour) moves whole walls.
+    let differing = element_differences(&a, &b).filter(|&d| d > 2e-3).count();
+    let worst = element_differences(&a, &b).fold(0.0, f64::max);
+    eprintln!(
+        "shots {sa} plain, {sb} overshooting; {differing} of {} elements differ by more than 0.2 %, worst {worst}",
+        a.radiosity.len()
+    );
+    assert!(
+        differing * 100 < a.radiosity.len(),
+        "{differing} elements differ"
+    );
+    assert!(worst < 0.05, "an element differs by {worst}");
     assert!(
         (sb as f64) < 0.8 * sa as f64,
         "overshooting took {sb} shots, plain {sa}"
