@@ -181,7 +181,7 @@ fn row_cache_changes_no_number() {
         width: 0,
         ..RenderOptions::default()
     };
-    opts.stop.max_shots = 900;
+    opts.stop.max_shots = 1500;
     let cached = cornell(&opts);
     assert!(
         cached.report.timings.cached_shots > 300,

@@ -81,10 +81,10 @@ fn split_shots_agree_across_ranks() {
     // Long enough that some shooters have a near receiver partly hidden and
     // split their shot: the decision is gathered, so every rank splits alike.
     let dir = tempfile::tempdir().expect("temp dir");
-    let one = mpirun(1, dir.path(), "one", &["--max-shots", "300"]);
+    let one = mpirun(1, dir.path(), "one", &["--max-shots", "600"]);
     assert!(
         one["timings"]["split_shots"].as_u64().expect("split count") > 0,
-        "no split shot in 300"
+        "no split shot in 600"
     );
     for exchange in ["hemispheres", "sparse"] {
         let tag = format!("three-{exchange}");
@@ -92,7 +92,7 @@ fn split_shots_agree_across_ranks() {
             3,
             dir.path(),
             &tag,
-            &["--max-shots", "300", "--exchange", exchange],
+            &["--max-shots", "600", "--exchange", exchange],
         );
         same_result(&one, &r, &tag);
         assert_eq!(r["timings"]["split_shots"], one["timings"]["split_shots"]);
