@@ -514,8 +514,8 @@ impl<'m> Solver<'m> {
             let rho = mesh.polygons[el.polygon as usize].reflectance;
             let scale = area / el.area;
             let patch_share = el.area / mesh.patches[el.patch as usize].area;
-            for c in 0..3 {
-                let d = rho[c] * t.radiosity[c] * scale;
+            for (c, r) in rho.iter().enumerate() {
+                let d = r * t.radiosity[c] * scale;
                 self.radiosity[j][c] += d;
                 self.element_unshot[j][c] += d;
                 self.unshot[el.patch as usize][c] += d * patch_share;
