@@ -122,6 +122,143 @@ pub struct Mesh {
     pub elements: Vec<Element>,
     /// Positions of the shading vertices (element corners, shared within a polygon).
     pub vertices: Vec<Vec3>,
+    /// The closed solids among the scene's nodes (see [`Solid`]).
+    pub solids: Vec<Solid>,
+    /// Per polygon, the solid it bounds, if any (an index into `solids`).
+    pub solid_of: Vec<Option<u32>>,
+}
+
+/// A glTF node whose polygons close a volume with their fronts facing out (a
+/// box, say): every edge is shared by exactly two of its polygons, wound
+/// oppositely. Seen from outside its bounding box, a ray meets one of its
+/// front faces before any of its back faces, so a shot from there need not
+/// draw its back faces (they can hide nothing the front ones do not).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Solid {
+    /// Bounding box, grown by a margin: inside it, draw everything.
+    pub lo: Vec3,
+    /// See `lo`.
+    pub hi: Vec3,
+}
+
+impl Solid {
+    /// Whether `p` is in the (grown) bounding box.
+    pub fn holds(&self, p: Vec3) -> bool {
+        p.cmpge(self.lo).all() && p.cmple(self.hi).all()
+    }
+}
+
+/// Finds the closed, outward-facing solids among `polygons` (see [`Solid`]):
+/// each node's polygons are split into pieces connected by shared edges (a
+/// node of 64 separate cubes gives 64 solids), and each piece is a solid when
+/// it is closed and faces out. Vertices match when they agree to a millionth
+/// of the node's size; T-junctions, holes, doubled faces or inward-facing
+/// pieces (a room seen from inside) are not solids. Returns the solids and,
+/// per polygon, the solid it bounds.
+pub fn find_solids(polygons: &[crate::scene::Polygon]) -> (Vec<Solid>, Vec<Option<u32>>) {
+    type Key = [i64; 3];
+    let mut by_node: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (i, p) in polygons.iter().enumerate() {
+        by_node.entry(p.node).or_default().push(i);
+    }
+    let mut solids = Vec::new();
+    let mut solid_of = vec![None; polygons.len()];
+    for members in by_node.values() {
+        if members.len() < 4 {
+            continue;
+        }
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for &i in members {
+            for &v in &polygons[i].vertices {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        let size = (hi - lo).length() as f64;
+        if !(size > 0.0 && size.is_finite()) {
+            continue;
+        }
+        let eps = 1e-6 * size;
+        let key = |v: Vec3| -> Key {
+            let q = |x: f32| (x as f64 / eps).round() as i64;
+            [q(v.x), q(v.y), q(v.z)]
+        };
+        // Directed edges (counter-clockwise about each normal) and their owners.
+        let mut edges: std::collections::HashMap<(Key, Key), (u32, usize)> = Default::default();
+        for (m, &i) in members.iter().enumerate() {
+            let v = &polygons[i].vertices;
+            for k in 0..v.len() {
+                let (a, b) = (key(v[k]), key(v[(k + 1) % v.len()]));
+                if a != b {
+                    edges.entry((a, b)).or_insert((0, m)).0 += 1;
+                }
+            }
+        }
+        // Connected pieces: polygons joined by a shared edge (union-find).
+        let mut parent: Vec<usize> = (0..members.len()).collect();
+        fn root(parent: &mut [usize], mut x: usize) -> usize {
+            while parent[x] != x {
+                parent[x] = parent[parent[x]];
+                x = parent[x];
+            }
+            x
+        }
+        // A piece is open if any of its edges is not matched exactly once,
+        // the other way round.
+        let mut open = vec![false; members.len()];
+        for (&(a, b), &(count, m)) in &edges {
+            match edges.get(&(b, a)) {
+                Some(&(back, n)) if count == 1 && back == 1 => {
+                    let (ra, rb) = (root(&mut parent, m), root(&mut parent, n));
+                    parent[ra] = rb;
+                }
+                _ => open[m] = true,
+            }
+        }
+        let mut pieces: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+        for m in 0..members.len() {
+            let r = root(&mut parent, m);
+            pieces.entry(r).or_default().push(m);
+        }
+        for piece in pieces.values() {
+            if piece.len() < 4 || piece.iter().any(|&m| open[m]) {
+                continue;
+            }
+            let (mut plo, mut phi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+            for &m in piece {
+                for &v in &polygons[members[m]].vertices {
+                    plo = plo.min(v);
+                    phi = phi.max(v);
+                }
+            }
+            // Divergence theorem: the volume enclosed, positive when the
+            // normals face out.
+            let centre = (0.5 * (plo + phi)).as_dvec3();
+            let volume: f64 = piece
+                .iter()
+                .map(|&m| {
+                    let p = &polygons[members[m]];
+                    let c = p.vertices.iter().map(|v| v.as_dvec3()).sum::<glam::DVec3>()
+                        / p.vertices.len() as f64;
+                    p.area() as f64 * (c - centre).dot(p.normal.as_dvec3()) / 3.0
+                })
+                .sum();
+            let psize = (phi - plo).length() as f64;
+            if volume <= 1e-9 * psize * psize * psize {
+                continue;
+            }
+            let margin = Vec3::splat((1e-4 * psize) as f32);
+            let index = solids.len() as u32;
+            solids.push(Solid {
+                lo: plo - margin,
+                hi: phi + margin,
+            });
+            for &m in piece {
+                solid_of[members[m]] = Some(index);
+            }
+        }
+    }
+    (solids, solid_of)
 }
 
 impl Mesh {
@@ -140,6 +277,7 @@ impl Mesh {
             let f = factors.get(pi).copied().unwrap_or(1);
             mesh.add_polygon(pi as u32, poly, size, settings, f);
         }
+        (mesh.solids, mesh.solid_of) = find_solids(&scene.polygons);
         mesh
     }
 
@@ -417,6 +555,58 @@ fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The six faces of the unit box at `at`, facing out (or in).
+    fn cube(at: Vec3, out: bool, node: usize) -> Vec<crate::scene::Polygon> {
+        let mut faces = Vec::new();
+        for axis in 0..3 {
+            for (side, positive) in [(0.0, false), (1.0, true)] {
+                let v: Vec<Vec3> =
+                    crate::scene::axis_rect(axis, side, [0.0; 2], [1.0; 2], positive == out)
+                        .into_iter()
+                        .map(|p| p + at)
+                        .collect();
+                faces.push(crate::scene::Polygon {
+                    normal: crate::scene::polygon_normal(&v),
+                    vertices: v,
+                    reflectance: [0.5; 3],
+                    emission: [0.0; 3],
+                    node,
+                    subdivision: None,
+                });
+            }
+        }
+        faces
+    }
+
+    #[test]
+    fn closed_outward_boxes_are_solids_and_nothing_else_is() {
+        let mut polys = cube(Vec3::ZERO, true, 0);
+        polys.extend(cube(Vec3::new(3.0, 0.0, 0.0), true, 1));
+        // A room seen from inside, an open box, a box with a face doubled.
+        polys.extend(cube(Vec3::new(0.0, 5.0, 0.0), false, 2));
+        let mut open = cube(Vec3::new(3.0, 5.0, 0.0), true, 3);
+        open.pop();
+        polys.extend(open);
+        let mut doubled = cube(Vec3::new(6.0, 5.0, 0.0), true, 4);
+        doubled.push(doubled[0].clone());
+        polys.extend(doubled);
+        // One node holding two separate boxes: two solids.
+        let n = polys.len();
+        polys.extend(cube(Vec3::new(0.0, 9.0, 0.0), true, 5));
+        polys.extend(cube(Vec3::new(3.0, 9.0, 0.0), true, 5));
+        let (solids, of) = find_solids(&polys);
+        assert_eq!(solids.len(), 4, "{solids:?}");
+        assert!(of[..6].iter().all(|s| *s == Some(0)));
+        assert!(of[6..12].iter().all(|s| *s == Some(1)));
+        assert!(of[12..n].iter().all(Option::is_none));
+        assert!(of[n..n + 6].iter().all(|s| *s == Some(2)));
+        assert!(of[n + 6..].iter().all(|s| *s == Some(3)));
+        // The box holds its own faces' points (with a margin), not a point beside it.
+        assert!(solids[0].holds(Vec3::new(0.5, 0.0, 0.5)));
+        assert!(solids[0].holds(Vec3::new(0.5, 1.0, 0.5)));
+        assert!(!solids[0].holds(Vec3::new(0.5, 1.01, 0.5)));
+    }
     use crate::scene::Subdivision;
 
     fn poly(vertices: Vec<Vec3>, sub: Option<Subdivision>) -> Polygon {

@@ -99,6 +99,8 @@ struct PolygonProxies {
     radius: f32,
     /// Its bilinear element grid, when it is drawn in pieces (an index into `quads`).
     quad: Option<u32>,
+    /// The solid it bounds, if any (an index into `Mesh::solids`).
+    solid: Option<u32>,
 }
 
 /// A quad polygon drawn in pieces: its corners (world space) and element
@@ -168,6 +170,11 @@ pub struct HemisphereRasterizer {
     /// Quad polygons drawn in pieces.
     quads: Vec<QuadGrid>,
     polygons: Vec<PolygonProxies>,
+    /// The mesh's closed solids, and per shot whether the shooter is outside
+    /// each (then its back faces are not drawn: see `Mesh::solids`).
+    solids: Vec<crate::mesh::Solid>,
+    outside: Vec<bool>,
+    cull_solids: bool,
     /// Rectangles of the current shot, CPU side (reused).
     instances: Vec<Instance>,
     instance_buf: wgpu::Buffer,
@@ -219,7 +226,7 @@ impl HemisphereRasterizer {
         let mut element = Vec::new();
         let mut quads = Vec::new();
         let mut polygons = Vec::with_capacity(mesh.polygons.len());
-        for poly in &mesh.polygons {
+        for (k, poly) in mesh.polygons.iter().enumerate() {
             let first = corners.len() as u32;
             let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);
             for id in poly.elements.clone() {
@@ -265,6 +272,7 @@ impl HemisphereRasterizer {
                 centre: 0.5 * (lo + hi),
                 radius: 0.5 * (hi - lo).length(),
                 quad,
+                solid: mesh.solid_of.get(k).copied().flatten(),
             });
         }
         let max_instances = 2 * corners.len().max(1) as u64;
@@ -358,6 +366,9 @@ impl HemisphereRasterizer {
             element,
             quads,
             polygons,
+            solids: mesh.solids.clone(),
+            outside: Vec::new(),
+            cull_solids: true,
             instance_buf,
             uniform,
             pipeline,
@@ -433,9 +444,11 @@ impl HemisphereRasterizer {
         };
         t.pieces.clear();
         t.vertices.clear();
+        let (outside, corners) = (&self.outside, &self.corners);
         for (k, poly) in self.polygons.iter().enumerate() {
             if k as u32 == shooter.polygon
                 || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
+                || hidden_back_face(poly, corners, outside, shooter)
             {
                 continue;
             }
@@ -476,6 +489,21 @@ impl HemisphereRasterizer {
 
     /// Whether each shot also counts, per element, every cell whose ray hits
     /// the element whether or not something nearer hides it (see [`HemisphereRasterizer::coverage_pairs`]).
+    /// Whether shots skip the back faces of closed solids they are outside
+    /// of (on by default; the item buffer is the same either way, cell for
+    /// cell, but for rays grazing a silhouette edge).
+    pub fn set_cull_solids(&mut self, on: bool) {
+        self.cull_solids = on;
+    }
+
+    /// Which solids `shooter` is outside of (their back faces need no drawing).
+    fn find_outside(&mut self, shooter: &ShooterFrame) {
+        let cull = self.cull_solids;
+        self.outside.clear();
+        self.outside
+            .extend(self.solids.iter().map(|s| cull && !s.holds(shooter.centre)));
+    }
+
     pub fn set_count_coverage(&mut self, on: bool) {
         self.count_coverage = on;
         if !on {
@@ -517,12 +545,13 @@ impl HemisphereRasterizer {
                 .map_or(1, |n| n.get())
                 .min(8)
         };
-        let (res, far, corners, element, quads) = (
+        let (res, far, corners, element, quads, outside) = (
             self.res,
             self.far,
             &self.corners,
             &self.element,
             &self.quads,
+            &self.outside,
         );
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
             for (k, poly) in polys.iter().enumerate() {
@@ -530,6 +559,9 @@ impl HemisphereRasterizer {
                 if (first + k) as u32 == shooter.polygon
                     || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
                 {
+                    continue;
+                }
+                if hidden_back_face(poly, corners, outside, shooter) {
                     continue;
                 }
                 let n = shooter.to_local(poly.normal);
@@ -616,6 +648,7 @@ impl HemisphereRasterizer {
             own: [own.0 as f32, own.1 as f32],
             cells: [self.res.cols as f32, self.res.rows as f32],
         });
+        self.find_outside(shooter);
         if self.tess.is_some() {
             self.collect_triangles(shooter);
         } else {
@@ -764,6 +797,22 @@ impl HemisphereRasterizer {
             readback: read_start.elapsed(),
         })
     }
+}
+
+/// Whether `poly` is a back face of a solid that the shooter is outside of
+/// (`outside`, per solid): then a front face of the same solid is nearer in
+/// every direction it covers, and it need not be drawn.
+fn hidden_back_face(
+    poly: &PolygonProxies,
+    corners: &[[Vec3; 4]],
+    outside: &[bool],
+    shooter: &ShooterFrame,
+) -> bool {
+    poly.solid
+        .is_some_and(|s| outside.get(s as usize).copied().unwrap_or(false))
+        && corners
+            .get(poly.proxies.start as usize)
+            .is_some_and(|c| (shooter.centre - c[0]).dot(poly.normal) < 0.0)
 }
 
 /// Scenes with at least this many proxies find their rectangles on several threads.

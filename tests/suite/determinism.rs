@@ -254,3 +254,56 @@ fn the_ambient_term_is_in_the_report_unless_asked_not_to_be() {
     }
     assert!(with.report.settings.ambient && !without.report.settings.ambient);
 }
+
+#[test]
+fn skipping_the_back_faces_of_solids_changes_no_cell() {
+    // 27 closed cubes in a room: from any shooter outside a cube, the cube's
+    // front faces hide its back faces, so not drawing those leaves the item
+    // buffer as it was (but for rays grazing a silhouette edge).
+    let scene = radiosity::scene::open("cubes-3").expect("built-in");
+    let mesh = radiosity::mesh::Mesh::build(&scene, &Default::default());
+    assert_eq!(
+        mesh.solids.len(),
+        28,
+        "every cube and the light are solids, the room is not"
+    );
+    let g = gpu();
+    let res = radiosity::hemisphere::Resolution::default();
+    let layout = radiosity::hemisphere::TileLayout::whole(res);
+    let new = |cull: bool| {
+        let mut r =
+            radiosity::gpu::HemisphereRasterizer::new(&g.device, &mesh, res, 1, scene.extent())
+                .expect("rasteriser");
+        r.set_cull_solids(cull);
+        r
+    };
+    let (mut culled, mut full) = (new(true), new(false));
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let (mut differing, mut cells, mut rects) = (0usize, 0usize, [0u32; 2]);
+    // Shooters all over: room walls, cube faces, the light.
+    for patch in (0..mesh.patches.len()).step_by(mesh.patches.len() / 40) {
+        let frame = mesh.shooter_frame(patch as u32);
+        let s = culled
+            .render(&g.device, &g.queue, &frame, &layout, (0, 0), &mut a)
+            .expect("render");
+        let t = full
+            .render(&g.device, &g.queue, &frame, &layout, (0, 0), &mut b)
+            .expect("render");
+        rects[0] += s.rects;
+        rects[1] += t.rects;
+        differing += a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        cells += a.len();
+    }
+    eprintln!(
+        "{differing} of {cells} cells differ; {} rectangles drawn instead of {}",
+        rects[0], rects[1]
+    );
+    assert!(
+        10 * rects[0] < 8 * rects[1],
+        "few back faces skipped: {rects:?}"
+    );
+    assert!(
+        differing * 100_000 <= cells,
+        "{differing} of {cells} cells differ"
+    );
+}
