@@ -430,6 +430,9 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
         "--exposure",
         "--checkpoint-every",
         "--max-patches-per-edge",
+        "--coarse-resolution",
+        "--coarse-below",
+        "--overshoot",
     ];
     let values = [
         "0",
