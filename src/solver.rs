@@ -357,17 +357,23 @@ impl<'m> Solver<'m> {
 
     /// This rank's patch with the largest unshot power (lowest index on ties), if any has some.
     pub fn local_candidate(&self) -> Option<Candidate> {
-        Candidate::best(self.own_patches().filter_map(|i| {
+        // Patches in increasing order, so the first of equal powers wins
+        // (the lowest index, as `Candidate::best` breaks ties).
+        let mut best: Option<(usize, f64)> = None;
+        for i in self.own_patches() {
             let w = self.patch_power(i);
-            (w > 0.0).then_some(Candidate {
-                patch: i as u32,
-                power: w,
-                unshot: self.unshot[i],
-                centre: glam::Vec3::ZERO,
-                weighted: false,
-                lit: 0.0,
-            })
-        }))
+            if w > 0.0 && best.is_none_or(|(_, b)| w > b) {
+                best = Some((i, w));
+            }
+        }
+        best.map(|(i, w)| Candidate {
+            patch: i as u32,
+            power: w,
+            unshot: self.unshot[i],
+            centre: glam::Vec3::ZERO,
+            weighted: false,
+            lit: 0.0,
+        })
         .map(|c| {
             let p = &self.mesh.patches[c.patch as usize];
             let lit_area: f64 = p
