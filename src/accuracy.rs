@@ -633,8 +633,7 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
                 o.resolution = res;
                 eprintln!("accuracy: {} {method:?} {res}", scene.name);
                 let coarse = o
-                    .coarse
-                    .filter(|c| o.coarse_below > 0.0 && c.cells() < res.cells())
+                    .coarse_tier()
                     .map(|c| format!(", weak shooters {c}"))
                     .unwrap_or_default();
                 let label = format!("{} {res}{coarse}", format!("{method:?}").to_lowercase());

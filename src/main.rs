@@ -149,8 +149,10 @@ pub struct SolveArgs {
     overshoot: bool,
     /// Hemisphere resolution of weak shooters (see --coarse-below): they
     /// matter little, and a coarse hemisphere costs a fraction of the time.
-    #[arg(long, default_value = "64x256")]
-    coarse_resolution: Resolution,
+    /// Default: half --resolution along each axis, but no coarser than
+    /// 64x256 (so 64x256 for 128x512, none for 64x256).
+    #[arg(long)]
+    coarse_resolution: Option<Resolution>,
     /// Shooters whose unshot power is below this fraction of the emitted
     /// power draw their hemisphere at --coarse-resolution (0: every shot at
     /// --resolution).
@@ -182,7 +184,7 @@ impl SolveArgs {
             cache_rows: !self.no_cache,
             split_shots: !self.no_split,
             overshoot: self.overshoot,
-            coarse: Some(self.coarse_resolution),
+            coarse: self.coarse_resolution,
             coarse_below: self.coarse_below,
             ..RenderOptions::default()
         }

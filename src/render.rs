@@ -39,12 +39,6 @@ pub enum FormFactorMethod {
 /// (chosen by `radiosity bench`; see README "Performance").
 pub const DEFAULT_RASTER_PIECES: u32 = 1;
 
-/// The hemisphere resolution of weak shooters (`--coarse-resolution`).
-pub const DEFAULT_COARSE_RESOLUTION: Resolution = Resolution {
-    rows: 64,
-    cols: 256,
-};
-
 /// Shooters below this fraction of the emitted power draw the coarse
 /// hemisphere (`--coarse-below`; README "Coarse hemispheres for weak shooters").
 pub const DEFAULT_COARSE_BELOW: f64 = 3e-3;
@@ -108,7 +102,8 @@ pub struct RenderOptions {
     /// Split a hybrid shot into one hemisphere per group of shooter elements
     /// where a near receiver is partly hidden from the shooter's centre.
     pub split_shots: bool,
-    /// The hemisphere resolution of weak shooters (see `coarse_below`).
+    /// The hemisphere resolution of weak shooters (see `coarse_below`);
+    /// `None`: half `resolution` along each axis (a quarter of the cells).
     pub coarse: Option<Resolution>,
     /// Shooters whose unshot power is below this fraction of the emitted
     /// power draw their hemisphere at `coarse` (0: every shot at `resolution`).
@@ -137,6 +132,22 @@ pub struct CheckpointPlan {
     pub every: Option<Duration>,
 }
 
+impl RenderOptions {
+    /// The hemisphere resolution weak shooters draw at, if there is a coarse
+    /// tier: `coarse`, or half `resolution` along each axis but no coarser
+    /// than 64 x 256 (weak shooters at 48 x 192 or 32 x 128 leave the 64
+    /// cubes above 1 %: README "Coarse hemispheres for weak shooters"), when
+    /// `coarse_below` is above 0 and it has fewer cells than `resolution`.
+    pub fn coarse_tier(&self) -> Option<Resolution> {
+        let res = self.resolution;
+        let coarse = self.coarse.unwrap_or(Resolution {
+            rows: (res.rows / 2).max(64),
+            cols: (res.cols / 2).max(256),
+        });
+        (self.coarse_below > 0.0 && coarse.cells() < res.cells()).then_some(coarse)
+    }
+}
+
 impl Default for RenderOptions {
     fn default() -> Self {
         Self {
@@ -157,7 +168,7 @@ impl Default for RenderOptions {
             cache_rows: true,
             split_shots: true,
             overshoot: false,
-            coarse: Some(DEFAULT_COARSE_RESOLUTION),
+            coarse: None,
             coarse_below: DEFAULT_COARSE_BELOW,
             wireframe: false,
             checkpoint: None,
@@ -345,10 +356,7 @@ impl<'a> GpuFormFactors<'a> {
     ) -> Result<Self, RenderError> {
         let n = comm.size();
         let mut tiers = vec![Tier::new(gpu, mesh, opts, opts.resolution, n, extent)?];
-        let coarse = opts
-            .coarse
-            .filter(|c| opts.coarse_below > 0.0 && c.cells() < opts.resolution.cells());
-        if let Some(res) = coarse {
+        if let Some(res) = opts.coarse_tier() {
             tiers.push(Tier::new(gpu, mesh, opts, res, n, extent)?);
         }
         let emitted: f64 = mesh
@@ -1083,7 +1091,7 @@ fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         opts.overshoot,
         opts.projection,
         opts.tessellation_tolerance,
-        opts.coarse.map(|r| r.to_string()),
+        opts.coarse_tier().map(|r| r.to_string()),
         opts.coarse_below
     );
     crate::checkpoint::fingerprint(&[
@@ -1485,8 +1493,7 @@ pub fn build_report(
             ambient: opts.ambient,
             overshoot: opts.overshoot,
             coarse: opts
-                .coarse
-                .filter(|c| opts.coarse_below > 0.0 && c.cells() < opts.resolution.cells())
+                .coarse_tier()
                 .map(|c| (c.to_string(), opts.coarse_below)),
         },
         device: gpu.describe(),
