@@ -109,6 +109,9 @@ pub struct Element {
     pub area: f64,
     /// Shading-vertex indices of the corners (shared within a polygon).
     pub vertices: [u32; 4],
+    /// Centroid (see [`element_centre`]), kept: every shot evaluates its
+    /// receivers' form factors there.
+    pub centre: Vec3,
 }
 
 /// The discretised scene.
@@ -380,6 +383,7 @@ impl Mesh {
             corners,
             area,
             vertices,
+            centre: centroid(&corners),
         });
     }
 
@@ -497,7 +501,11 @@ pub fn area_centroid<'a>(elements: impl IntoIterator<Item = &'a Element>) -> Opt
 /// centroids of its two triangles (the vertex average is off for a kite or a
 /// trapezoid, and the receiver-side form factor is evaluated here).
 pub fn element_centre(e: &Element) -> Vec3 {
-    let c = e.corners;
+    e.centre
+}
+
+/// The centroid of a quad (a triangle repeats its last corner).
+fn centroid(c: &[Vec3; 4]) -> Vec3 {
     let tri = (c[0] + c[1] + c[2]) / 3.0;
     if c[3] == c[2] {
         return tri;
