@@ -284,6 +284,17 @@ impl Mesh {
         mesh
     }
 
+    /// Total emitted power (exitance times area, summed over patches and RGB), W.
+    pub fn emitted_power(&self) -> f64 {
+        self.patches
+            .iter()
+            .map(|p| {
+                let e = self.polygons[p.polygon as usize].exitance;
+                (e[0] + e[1] + e[2]) * p.area
+            })
+            .sum()
+    }
+
     /// Total area of all elements.
     pub fn total_area(&self) -> f64 {
         self.elements.iter().map(|e| e.area).sum()

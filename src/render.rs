@@ -359,14 +359,6 @@ impl<'a> GpuFormFactors<'a> {
         if let Some(res) = opts.coarse_tier() {
             tiers.push(Tier::new(gpu, mesh, opts, res, n, extent)?);
         }
-        let emitted: f64 = mesh
-            .patches
-            .iter()
-            .map(|p| {
-                let e = mesh.polygons[p.polygon as usize].exitance;
-                (e[0] + e[1] + e[2]) * p.area
-            })
-            .sum();
         let rank = comm.rank();
         let element_rank: Vec<u32> = mesh
             .elements
@@ -379,7 +371,7 @@ impl<'a> GpuFormFactors<'a> {
             mesh,
             comm,
             tiers,
-            coarse_below: opts.coarse_below * emitted,
+            coarse_below: opts.coarse_below * mesh.emitted_power(),
             last_tier: 0,
             exchange: opts.exchange,
             method: opts.form_factor,
@@ -964,7 +956,6 @@ fn shoot_until(
 /// The final solve's hooks: the trace, progress, checkpoints and interrupts.
 struct SolveHooks<'a, 'p> {
     comm: &'a dyn Collectives,
-    mesh: &'a Mesh,
     nodes: &'a [String],
     ambient: bool,
     solve_start: Instant,
@@ -1017,20 +1008,8 @@ impl LoopHooks for SolveHooks<'_, '_> {
         };
         // Rank 0 assembles the whole state and writes it; every rank learns
         // whether that worked, so none waits for a rank that gave up.
-        let (b, u) = solver.local_state();
-        let e = solver.local_element_unshot();
-        let gathered = (
-            self.comm.gather_f64(&b),
-            self.comm.gather_f64(&u),
-            self.comm.gather_f64(&e),
-        );
-        let written = match gathered {
-            (Some(b), Some(u), Some(e)) => {
-                let mut whole = Solver::new(self.mesh);
-                whole.assemble(&b, &u);
-                whole.assemble_element_unshot(&e);
-                whole.set_shots(solver.shots());
-                whole.copy_retention(solver);
+        let written = match gather_whole(self.comm, solver, true) {
+            Some(whole) => {
                 let mut header = self.header.clone();
                 header.seconds = self
                     .solve_start
@@ -1068,6 +1047,34 @@ impl LoopHooks for SolveHooks<'_, '_> {
         self.trace.spent += started.elapsed();
         Ok(())
     }
+}
+
+/// Gathers every rank's share of `solver` to rank 0 and assembles the whole
+/// solution there (`None` on the other ranks): radiosities, unshot
+/// radiosities, shots, retention, overshooting, and with `elements` the
+/// elements' unshot radiosities (a checkpoint needs them, and so does the
+/// unshot fraction under overshooting). Every rank must call it.
+fn gather_whole<'m>(
+    comm: &dyn Collectives,
+    solver: &Solver<'m>,
+    elements: bool,
+) -> Option<Solver<'m>> {
+    let (b, u) = solver.local_state();
+    let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
+    let ge = if elements {
+        comm.gather_f64(&solver.local_element_unshot())
+    } else {
+        None
+    };
+    let mut whole = Solver::new(solver.mesh());
+    whole.assemble(&gb?, &gu?);
+    if let Some(e) = &ge {
+        whole.assemble_element_unshot(e);
+    }
+    whole.set_overshoot(solver.overshoot());
+    whole.set_shots(solver.shots());
+    whole.copy_retention(solver);
+    Some(whole)
 }
 
 /// What a checkpoint must match to be resumed here: the scene's geometry,
@@ -1284,7 +1291,6 @@ pub fn render_on(
         .unwrap_or_else(Instant::now);
     let mut hooks = SolveHooks {
         comm,
-        mesh: &mesh,
         nodes: &scene.nodes,
         ambient: opts.ambient,
         solve_start,
@@ -1582,22 +1588,8 @@ impl Trace {
                 solver.unshot_fraction(),
             ))
         } else {
-            let (b, u) = solver.local_state();
-            let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
             // With overshooting the unshot fraction sums elements' |unshot|.
-            let ge = if solver.overshoot() {
-                comm.gather_f64(&solver.local_element_unshot())
-            } else {
-                None
-            };
-            gb.zip(gu).map(|(gb, gu)| {
-                let mut whole = Solver::new(solver.mesh());
-                whole.assemble(&gb, &gu);
-                if let Some(e) = &ge {
-                    whole.set_overshoot(true);
-                    whole.assemble_element_unshot(e);
-                }
-                whole.copy_retention(solver);
+            gather_whole(comm, solver, solver.overshoot()).map(|whole| {
                 (
                     report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),
                     whole.unshot_fraction(),

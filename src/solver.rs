@@ -229,11 +229,7 @@ impl<'m> Solver<'m> {
             .iter()
             .map(|p| mesh.polygons[p.polygon as usize].exitance)
             .collect();
-        let emitted_power = unshot
-            .iter()
-            .zip(&mesh.patches)
-            .map(|(b, p)| power(b, p.area))
-            .sum();
+        let emitted_power = mesh.emitted_power();
         Self {
             mesh,
             rank,
@@ -366,34 +362,27 @@ impl<'m> Solver<'m> {
                 best = Some((i, w));
             }
         }
-        best.map(|(i, w)| Candidate {
+        let (i, power) = best?;
+        let p = &self.mesh.patches[i];
+        let (mut lit_area, mut lit_count) = (0.0, 0);
+        for j in p.elements.clone().filter(|&j| self.lit(j)) {
+            lit_area += self.mesh.elements[j as usize].area;
+            lit_count += 1;
+        }
+        let all_lit = lit_count == p.elements.len();
+        let first = self.element_unshot[p.elements.start as usize];
+        Some(Candidate {
             patch: i as u32,
-            power: w,
+            power,
             unshot: self.unshot[i],
-            centre: glam::Vec3::ZERO,
-            weighted: false,
-            lit: 0.0,
-        })
-        .map(|c| {
-            let p = &self.mesh.patches[c.patch as usize];
-            let lit_area: f64 = p
-                .elements
-                .clone()
-                .filter(|&j| self.lit(j))
-                .map(|j| self.mesh.elements[j as usize].area)
-                .sum();
-            let first = self.element_unshot[p.elements.start as usize];
-            let all_lit = p.elements.clone().all(|j| self.lit(j));
-            let none_lit = !p.elements.clone().any(|j| self.lit(j));
-            Candidate {
-                centre: self.shooting_centre(c.patch),
-                weighted: !(all_lit || none_lit)
-                    || p.elements
-                        .clone()
-                        .any(|j| self.element_unshot[j as usize] != first),
-                lit: if all_lit { 1.0 } else { lit_area / p.area },
-                ..c
-            }
+            centre: self.shooting_centre(i as u32),
+            // Elements shoot differently when only some are lit (only those
+            // overshoot) or when their unshot radiosities differ.
+            weighted: !(all_lit || lit_count == 0)
+                || p.elements
+                    .clone()
+                    .any(|j| self.element_unshot[j as usize] != first),
+            lit: if all_lit { 1.0 } else { lit_area / p.area },
         })
     }
 
