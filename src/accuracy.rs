@@ -97,9 +97,7 @@ impl AccuracyArgs {
 
 /// A file-name-safe name for a scene (a file's stem; built-in names as they are).
 fn stem(name: &str) -> String {
-    Path::new(name)
-        .file_stem()
-        .map_or_else(|| name.to_string(), |s| s.to_string_lossy().into_owned())
+    radiosity::render::write::output_stem(name)
 }
 
 /// A cached reference solution.

@@ -45,20 +45,37 @@ impl fmt::Display for Resolution {
     }
 }
 
+/// Why a hemisphere resolution is unusable.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ResolutionError {
+    /// Not of the form RxC.
+    #[error("expected R_PHIxR_THETA such as 128x512, got '{0}'")]
+    Syntax(String),
+    /// The row count is not a number.
+    #[error("bad row count '{0}'")]
+    Rows(String),
+    /// The column count is not a number.
+    #[error("bad column count '{0}'")]
+    Cols(String),
+    /// A count is out of range.
+    #[error("hemisphere resolution {0} out of range: each count must be 4..=8192")]
+    Range(Resolution),
+}
+
 impl FromStr for Resolution {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = ResolutionError;
+    fn from_str(s: &str) -> Result<Self, ResolutionError> {
         let (r, c) = s
             .split_once(['x', 'X'])
-            .ok_or_else(|| format!("expected R_PHIxR_THETA such as 128x512, got '{s}'"))?;
+            .ok_or_else(|| ResolutionError::Syntax(s.into()))?;
         let rows: u32 = r
             .trim()
             .parse()
-            .map_err(|_| format!("bad row count '{r}'"))?;
+            .map_err(|_| ResolutionError::Rows(r.into()))?;
         let cols: u32 = c
             .trim()
             .parse()
-            .map_err(|_| format!("bad column count '{c}'"))?;
+            .map_err(|_| ResolutionError::Cols(c.into()))?;
         let res = Resolution { rows, cols };
         res.validate()?;
         Ok(res)
@@ -67,11 +84,9 @@ impl FromStr for Resolution {
 
 impl Resolution {
     /// Checks the resolution is usable (both counts in 4..=8192).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ResolutionError> {
         if !(4..=8192).contains(&self.rows) || !(4..=8192).contains(&self.cols) {
-            return Err(format!(
-                "hemisphere resolution {self} out of range: each count must be 4..=8192"
-            ));
+            return Err(ResolutionError::Range(*self));
         }
         Ok(())
     }
@@ -150,14 +165,6 @@ impl TileLayout {
     pub fn ranks(&self) -> u32 {
         self.px * self.py
     }
-
-    /// Tiles along theta and phi for a resolution (the last ones may be partial).
-    pub fn tile_counts(&self, res: Resolution) -> (u32, u32) {
-        (
-            res.cols.div_ceil(self.tile_w),
-            res.rows.div_ceil(self.tile_h),
-        )
-    }
 }
 
 /// Sparse per-element form factors of one shot, accumulated in fixed point.
@@ -183,18 +190,17 @@ impl FormFactorAccumulator {
     }
 
     /// Adds the delta form factor of every cell of `items` (row-major, `cols`
-    /// values per row, rows starting at `first_row`) to the element it names,
+    /// values per row, from the top row) to the element it names,
     /// skipping elements for which `keep` (indexed by element) is false.
     pub fn add_cells(
         &mut self,
         items: &[u32],
         cols: usize,
-        first_row: usize,
         dff_fixed: &[u64],
         keep: Option<&[bool]>,
     ) {
         for (r, row) in items.chunks_exact(cols).enumerate() {
-            let w = dff_fixed[first_row + r];
+            let w = dff_fixed[r];
             for &id in row {
                 if keep.is_some_and(|k| !k.get(id as usize).copied().unwrap_or(false)) {
                     continue;
@@ -256,18 +262,6 @@ impl FormFactorAccumulator {
                 }
             }
         }
-    }
-
-    /// Drains the accumulated form factors as (element, F) pairs sorted by element.
-    pub fn drain_sorted(&mut self, out: &mut Vec<(u32, f64)>) {
-        out.clear();
-        self.touched.sort_unstable();
-        for &id in &self.touched {
-            let slot = &mut self.fixed[id as usize];
-            out.push((id, *slot as f64 / FIXED_ONE));
-            *slot = 0;
-        }
-        self.touched.clear();
     }
 }
 

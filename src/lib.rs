@@ -5,11 +5,13 @@
 //! - [`hemisphere`]: cells, delta form factors, tiles (pure maths);
 //! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
+//! - [`settings`]: the enums a render is told and the report records;
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
 //! - [`refine`]: which polygons a coarse solution says to subdivide (pure maths);
 //! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
 //! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
-//!   MPI implementation (the only module that calls MPI);
+//!   MPI implementation (the only module that calls MPI); [`launch`]: starting
+//!   the ranks a launcher started;
 //! - [`render`]: one render from scene to image and report, on one or many ranks;
 //! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
 //! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
@@ -22,6 +24,7 @@ pub mod formfactor;
 pub mod fuzz;
 pub mod gpu;
 pub mod hemisphere;
+pub mod launch;
 pub mod mesh;
 pub mod output;
 pub mod parallel;
@@ -29,4 +32,5 @@ pub mod refine;
 pub mod render;
 pub mod report;
 pub mod scene;
+pub mod settings;
 pub mod solver;

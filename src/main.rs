@@ -9,9 +9,12 @@ use radiosity::gpu::{Gpu, Shading};
 use radiosity::hemisphere::Resolution;
 use radiosity::mesh::MeshSettings;
 use radiosity::parallel::{Collectives, Exchange, Single};
-use radiosity::render::{render_on, CheckpointPlan, FormFactorMethod, Progress, RenderOptions};
+use radiosity::render::write::{output_stem, write_outputs, OutputPaths, WriteError};
+use radiosity::render::{
+    render_on, CheckpointPlan, FormFactorMethod, Progress, RenderOptions, Rendered,
+};
 use radiosity::solver::StopRule;
-use radiosity::{output, scene};
+use radiosity::{launch, output, scene};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -321,27 +324,6 @@ impl std::fmt::Display for ReportedByRankZero {
 
 impl std::error::Error for ReportedByRankZero {}
 
-/// How many processes the MPI launcher started, from its environment
-/// (Open MPI, PMI/PMIx, MPICH's Hydra), if one did.
-fn launched_ranks() -> Option<usize> {
-    ["OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "PMI_SIZE"]
-        .iter()
-        .find_map(|k| std::env::var(k).ok()?.trim().parse().ok())
-}
-
-/// Under mpirun, several lavapipe devices on one host must share its cores:
-/// give each rank cores / ranks-on-this-host worker threads (unless set).
-fn share_cores_between_ranks() {
-    let local: usize = std::env::var("OMPI_COMM_WORLD_LOCAL_SIZE")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1);
-    if local > 1 && std::env::var_os("LP_NUM_THREADS").is_none() {
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        std::env::set_var("LP_NUM_THREADS", (cores / local).max(1).to_string());
-    }
-}
-
 /// Writes one line to stderr in a single write, so that under mpirun other
 /// processes' output cannot land in the middle of it.
 fn print_error(line: &str) {
@@ -458,13 +440,8 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
         "65536x65536",
     ];
     let (mut accepted, mut refused) = (0u64, 0u64);
-    let mut state = seed ^ 0x00f1_a6f1_a65e_ed00;
-    let mut next = move |n: usize| {
-        state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        ((state >> 33) % n as u64) as usize
-    };
+    let mut rng = radiosity::fuzz::Rng(seed ^ 0x00f1_a6f1_a65e_ed00);
+    let mut next = move |n: usize| rng.below(n);
     for _ in 0..flag_cases {
         let mut argv = vec!["radiosity".to_string(), "render".into(), "cornell".into()];
         for _ in 0..1 + next(4) {
@@ -566,83 +543,29 @@ impl Reporter {
     }
 }
 
-fn stem(scene: &str) -> String {
-    Path::new(scene)
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "render".into())
+/// Where the outputs of `args` go.
+fn output_paths(args: &RenderArgs) -> OutputPaths {
+    let stem = output_stem(&args.scene);
+    OutputPaths {
+        image: Some(
+            args.image
+                .clone()
+                .unwrap_or_else(|| args.out_dir.join(format!("{stem}.exr"))),
+        ),
+        exposure: args.exposure,
+        bake: args.bake.clone(),
+        report: args
+            .report
+            .clone()
+            .unwrap_or_else(|| args.out_dir.join(format!("{stem}.json"))),
+    }
 }
 
-fn run_render(args: RenderArgs) -> Result<()> {
-    // SIGINT and SIGTERM (mpirun forwards them to every rank) end the solve
-    // after the current shot, saving its state and writing what it has.
-    // Registered first, so no signal finds the default handler.
-    let interrupt = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, interrupt.clone())
-            .with_context(|| format!("cannot handle signal {signal}"))?;
-    }
-    share_cores_between_ranks();
-    let mpi = MpiComm::init();
-    let single = Single::default();
-    let comm: &dyn Collectives = match &mpi {
-        Some(c) => c,
-        None => &single,
-    };
-    let (rank, ranks) = (comm.rank(), comm.size());
-    // Under a launcher that started several processes, a world of one would
-    // mean N independent solves all writing the same files: refuse.
-    if let Some(launched) = launched_ranks() {
-        if launched > 1 && ranks != launched {
-            anyhow::bail!(
-                "the launcher started {launched} processes but MPI gave this one a world of {ranks}: \
-                 is this binary built against the same MPI as the mpirun that started it?"
-            );
-        }
-    }
-    if rank > 0 {
-        log::set_max_level(log::LevelFilter::Warn);
-    }
-    // Every rank loads the scene and opens a device; any failure ends all of
-    // them, with rank 0 reporting which rank failed and why.
-    let t = Instant::now();
-    let setup = scene::open(&args.scene)
-        .map_err(anyhow::Error::from)
-        .and_then(|s| Ok((s, Gpu::new()?)));
-    let load_time = t.elapsed();
-    if let Err(failures) = comm.all_ok(setup.as_ref().map(|_| ()).map_err(|e| format!("{e:#}"))) {
-        if rank == 0 {
-            print_error(&match failures.first() {
-                Some((r, m)) if ranks > 1 => format!("error: rank {r}: {m}"),
-                Some((_, m)) => format!("error: {m}"),
-                None => "error: a rank failed to start".to_string(),
-            });
-        }
-        // Nobody leaves before rank 0 has said why: a rank that exits early
-        // makes mpirun kill the others, rank 0's message with them.
-        let _ = comm.all_gather_f64(&[0.0]);
-        return Err(ReportedByRankZero.into());
-    }
-    let (scene, gpu) = setup?;
-    if rank == 0 {
-        log::info!(
-            "device: {}{}",
-            gpu.describe(),
-            if ranks > 1 {
-                format!(", {ranks} ranks")
-            } else {
-                String::new()
-            }
-        );
-    }
-    let image_path = args
-        .image
-        .clone()
-        .unwrap_or_else(|| args.out_dir.join(format!("{}.exr", stem(&args.scene))));
-    let report_path = args
-        .report
-        .clone()
-        .unwrap_or_else(|| args.out_dir.join(format!("{}.json", stem(&args.scene))));
+/// The render options of `args`, with `interrupt` to stop the solve.
+fn render_options(
+    args: &RenderArgs,
+    interrupt: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> Result<RenderOptions> {
     let mut opts = args.solve.options();
     opts.width = args.width;
     opts.height = args.height;
@@ -652,10 +575,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
     opts.tile = args.tile;
     opts.exchange = args.exchange;
     opts.checkpoint = Some(CheckpointPlan {
-        path: args
-            .checkpoint
-            .clone()
-            .unwrap_or_else(|| args.out_dir.join(format!("{}.ckpt", stem(&args.scene)))),
+        path: args.checkpoint.clone().unwrap_or_else(|| {
+            args.out_dir
+                .join(format!("{}.ckpt", output_stem(&args.scene)))
+        }),
         every: args
             .checkpoint_every
             .map(std::time::Duration::from_secs_f32),
@@ -664,6 +587,61 @@ fn run_render(args: RenderArgs) -> Result<()> {
         opts.resume = Some(std::sync::Arc::new(Checkpoint::read(path)?));
     }
     opts.interrupt = Some(interrupt);
+    Ok(opts)
+}
+
+/// SIGINT and SIGTERM (mpirun forwards them to every rank) end the solve
+/// after the current shot, saving its state and writing what it has.
+fn handle_signals() -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+    let interrupt = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, interrupt.clone())
+            .with_context(|| format!("cannot handle signal {signal}"))?;
+    }
+    Ok(interrupt)
+}
+
+fn run_render(args: RenderArgs) -> Result<()> {
+    // Registered first, so no signal finds the default handler.
+    let interrupt = handle_signals()?;
+    launch::share_cores_between_ranks();
+    let mpi = MpiComm::init();
+    let single = Single::default();
+    let comm: &dyn Collectives = match &mpi {
+        Some(c) => c,
+        None => &single,
+    };
+    let (rank, ranks) = (comm.rank(), comm.size());
+    launch::check_world(ranks)?;
+    if rank > 0 {
+        log::set_max_level(log::LevelFilter::Warn);
+    }
+    // Every rank loads the scene and opens a device; any failure ends all of
+    // them, with rank 0 reporting which rank failed and why.
+    let t = Instant::now();
+    let setup = scene::open(&args.scene)
+        .map_err(anyhow::Error::from)
+        .and_then(|s| Ok((s, Gpu::new()?)))
+        .map_err(|e| format!("{e:#}"));
+    let load_time = t.elapsed();
+    let (scene, gpu) = match launch::start_together(comm, setup) {
+        Ok(x) => x,
+        Err(e) => {
+            if rank == 0 {
+                print_error(&format!("error: {e}"));
+            }
+            return Err(ReportedByRankZero.into());
+        }
+    };
+    if rank == 0 {
+        let ranks_note = if ranks > 1 {
+            format!(", {ranks} ranks")
+        } else {
+            String::new()
+        };
+        log::info!("device: {}{ranks_note}", gpu.describe());
+    }
+    let opts = render_options(&args, interrupt)?;
     let mut reporter = (rank == 0).then(|| Reporter::new(opts.stop.max_shots, opts.stop.threshold));
     let rendered = render_on(&gpu, &scene, &opts, comm, load_time, &mut |p| {
         if let Some(r) = reporter.as_mut() {
@@ -682,9 +660,14 @@ fn run_render(args: RenderArgs) -> Result<()> {
         }
         Err(e) => return Err(e.into()),
     };
-    let Some(rendered) = rendered else {
-        return Ok(());
-    };
+    match rendered {
+        Some(rendered) => write_rendered(&args, &scene, rendered),
+        None => Ok(()),
+    }
+}
+
+/// Rank 0's outputs: the image, the bake and the report.
+fn write_rendered(args: &RenderArgs, scene: &scene::Scene, mut rendered: Rendered) -> Result<()> {
     let r = &rendered.report;
     log::info!(
         "{} shots, unshot fraction {:.3e}, solve {:.2} s (median shot {:.2} ms)",
@@ -693,32 +676,32 @@ fn run_render(args: RenderArgs) -> Result<()> {
         r.timings.solve,
         r.timings.median_shot_ms
     );
-    if let Some((w, h, pixels)) = &rendered.image {
-        let png = output::write_image(&image_path, *w, *h, pixels, args.exposure)?;
-        eprintln!("wrote {} and {}", image_path.display(), png.display());
-    } else {
+    if rendered.image.is_none() {
         eprintln!("no image (--width 0)");
     }
-    if let Some(what) = rendered.report.non_finite() {
-        anyhow::bail!(
+    let image = rendered
+        .image
+        .as_ref()
+        .map(|(w, h, pixels)| (*w, *h, &pixels[..]));
+    let written = write_outputs(
+        &output_paths(args),
+        scene,
+        &rendered.mesh,
+        &rendered.radiosity,
+        image,
+        &mut rendered.report,
+    )
+    .map_err(|e| match e {
+        // The binary names the scene as it was given.
+        WriteError::NonFinite { what, .. } => anyhow::anyhow!(
             "{}: the solution has a non-finite number in {what}; no report written",
             args.scene
-        );
+        ),
+        e => e.into(),
+    })?;
+    for line in written.lines() {
+        eprintln!("{line}");
     }
-    let mut rendered = rendered;
-    if let Some(path) = &args.bake {
-        let baked = radiosity::bake::write(path, &scene, &rendered.mesh, &rendered.radiosity)?;
-        eprintln!(
-            "wrote {} ({} nodes, {} triangles, COLOR_0 = min(1, B/pi x {:.4}))",
-            path.display(),
-            baked.nodes,
-            baked.triangles,
-            baked.scale
-        );
-        rendered.report.bake = Some(baked);
-    }
-    output::write_json(&report_path, &rendered.report)?;
-    eprintln!("wrote {}", report_path.display());
     if rendered.interrupted {
         let why = rendered.report.warnings.last().cloned().unwrap_or_default();
         return Err(Interrupted(format!("{}: {why}", args.scene)).into());

@@ -18,6 +18,27 @@ pub enum OutputError {
     },
 }
 
+/// Why an image could not be encoded.
+#[derive(Debug, thiserror::Error)]
+pub enum EncodeError {
+    /// The pixel count is not width x height.
+    #[error("{pixels} pixels do not make a {width} x {height} image")]
+    Size {
+        /// Pixels given.
+        pixels: usize,
+        /// Image width.
+        width: u32,
+        /// Image height.
+        height: u32,
+    },
+    /// The EXR encoder failed.
+    #[error("EXR: {0}")]
+    Exr(#[from] exr::error::Error),
+    /// The PNG encoder failed.
+    #[error("PNG: {0}")]
+    Png(#[from] image::ImageError),
+}
+
 fn err(path: &Path, e: impl std::fmt::Display) -> OutputError {
     OutputError::Write {
         path: path.to_path_buf(),
@@ -52,8 +73,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
 }
 
 /// Encodes linear RGB pixels (top row first) as an OpenEXR file in memory.
-pub fn encode_exr(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<Vec<u8>, String> {
+pub fn encode_exr(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<Vec<u8>, EncodeError> {
     use exr::prelude::*;
+    check_size(width, height, pixels)?;
     let w = width as usize;
     let channels = SpecificChannels::rgb(|Vec2(x, y): Vec2<usize>| {
         let p = pixels[y * w + x];
@@ -61,12 +83,19 @@ pub fn encode_exr(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<Vec<u8
     });
     let image = Image::from_channels((w, height as usize), channels);
     let mut buf = Cursor::new(Vec::new());
-    image
-        .write()
-        .non_parallel()
-        .to_buffered(&mut buf)
-        .map_err(|e| e.to_string())?;
+    image.write().non_parallel().to_buffered(&mut buf)?;
     Ok(buf.into_inner())
+}
+
+fn check_size(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<(), EncodeError> {
+    if pixels.len() as u64 != width as u64 * height as u64 {
+        return Err(EncodeError::Size {
+            pixels: pixels.len(),
+            width,
+            height,
+        });
+    }
+    Ok(())
 }
 
 /// Automatic exposure: the scale that maps the 95th percentile of the lit
@@ -113,12 +142,17 @@ pub fn encode_png(
     height: u32,
     pixels: &[[f32; 3]],
     exposure: f32,
-) -> Result<Vec<u8>, String> {
-    let img = image::RgbImage::from_raw(width, height, tone_map(pixels, exposure))
-        .ok_or("pixel count does not match the image size")?;
+) -> Result<Vec<u8>, EncodeError> {
+    check_size(width, height, pixels)?;
+    let img = image::RgbImage::from_raw(width, height, tone_map(pixels, exposure)).ok_or(
+        EncodeError::Size {
+            pixels: pixels.len(),
+            width,
+            height,
+        },
+    )?;
     let mut buf = Cursor::new(Vec::new());
-    img.write_to(&mut buf, image::ImageFormat::Png)
-        .map_err(|e| e.to_string())?;
+    img.write_to(&mut buf, image::ImageFormat::Png)?;
     Ok(buf.into_inner())
 }
 

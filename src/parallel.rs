@@ -2,7 +2,9 @@
 //! can run on one process or on MPI ranks without knowing which. The MPI
 //! implementation lives in [`crate::comm`], the only module that calls MPI.
 
+use std::any::Any;
 use std::cell::Cell;
+use std::sync::{Arc, Barrier, Mutex};
 
 /// Bytes this rank sent and received in exchanges, summed over calls.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
@@ -77,6 +79,165 @@ impl Collectives for Single {
     }
 }
 
+/// The rank that owns patch `patch` among `ranks` ranks: k mod ranks (an
+/// element belongs to its patch's owner). The one place this rule lives.
+pub fn patch_owner(patch: u32, ranks: usize) -> usize {
+    patch as usize % ranks.max(1)
+}
+
+/// The patches rank `rank` of `ranks` owns, in increasing order, out of `patches`.
+pub fn owned_patches(rank: usize, ranks: usize, patches: usize) -> impl Iterator<Item = usize> {
+    (rank..patches).step_by(ranks.max(1))
+}
+
+/// Ranks as threads of one process, for tests of what ranks exchange
+/// without MPI: every collective meets at a barrier and copies what each
+/// rank put in its slot. Traffic is counted as [`crate::comm::MpiComm`]
+/// counts it (the form-factor exchanges only).
+pub struct ThreadComm {
+    rank: usize,
+    shared: Arc<Meeting>,
+    traffic: Cell<Traffic>,
+}
+
+/// What each rank put down for the collective under way.
+type Slots = Vec<Option<Box<dyn Any + Send>>>;
+
+struct Meeting {
+    size: usize,
+    slots: Mutex<Slots>,
+    barrier: Barrier,
+}
+
+impl ThreadComm {
+    /// Runs `f` on `ranks` threads, each with its rank's communicator, and
+    /// returns their results in rank order. A panic on any rank panics here.
+    pub fn run<T: Send>(ranks: usize, f: impl Fn(&ThreadComm) -> T + Sync) -> Vec<T> {
+        let shared = Arc::new(Meeting {
+            size: ranks,
+            slots: Mutex::new((0..ranks).map(|_| None).collect()),
+            barrier: Barrier::new(ranks),
+        });
+        std::thread::scope(|s| {
+            let handles: Vec<_> = (0..ranks)
+                .map(|rank| {
+                    let comm = ThreadComm {
+                        rank,
+                        shared: shared.clone(),
+                        traffic: Cell::default(),
+                    };
+                    let f = &f;
+                    s.spawn(move || f(&comm))
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        })
+    }
+
+    /// Every rank's `mine`, in rank order.
+    fn meet<T: Clone + Send + 'static>(&self, mine: T) -> Vec<T> {
+        self.slots()[self.rank] = Some(Box::new(mine));
+        self.shared.barrier.wait();
+        let all = self
+            .slots()
+            .iter()
+            .map(|s| {
+                s.as_ref()
+                    .and_then(|b| b.downcast_ref::<T>())
+                    .cloned()
+                    .expect("every rank makes the same collective calls")
+            })
+            .collect();
+        // Nobody writes the next call's slot before everyone has read this one.
+        self.shared.barrier.wait();
+        all
+    }
+
+    fn slots(&self) -> std::sync::MutexGuard<'_, Slots> {
+        self.shared
+            .slots
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn count(&self, sent: usize, received: usize) {
+        let t = self.traffic.get();
+        self.traffic.set(Traffic {
+            sent: t.sent + sent as u64,
+            received: t.received + received as u64,
+        });
+    }
+}
+
+impl Collectives for ThreadComm {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+    fn size(&self) -> usize {
+        self.shared.size
+    }
+    fn all_gather_f64(&self, local: &[f64]) -> Vec<f64> {
+        self.meet(local.to_vec()).concat()
+    }
+    fn all_gather_u32(&self, local: &[u32], _lengths: Option<&[usize]>) -> Vec<Vec<u32>> {
+        let all = self.meet(local.to_vec());
+        let total: usize = all.iter().map(Vec::len).sum();
+        self.count(
+            4 * local.len() * (self.size() - 1),
+            4 * (total - local.len()),
+        );
+        all
+    }
+    fn reduce_broadcast_sum(&self, data: &mut [u64]) {
+        let all = self.meet(data.to_vec());
+        for (i, d) in data.iter_mut().enumerate() {
+            *d = all.iter().fold(0u64, |s, v| s.wrapping_add(v[i]));
+        }
+        self.count(8 * data.len(), 8 * data.len());
+    }
+    fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
+        let all = self.meet(outgoing.to_vec());
+        let incoming: Vec<(u32, u64)> = all
+            .iter()
+            .flat_map(|from| from[self.rank].iter().copied())
+            .collect();
+        let n = self.size();
+        let own_out = outgoing[self.rank].len();
+        let out: usize = outgoing.iter().map(Vec::len).sum();
+        self.count(
+            12 * (out - own_out) + 4 * n,
+            12 * (incoming.len() - all[self.rank][self.rank].len()) + 4 * n,
+        );
+        incoming
+    }
+    fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
+        let all = self.meet(local.to_vec());
+        (self.rank == 0).then_some(all)
+    }
+    fn all_ok(&self, ok: Result<(), String>) -> Result<(), Vec<(usize, String)>> {
+        let all = self.meet(ok.err());
+        let failed: Vec<(usize, String)> = all
+            .into_iter()
+            .enumerate()
+            .filter_map(|(r, m)| Some((r, m?)))
+            .collect();
+        match (failed.is_empty(), self.rank) {
+            (true, _) => Ok(()),
+            (false, 0) => Err(failed),
+            (false, _) => Err(Vec::new()),
+        }
+    }
+    fn traffic(&self) -> Traffic {
+        self.traffic.get()
+    }
+    fn abort(&self, code: i32) -> ! {
+        panic!("rank {} aborted the run with code {code}", self.rank)
+    }
+}
+
 /// How the ranks exchange form factors each shot (DESIGN.md section 3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -114,5 +275,53 @@ mod tests {
         assert_eq!(rank_grid(7), (7, 1));
         assert_eq!(rank_grid(64), (8, 8));
         assert_eq!(rank_grid(8), (4, 2));
+    }
+
+    #[test]
+    fn thread_ranks_meet_in_every_collective() {
+        let out = ThreadComm::run(3, |c| {
+            let r = c.rank() as u32;
+            let gathered = c.all_gather_f64(&[r as f64]);
+            let lists = c.all_gather_u32(&vec![r; c.rank()], None);
+            let mut sum = [1u64, r as u64];
+            c.reduce_broadcast_sum(&mut sum);
+            let outgoing: Vec<Vec<(u32, u64)>> = (0..3).map(|to| vec![(r, to as u64)]).collect();
+            let incoming = c.all_to_all_pairs(&outgoing);
+            let ok = c.all_ok(if r == 2 { Err("two".into()) } else { Ok(()) });
+            (
+                gathered,
+                lists,
+                sum,
+                incoming,
+                ok,
+                c.gather_f64(&[r as f64]).is_some(),
+            )
+        });
+        for (rank, (g, l, s, inc, ok, root)) in out.into_iter().enumerate() {
+            assert_eq!(g, vec![0.0, 1.0, 2.0]);
+            assert_eq!(l, vec![vec![], vec![1], vec![2, 2]]);
+            assert_eq!(s, [3, 3]);
+            assert_eq!(
+                inc,
+                (0..3).map(|from| (from, rank as u64)).collect::<Vec<_>>()
+            );
+            match rank {
+                0 => assert_eq!(ok, Err(vec![(2, "two".to_string())])),
+                _ => assert_eq!(ok, Err(vec![])),
+            }
+            assert_eq!(root, rank == 0);
+        }
+    }
+
+    #[test]
+    fn patch_ownership_is_k_mod_ranks() {
+        assert_eq!(patch_owner(7, 3), 1);
+        assert_eq!(patch_owner(7, 1), 0);
+        assert_eq!(owned_patches(1, 3, 8).collect::<Vec<_>>(), vec![1, 4, 7]);
+        for ranks in 1..5 {
+            for r in 0..ranks {
+                assert!(owned_patches(r, ranks, 20).all(|k| patch_owner(k as u32, ranks) == r));
+            }
+        }
     }
 }

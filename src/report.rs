@@ -80,7 +80,7 @@ pub struct Settings {
     /// Hemisphere resolution (R_phi x R_theta).
     pub resolution: Resolution,
     /// How form factors were evaluated.
-    pub form_factor: crate::render::FormFactorMethod,
+    pub form_factor: crate::settings::FormFactorMethod,
     /// Stop at this unshot fraction.
     pub threshold: f64,
     /// Stop after this many shots.
@@ -90,7 +90,7 @@ pub struct Settings {
     /// Pieces per quad polygon edge drawn by the hemisphere rasteriser (0: every element).
     pub raster_pieces: u32,
     /// How cells were found: `exact` or `tessellated`.
-    pub projection: crate::render::Projection,
+    pub projection: crate::settings::Projection,
     /// The tessellated projection's tolerance in cells (null with `exact`).
     pub tessellation_tolerance: Option<f32>,
     /// Image size.

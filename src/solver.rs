@@ -15,6 +15,7 @@
 //! knows nothing of GPUs or ranks: form factors arrive as sparse [`Transfer`]s.
 
 use crate::mesh::Mesh;
+use crate::parallel::{owned_patches, patch_owner};
 
 /// Anything that can produce the form factors from a shooter patch to the elements.
 pub trait FormFactorSource {
@@ -63,9 +64,24 @@ pub struct ShotRegion {
 }
 
 impl ShotRegion {
-    /// Whether the patch shoots the same radiosity from every element.
-    pub fn uniform(&self) -> bool {
-        self.elements.is_empty()
+    /// The region of a patch whose elements shoot `elements` (in order; its
+    /// area-weighted mean is `shoot`): uniform, with no per-element list,
+    /// when every element shoots the same. The one place that decides it.
+    pub fn new(centre: glam::Vec3, power: f64, shoot: [f64; 3], elements: Vec<[f64; 3]>) -> Self {
+        match elements.first() {
+            Some(first) if elements.iter().all(|s| s == first) => Self {
+                centre,
+                power,
+                shoot: *first,
+                elements: Vec::new(),
+            },
+            _ => Self {
+                centre,
+                power,
+                shoot,
+                elements,
+            },
+        }
     }
 }
 
@@ -149,6 +165,16 @@ pub struct SolverState {
     pub retention: [f64; 2],
 }
 
+/// A saved state that does not fit the mesh it is restored on.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("the state is for {} patches and {} elements, the mesh has {} and {}", state[0], state[1], mesh[0], mesh[1])]
+pub struct StateMismatch {
+    /// The state's patches and elements.
+    pub state: [usize; 2],
+    /// The mesh's.
+    pub mesh: [usize; 2],
+}
+
 /// The signed unshot power per channel, over the emitted power, in
 /// [`UNSHOT_ONE`] fixed point (so ranks sum it exactly): what the ambient
 /// term and overshooting are computed from.
@@ -181,7 +207,6 @@ pub struct Solver<'m> {
     mean_reflectance: [f64; 3],
     /// The mesh's area.
     total_area: f64,
-    ff: Vec<Transfer>,
 }
 
 /// The area-weighted mean reflectance of a mesh, per channel.
@@ -243,12 +268,11 @@ impl<'m> Solver<'m> {
             overshoot: false,
             mean_reflectance: mean_reflectance(mesh),
             total_area: mesh.total_area(),
-            ff: Vec::new(),
         }
     }
 
-    /// Turns overshooting by the ambient term on or off (off by default here;
-    /// the renderer's default is on).
+    /// Turns overshooting by the ambient term on or off (off by default, here
+    /// and in the renderer: `--overshoot`).
     pub fn set_overshoot(&mut self, on: bool) {
         self.overshoot = on;
     }
@@ -263,11 +287,6 @@ impl<'m> Solver<'m> {
         self.mesh
     }
 
-    /// Radiosity per element (without the ambient term).
-    pub fn radiosity(&self) -> &[[f64; 3]] {
-        &self.radiosity
-    }
-
     /// Shots taken so far.
     pub fn shots(&self) -> u64 {
         self.shots
@@ -280,11 +299,11 @@ impl<'m> Solver<'m> {
 
     /// Whether this rank owns `patch`.
     pub fn owns(&self, patch: u32) -> bool {
-        patch as usize % self.ranks == self.rank
+        patch_owner(patch, self.ranks) == self.rank
     }
 
-    fn own_patches(&self) -> impl Iterator<Item = usize> + '_ {
-        (self.rank..self.mesh.patches.len()).step_by(self.ranks)
+    fn own_patches(&self) -> impl Iterator<Item = usize> {
+        owned_patches(self.rank, self.ranks, self.mesh.patches.len())
     }
 
     /// This rank's unshot power (of |dB|) over the emitted power, in
@@ -454,18 +473,12 @@ impl<'m> Solver<'m> {
                 shoot[c] += s[c] * share;
             }
         }
-        let uniform = elements.iter().all(|s| *s == elements[0]);
-        ShotRegion {
-            centre: self.shooting_centre(patch),
-            power: self.patch_power(patch as usize),
-            shoot: if uniform { elements[0] } else { shoot },
-            elements: if uniform { Vec::new() } else { elements },
-        }
-    }
-
-    /// The patch with the largest unshot power (one rank).
-    pub fn select_shooter(&self) -> Option<u32> {
-        self.local_candidate().map(|c| c.patch)
+        ShotRegion::new(
+            self.shooting_centre(patch),
+            self.patch_power(patch as usize),
+            shoot,
+            elements,
+        )
     }
 
     /// Shoots `region` from `shooter` through the transfers `ff`, updating
@@ -546,7 +559,7 @@ impl<'m> Solver<'m> {
         let ranks = radiosity.len();
         for (r, (b, u)) in radiosity.iter().zip(unshot).enumerate() {
             let (mut bi, mut ui) = (b.chunks_exact(3), u.chunks_exact(3));
-            for i in (r..self.mesh.patches.len()).step_by(ranks) {
+            for i in owned_patches(r, ranks, self.mesh.patches.len()) {
                 if let Some(x) = ui.next() {
                     self.unshot[i] = [x[0], x[1], x[2]];
                 }
@@ -578,7 +591,7 @@ impl<'m> Solver<'m> {
         let ranks = parts.len();
         for (r, part) in parts.iter().enumerate() {
             let mut it = part.chunks_exact(3);
-            for i in (r..self.mesh.patches.len()).step_by(ranks) {
+            for i in owned_patches(r, ranks, self.mesh.patches.len()) {
                 for j in self.mesh.patches[i].elements.clone() {
                     if let Some(x) = it.next() {
                         self.element_unshot[j as usize] = [x[0], x[1], x[2]];
@@ -602,15 +615,14 @@ impl<'m> Solver<'m> {
 
     /// Continues from `state` (every rank takes the whole state and keeps
     /// updating its own share). Fails when it is for another mesh.
-    pub fn restore(&mut self, state: &SolverState) -> Result<(), String> {
+    pub fn restore(&mut self, state: &SolverState) -> Result<(), StateMismatch> {
         let (e, p) = (self.mesh.elements.len(), self.mesh.patches.len());
         if state.radiosity.len() != e || state.element_unshot.len() != e || state.unshot.len() != p
         {
-            return Err(format!(
-                "the state is for {} patches and {} elements, the mesh has {p} and {e}",
-                state.unshot.len(),
-                state.radiosity.len()
-            ));
+            return Err(StateMismatch {
+                state: [state.unshot.len(), state.radiosity.len()],
+                mesh: [p, e],
+            });
         }
         self.radiosity.clone_from(&state.radiosity);
         self.unshot.clone_from(&state.unshot);
@@ -623,31 +635,6 @@ impl<'m> Solver<'m> {
     /// Sets the shot count (after assembling a distributed solution).
     pub fn set_shots(&mut self, shots: u64) {
         self.shots = shots;
-    }
-
-    /// One whole shot (one rank): select, get form factors, distribute.
-    /// `None` when nothing is left to shoot.
-    pub fn step<S: FormFactorSource>(&mut self, source: &mut S) -> Result<Option<Shot>, S::Error> {
-        let Some(candidate) = self.local_candidate() else {
-            return Ok(None);
-        };
-        // The same region the ranks' loop builds (`render::shoot_until`).
-        let ambient = if self.overshoot {
-            self.ambient()
-        } else {
-            [0.0; 3]
-        };
-        let region = if candidate.weighted {
-            self.shooting_region(candidate.patch, ambient)
-        } else {
-            self.candidate_region(&candidate, ambient)
-        };
-        let mut ff = std::mem::take(&mut self.ff);
-        source.form_factors(candidate.patch, &region, &mut ff)?;
-        let shot = self.shoot_candidate(&candidate, &region, &ff);
-        self.note_retention(shot.shot_power, shot.form_factor_sum);
-        self.ff = ff;
-        Ok(Some(shot))
     }
 
     /// Records that a shot of `power` (of either sign) landed the fraction
@@ -700,6 +687,15 @@ impl<'m> Solver<'m> {
             let unshot = net[c] as f64 / UNSHOT_ONE * self.emitted_power;
             unshot * f / total_area / (1.0 - self.mean_reflectance[c] * f).max(1e-3)
         })
+    }
+
+    /// Radiance for display, W sr^-1 m^-2 per channel: a Lambertian
+    /// surface's [`Solver::display_radiosity`] over pi.
+    pub fn display_radiance(&self, ambient: bool) -> Vec<[f32; 3]> {
+        self.display_radiosity(ambient)
+            .iter()
+            .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
+            .collect()
     }
 
     /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.

@@ -395,7 +395,7 @@ impl HemisphereRasterizer {
         tolerance: f32,
     ) -> Result<(), GpuError> {
         if !(tolerance.is_finite() && tolerance > 0.0) {
-            return Err(GpuError::Failed(format!(
+            return Err(GpuError::Setting(format!(
                 "tessellation tolerance {tolerance} must be a positive number of cells"
             )));
         }
@@ -446,10 +446,7 @@ impl HemisphereRasterizer {
         t.vertices.clear();
         let (outside, corners) = (&self.outside, &self.corners);
         for (k, poly) in self.polygons.iter().enumerate() {
-            if k as u32 == shooter.polygon
-                || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
-                || hidden_back_face(poly, corners, outside, shooter)
-            {
+            if !in_view(k, poly, corners, outside, shooter) {
                 continue;
             }
             let n = shooter.to_local(poly.normal);
@@ -487,8 +484,6 @@ impl HemisphereRasterizer {
         }
     }
 
-    /// Whether each shot also counts, per element, every cell whose ray hits
-    /// the element whether or not something nearer hides it (see [`HemisphereRasterizer::coverage_pairs`]).
     /// Whether shots skip the back faces of closed solids they are outside
     /// of (on by default; the item buffer is the same either way, cell for
     /// cell, but for rays grazing a silhouette edge).
@@ -504,6 +499,8 @@ impl HemisphereRasterizer {
             .extend(self.solids.iter().map(|s| cull && !s.holds(shooter.centre)));
     }
 
+    /// Whether each shot also counts, per element, every cell whose ray hits
+    /// the element whether or not something nearer hides it (see [`HemisphereRasterizer::coverage_pairs`]).
     pub fn set_count_coverage(&mut self, on: bool) {
         self.count_coverage = on;
         if !on {
@@ -525,11 +522,6 @@ impl HemisphereRasterizer {
     /// The hemisphere resolution.
     pub fn resolution(&self) -> Resolution {
         self.res
-    }
-
-    /// Number of rasterisation proxies (pieces of quad polygons, elements of triangles).
-    pub fn proxy_count(&self) -> usize {
-        self.corners.len()
     }
 
     /// Fills `self.instances` with a rectangle for every proxy the shooter can
@@ -555,13 +547,7 @@ impl HemisphereRasterizer {
         );
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
             for (k, poly) in polys.iter().enumerate() {
-                // The shooter never sees its own polygon; skip polygons wholly below its plane.
-                if (first + k) as u32 == shooter.polygon
-                    || (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius <= 0.0
-                {
-                    continue;
-                }
-                if hidden_back_face(poly, corners, outside, shooter) {
+                if !in_view(first + k, poly, corners, outside, shooter) {
                     continue;
                 }
                 let n = shooter.to_local(poly.normal);
@@ -797,6 +783,22 @@ impl HemisphereRasterizer {
             readback: read_start.elapsed(),
         })
     }
+}
+
+/// Whether polygon `k` (`poly`) can show in the shooter's hemisphere: the
+/// shooter never sees its own polygon, polygons wholly below its plane, or
+/// the hidden back faces of solids it is outside of. The one cull both
+/// projections use.
+fn in_view(
+    k: usize,
+    poly: &PolygonProxies,
+    corners: &[[Vec3; 4]],
+    outside: &[bool],
+    shooter: &ShooterFrame,
+) -> bool {
+    k as u32 != shooter.polygon
+        && (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius > 0.0
+        && !hidden_back_face(poly, corners, outside, shooter)
 }
 
 /// Whether `poly` is a back face of a solid that the shooter is outside of

@@ -37,6 +37,9 @@ pub enum GpuError {
     /// Any other failure while waiting on or reading from the device.
     #[error("GPU failure: {0}")]
     Failed(String),
+    /// A setting the GPU code cannot use.
+    #[error("invalid setting: {0}")]
+    Setting(String),
     /// The scene is too big for this device.
     #[error("scene too large for the device: {0}")]
     TooLarge(String),
@@ -52,11 +55,18 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
 }
 
+/// The backends the renderer and the viewer open: Vulkan only (its float
+/// render targets need it, and a missing driver must be an error rather
+/// than a fall-back to GL), unless `WGPU_BACKEND` says otherwise.
+pub fn backends() -> wgpu::Backends {
+    wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN)
+}
+
 impl Gpu {
     /// Opens the first suitable adapter. Vulkan only unless `WGPU_BACKEND` says otherwise.
     pub fn new() -> Result<Gpu, GpuError> {
         let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::VULKAN);
+        desc.backends = backends();
         let instance = wgpu::Instance::new(desc);
         let options = wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,

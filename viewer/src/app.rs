@@ -362,6 +362,18 @@ impl Viewer {
     }
 
     fn side_panel(&mut self, ui: &mut egui::Ui, snap: &Snapshot) {
+        self.solve_status(ui, snap);
+        self.solve_controls(ui);
+        ui.separator();
+        self.view_controls(ui, snap);
+        ui.separator();
+        self.convergence_plot(ui, snap);
+        ui.separator();
+        self.hemisphere_panel(ui, snap);
+    }
+
+    /// Where the solve stands.
+    fn solve_status(&self, ui: &mut egui::Ui, snap: &Snapshot) {
         ui.heading("Solve");
         if let Some(e) = &snap.error {
             ui.colored_label(Color32::RED, e);
@@ -382,6 +394,10 @@ impl Viewer {
         } else {
             "shooting"
         });
+    }
+
+    /// Pause, step, resume, and the settings a restart takes.
+    fn solve_controls(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             if ui.button("Pause").clicked() {
                 solve::send(&self.tx, Command::Pause);
@@ -405,17 +421,27 @@ impl Viewer {
         });
         ui.horizontal(|ui| {
             ui.label("patch size");
+            // 0 is the scene's own subdivision or the automatic rule.
             ui.add(
                 egui::DragValue::new(&mut self.patch_size)
                     .speed(0.005)
                     .range(0.0..=10.0)
-                    .suffix(" m"),
+                    .custom_formatter(|v, _| {
+                        if v > 0.0 {
+                            format!("{v:.3} m")
+                        } else {
+                            "automatic".into()
+                        }
+                    })
+                    .custom_parser(|t| {
+                        let t = t.trim().trim_end_matches('m').trim();
+                        if t.eq_ignore_ascii_case("automatic") || t.eq_ignore_ascii_case("auto") {
+                            Some(0.0)
+                        } else {
+                            t.parse().ok()
+                        }
+                    }),
             );
-            ui.label(if self.patch_size > 0.0 {
-                ""
-            } else {
-                "(scene / automatic)"
-            });
         });
         ui.horizontal(|ui| {
             ui.label("stop at");
@@ -428,7 +454,10 @@ impl Viewer {
                 self.restart();
             }
         });
-        ui.separator();
+    }
+
+    /// Exposure, shading, camera, saving and frame times.
+    fn view_controls(&mut self, ui: &mut egui::Ui, snap: &Snapshot) {
         ui.heading("View");
         ui.add(egui::Slider::new(&mut self.ev, -6.0..=6.0).text("exposure (EV)"));
         ui.horizontal(|ui| {
@@ -454,7 +483,10 @@ impl Viewer {
             "frame: {:.1} ms CPU ({:.1} ms UI), {:.1} ms apart (medians of {}); view image {:.1} ms off-thread",
             f.cpu_ms_median, f.ui_ms_median, f.interval_ms_median, f.frames, f.view_ms
         ));
-        ui.separator();
+    }
+
+    /// The unshot fraction, or the error against `--reference`, over shots or time.
+    fn convergence_plot(&mut self, ui: &mut egui::Ui, snap: &Snapshot) {
         ui.horizontal(|ui| {
             ui.heading("Convergence");
             ui.checkbox(&mut self.plot_time, "against time");
@@ -510,7 +542,10 @@ impl Viewer {
                 ))
             });
         }
-        ui.separator();
+    }
+
+    /// The last shot's item buffer.
+    fn hemisphere_panel(&mut self, ui: &mut egui::Ui, snap: &Snapshot) {
         ui.horizontal(|ui| {
             ui.heading("Hemisphere");
             ui.checkbox(&mut self.by_rank, "by rank");

@@ -22,11 +22,9 @@ fn run(args: Args) -> Result<()> {
         .split_once('x')
         .and_then(|(w, h)| Some((w.parse::<f32>().ok()?, h.parse::<f32>().ok()?)))
         .context("--size must be WxH, e.g. 1280x760")?;
-    // Vulkan only, like the renderer: its float render targets need it, and a
-    // missing driver must be an error rather than a fall-back to GL.
+    // The renderer's backends (Vulkan only by default).
     let mut setup = eframe::egui_wgpu::WgpuSetupCreateNew::without_display_handle();
-    setup.instance_descriptor.backends =
-        eframe::wgpu::Backends::from_env().unwrap_or(eframe::wgpu::Backends::VULKAN);
+    setup.instance_descriptor.backends = radiosity::gpu::backends();
     let mut wgpu_options = eframe::egui_wgpu::WgpuConfiguration {
         wgpu_setup: eframe::egui_wgpu::WgpuSetup::CreateNew(setup),
         ..Default::default()

@@ -4,7 +4,11 @@
 use radiosity::gpu::Gpu;
 use radiosity::mesh::Mesh;
 use radiosity::parallel::Single;
-use radiosity::render::{GpuFormFactors, RenderOptions};
+use radiosity::render::write::{write_outputs, OutputPaths};
+use radiosity::render::{
+    build_report, refined_mesh, single_process, AfterShot, GpuFormFactors, RenderOptions, ShotLoop,
+    Step, Trace,
+};
 use radiosity::scene::Scene;
 use radiosity::solver::Solver;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender};
@@ -126,7 +130,50 @@ pub fn run(
     }
 }
 
-/// One solve; returns the settings of a requested restart, or `None` on quit.
+/// Where the user has put the solve: running, paused, stepping, or stopped
+/// at the automatic pause; and whether the loop has stopped by itself.
+#[derive(Default)]
+struct Control {
+    paused: bool,
+    steps_left: Option<u64>,
+    /// The automatic pause applies once: a step or resume goes past it.
+    pause_at: Option<u64>,
+    /// The shooting loop said it is over (the stop rule is met).
+    done: bool,
+}
+
+impl Control {
+    /// Whether to shoot now, after `shots` shots.
+    fn shooting(&self, shots: u64) -> bool {
+        !(self.paused
+            || self.done
+            || self.pause_at.is_some_and(|n| shots >= n)
+            || self.steps_left == Some(0))
+    }
+
+    /// Applies a pause, resume or step.
+    fn apply(&mut self, cmd: &Command) {
+        match cmd {
+            Command::Pause => self.paused = true,
+            Command::Resume => {
+                self.paused = false;
+                self.steps_left = None;
+                self.pause_at = None;
+            }
+            Command::Step => {
+                self.paused = false;
+                self.steps_left = Some(1);
+                self.pause_at = None;
+            }
+            _ => {}
+        }
+    }
+}
+
+/// One solve: the library's own mesh, form-factor source, solver and
+/// shooting loop (exactly what `radiosity render` runs on one rank), stepped
+/// a shot at a time between the window's commands. Returns the settings of a
+/// requested restart, or `None` on quit.
 fn solve(
     gpu: &Gpu,
     scene: &Scene,
@@ -137,38 +184,21 @@ fn solve(
 ) -> Result<Option<Settings>, String> {
     let opts = &settings.options;
     let single = Single::default();
-    // The same mesh `radiosity render` solves (refinement passes included).
-    let (mesh, _, _) = radiosity::render::refined_mesh(gpu, scene, opts, &single, &mut |_| {})
-        .map_err(|e| e.to_string())?;
+    let (mesh, _, _) =
+        refined_mesh(gpu, scene, opts, &single, &mut |_| {}).map_err(|e| e.to_string())?;
     let mesh = Arc::new(mesh);
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())
         .map_err(|e| e.to_string())?;
-    let mut solver = Solver::new(&mesh);
+    let mut solver = Solver::partitioned(&mesh, 0, 1);
     solver.set_overshoot(opts.overshoot);
-    let res = opts.resolution;
-    {
-        let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
-        *s = Snapshot {
-            mesh: Some(mesh.clone()),
-            version: s.version + 1,
-            resolution: (res.rows, res.cols),
-            ..Snapshot::default()
-        };
-        s.radiance = Arc::new(display(&solver));
-    }
-    wake();
-    let mut paused = false;
-    let mut steps_left: Option<u64> = None;
-    // The automatic pause applies once: a step or resume goes past it.
-    let mut pause_at = settings.pause_at;
-    let mut solve_time = Duration::ZERO;
-    // The report's convergence trace, as `radiosity render` keeps it.
-    let mut trace = radiosity::render::Trace::default();
-    let mut last_publish = Instant::now();
+    let mut shots = ShotLoop::new(&mesh, &single, opts.stop, 0.0);
+    let mut pub_ = Publisher::start(shared, &mesh, &solver, opts, wake)?;
+    let mut control = Control {
+        pause_at: settings.pause_at,
+        ..Control::default()
+    };
     loop {
-        let done = solver.done(&opts.stop);
-        let at_pause = pause_at.is_some_and(|n| solver.shots() >= n);
-        let idle = paused || done || at_pause || steps_left == Some(0);
+        let idle = !control.shooting(solver.shots());
         let cmd = if idle {
             match commands.recv_timeout(Duration::from_millis(100)) {
                 Ok(c) => Some(c),
@@ -179,100 +209,156 @@ fn solve(
             commands.try_recv().ok()
         };
         match cmd {
-            Some(Command::Pause) => paused = true,
-            Some(Command::Resume) => {
-                paused = false;
-                steps_left = None;
-                pause_at = None;
-            }
-            Some(Command::Step) => {
-                paused = false;
-                steps_left = Some(1);
-                pause_at = None;
-            }
             Some(Command::Restart(next)) => return Ok(Some(next)),
+            Some(Command::Quit) => return Ok(None),
             Some(Command::Save(req)) => {
-                let outcome = save(gpu, scene, &mesh, opts, &solver, solve_time, &trace, &req);
+                let outcome = save(gpu, scene, &mesh, opts, &solver, &pub_, &req);
                 if let Ok(mut s) = shared.lock() {
                     s.saved = Some(outcome.unwrap_or_else(|e| format!("save failed: {e}")));
                 }
                 wake();
             }
-            Some(Command::Quit) => return Ok(None),
+            Some(c) => control.apply(&c),
             None => {}
         }
-        let shooting = !(paused
-            || done
-            || pause_at.is_some_and(|n| solver.shots() >= n)
-            || steps_left == Some(0));
+        let shooting = control.shooting(solver.shots());
         if shooting {
             let t = Instant::now();
-            let Some(shot) = solver.step(&mut source).map_err(|e| e.to_string())? else {
-                paused = true;
-                continue;
-            };
-            let shooter = shot.shooter;
-            solve_time += t.elapsed();
-            if trace.due(solver.shots()) {
-                let seconds = solve_time.as_secs_f64();
-                trace.record_at(&single, &solver, &scene.nodes, opts.ambient, seconds);
-                if let Ok(mut s) = shared.lock() {
-                    s.trace = Arc::new(trace.points.clone());
+            let step = shots
+                .step(&mut source, &mut solver, &mut AfterShot(|_: &Solver, _| {}))
+                .map_err(|e| e.to_string())?;
+            pub_.solve_time += t.elapsed();
+            match step {
+                Step::Shot(shot) => {
+                    if let Some(n) = control.steps_left.as_mut() {
+                        *n = n.saturating_sub(1);
+                    }
+                    pub_.after_shot(&solver, &source, shot.shooter, &scene.nodes, &single)?;
                 }
+                Step::Stopped(_) => control.done = true,
             }
-            if let Some(n) = steps_left.as_mut() {
-                *n = n.saturating_sub(1);
-            }
-            let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
-            s.shots = solver.shots();
-            s.unshot_fraction = solver.unshot_fraction();
-            s.elapsed = solve_time;
-            let point = (s.shots, solve_time.as_secs_f64(), s.unshot_fraction);
-            Arc::make_mut(&mut s.history).push(point);
-            s.shooter = Some(shooter);
-            // Small scenes publish every shot; large ones at about 10 Hz.
-            if mesh.elements.len() < 20_000 || last_publish.elapsed() > Duration::from_millis(100) {
-                s.radiance = Arc::new(display(&solver));
-                let (items, res) = source.last_items();
-                s.items = Arc::new(items.to_vec());
-                s.resolution = (res.rows, res.cols);
-                s.version += 1;
-                last_publish = Instant::now();
-            }
-            drop(s);
-            wake();
         }
-        let now_idle = !shooting
-            || solver.done(&opts.stop)
-            || pause_at.is_some_and(|n| solver.shots() >= n)
-            || steps_left == Some(0);
-        if let Ok(mut s) = shared.lock() {
-            let converged = solver.done(&opts.stop);
-            if now_idle && (s.paused != now_idle || s.converged != converged) {
-                // Publish the final state of a run of shots.
-                s.radiance = Arc::new(display(&solver));
-                let (items, res) = source.last_items();
-                s.items = Arc::new(items.to_vec());
-                s.resolution = (res.rows, res.cols);
-                s.version += 1;
-                wake();
-            }
-            s.paused = now_idle;
-            s.converged = converged;
-        }
+        let now_idle = !control.shooting(solver.shots());
+        pub_.idle(&solver, &source, now_idle, control.done);
     }
 }
 
-/// Writes the image and the report of the current state.
-#[allow(clippy::too_many_arguments)]
-fn save(
+/// What the solve thread publishes to the window, and how often.
+struct Publisher<'s, W: Fn()> {
+    shared: &'s Mutex<Snapshot>,
+    wake: &'s W,
+    ambient: bool,
+    /// Small scenes publish every shot; large ones at about 10 Hz.
+    every_shot: bool,
+    last_publish: Instant,
+    /// Solve time so far (pauses left out).
+    solve_time: Duration,
+    /// The report's convergence trace, as `radiosity render` keeps it.
+    trace: Trace,
+}
+
+impl<'s, W: Fn()> Publisher<'s, W> {
+    /// Publishes the start of a solve (B = E) and returns the publisher.
+    fn start(
+        shared: &'s Mutex<Snapshot>,
+        mesh: &Arc<Mesh>,
+        solver: &Solver,
+        opts: &RenderOptions,
+        wake: &'s W,
+    ) -> Result<Self, String> {
+        let res = opts.resolution;
+        {
+            let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
+            *s = Snapshot {
+                mesh: Some(mesh.clone()),
+                version: s.version + 1,
+                resolution: (res.rows, res.cols),
+                ..Snapshot::default()
+            };
+            s.radiance = Arc::new(solver.display_radiance(opts.ambient));
+        }
+        wake();
+        Ok(Self {
+            shared,
+            wake,
+            ambient: opts.ambient,
+            every_shot: mesh.elements.len() < PUBLISH_EVERY_SHOT_BELOW,
+            last_publish: Instant::now(),
+            solve_time: Duration::ZERO,
+            trace: Trace::default(),
+        })
+    }
+
+    /// Records the trace when due and publishes the shot.
+    fn after_shot(
+        &mut self,
+        solver: &Solver,
+        source: &GpuFormFactors,
+        shooter: u32,
+        nodes: &[String],
+        single: &Single,
+    ) -> Result<(), String> {
+        if self.trace.due(solver.shots()) {
+            let seconds = self.solve_time.as_secs_f64();
+            self.trace
+                .record_at(single, solver, nodes, self.ambient, seconds);
+            if let Ok(mut s) = self.shared.lock() {
+                s.trace = Arc::new(self.trace.points.clone());
+            }
+        }
+        let mut s = self.shared.lock().map_err(|_| "state lock poisoned")?;
+        s.shots = solver.shots();
+        s.unshot_fraction = solver.unshot_fraction();
+        s.elapsed = self.solve_time;
+        let point = (s.shots, self.solve_time.as_secs_f64(), s.unshot_fraction);
+        Arc::make_mut(&mut s.history).push(point);
+        s.shooter = Some(shooter);
+        if self.every_shot || self.last_publish.elapsed() > PUBLISH_PERIOD {
+            self.publish(&mut s, solver, source);
+        }
+        drop(s);
+        (self.wake)();
+        Ok(())
+    }
+
+    /// Publishes the final state of a run of shots once it goes idle.
+    fn idle(&mut self, solver: &Solver, source: &GpuFormFactors, idle: bool, converged: bool) {
+        let Ok(mut s) = self.shared.lock() else {
+            return;
+        };
+        if idle && (s.paused != idle || s.converged != converged) {
+            self.publish(&mut s, solver, source);
+            (self.wake)();
+        }
+        s.paused = idle;
+        s.converged = converged;
+    }
+
+    fn publish(&mut self, s: &mut Snapshot, solver: &Solver, source: &GpuFormFactors) {
+        s.radiance = Arc::new(solver.display_radiance(self.ambient));
+        let (items, res) = source.last_items();
+        s.items = Arc::new(items.to_vec());
+        s.resolution = (res.rows, res.cols);
+        s.version += 1;
+        self.last_publish = Instant::now();
+    }
+}
+
+/// Scenes with fewer elements publish their radiance after every shot.
+const PUBLISH_EVERY_SHOT_BELOW: usize = 20_000;
+
+/// How often larger scenes publish while solving.
+const PUBLISH_PERIOD: Duration = Duration::from_millis(100);
+
+/// Writes the image, the report (and with `req.bake` the bake) of the
+/// current state, through the renderer's own write path.
+fn save<W: Fn()>(
     gpu: &Gpu,
     scene: &Scene,
     mesh: &Mesh,
     opts: &RenderOptions,
     solver: &Solver,
-    solve_time: Duration,
-    trace: &radiosity::render::Trace,
+    pub_: &Publisher<W>,
     req: &SaveRequest,
 ) -> Result<String, String> {
     let (w, h) = (800, 600);
@@ -285,46 +371,35 @@ fn save(
         supersample: 2,
         wireframe: req.wireframe,
     };
-    let pixels = radiosity::gpu::render_view(
-        &gpu.device,
-        &gpu.queue,
-        mesh,
-        &display(solver),
-        &camera,
-        &view,
-    )
-    .map_err(|e| e.to_string())?;
-    let exr = req.stem.with_extension("exr");
-    radiosity::output::write_image(&exr, w, h, &pixels, req.ev).map_err(|e| e.to_string())?;
+    let radiance = solver.display_radiance(opts.ambient);
+    let pixels =
+        radiosity::gpu::render_view(&gpu.device, &gpu.queue, mesh, &radiance, &camera, &view)
+            .map_err(|e| e.to_string())?;
+    let seconds = pub_.solve_time.as_secs_f64();
     let timings = radiosity::report::Timings {
-        solve: solve_time.as_secs_f64(),
+        solve: seconds,
         ..Default::default()
     };
-    let parallel =
-        radiosity::render::single_process(opts.resolution, mesh.elements.len(), solver.shots());
-    let mut report =
-        radiosity::render::build_report(scene, mesh, opts, solver, gpu, [w, h], timings, parallel);
-    report.convergence = trace.ending_with(&report, solve_time.as_secs_f64());
-    let mut wrote = format!("wrote {}, .png and .json", exr.display());
-    if req.bake {
-        let glb = req.stem.with_extension("glb");
-        let radiosity = solver.display_radiosity(opts.ambient);
-        let baked =
-            radiosity::bake::write(&glb, scene, mesh, &radiosity).map_err(|e| e.to_string())?;
-        wrote += &format!(" and {}", glb.display());
-        report.bake = Some(baked);
-    }
-    let json = req.stem.with_extension("json");
-    radiosity::output::write_json(&json, &report).map_err(|e| e.to_string())?;
-    Ok(wrote)
-}
-
-fn display(solver: &Solver) -> Vec<[f32; 3]> {
-    solver
-        .display_radiosity(true)
-        .iter()
-        .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
-        .collect()
+    let parallel = single_process(opts.resolution, mesh.elements.len(), solver.shots());
+    let mut report = build_report(scene, mesh, opts, solver, gpu, [w, h], timings, parallel);
+    report.convergence = pub_.trace.ending_with(&report, seconds);
+    let paths = OutputPaths {
+        image: Some(req.stem.with_extension("exr")),
+        exposure: req.ev,
+        bake: req.bake.then(|| req.stem.with_extension("glb")),
+        report: req.stem.with_extension("json"),
+    };
+    let radiosity = solver.display_radiosity(opts.ambient);
+    let written = write_outputs(
+        &paths,
+        scene,
+        mesh,
+        &radiosity,
+        Some((w, h, &pixels)),
+        &mut report,
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(written.lines().join("; "))
 }
 
 /// Sends a command, ignoring a solve thread that has already ended.

@@ -1,0 +1,476 @@
+//! One render from start to finish: the mesh (refined, or a checkpoint's),
+//! the final solve, the gather to rank 0, the camera image and the report.
+
+use super::hooks::{Progress, SolveHooks};
+use super::options::{fingerprint, RenderError, RenderOptions};
+use super::passes::refined_mesh;
+use super::shoot::{shoot_until, LoopStats};
+use super::source::{GpuFormFactors, PhaseTimes};
+use super::trace::Trace;
+use crate::checkpoint::Header;
+use crate::gpu::{render_view, Gpu, ViewSettings};
+use crate::hemisphere::{Resolution, TileLayout};
+use crate::mesh::Mesh;
+use crate::parallel::{Collectives, Exchange, Single, Traffic};
+use crate::report::{
+    self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
+};
+use crate::scene::Scene;
+use crate::settings::Projection;
+use crate::solver::Solver;
+use std::time::{Duration, Instant};
+
+/// The result of [`render`].
+pub struct Rendered {
+    /// The discretised scene.
+    pub mesh: Mesh,
+    /// Radiosity per element (the ambient term added when the options say so).
+    pub radiosity: Vec<[f64; 3]>,
+    /// Image size and linear radiance pixels (top row first), if an image was asked for.
+    pub image: Option<Image>,
+    /// The report.
+    pub report: Report,
+    /// The solve stopped early because it was interrupted.
+    pub interrupted: bool,
+}
+
+/// Solves `scene` in this process and renders its camera view. `load_time` is
+/// reported as the load phase.
+pub fn render(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    load_time: Duration,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Rendered, RenderError> {
+    let single = Single::default();
+    // With one rank this process is rank 0, which always gets the result.
+    render_on(gpu, scene, opts, &single, load_time, progress)?
+        .ok_or_else(|| RenderError::Settings("no result on rank 0".into()))
+}
+
+/// The mesh to solve: a checkpoint's (whose fingerprint must match), or
+/// the refinement passes' (see [`refined_mesh`]).
+fn solve_mesh(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    fingerprint: &str,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<(Mesh, Refinement, Vec<u32>), RenderError> {
+    let Some(c) = &opts.resume else {
+        return refined_mesh(gpu, scene, opts, comm, progress);
+    };
+    if c.header.fingerprint != fingerprint {
+        return Err(RenderError::Checkpoint(format!(
+            "it was saved from {} with other geometry or settings (resolution, form factors, subdivision and split shots must match)",
+            c.header.scene
+        )));
+    }
+    let mesh = Mesh::build_refined(scene, &opts.mesh_settings(), &c.header.factors);
+    Ok((mesh, c.header.refinement.clone(), c.header.factors.clone()))
+}
+
+/// A solver at the start of the final solve (or where a checkpoint left
+/// it), its trace so far, and the solve seconds already spent.
+fn start_solver<'m>(
+    mesh: &'m Mesh,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    refinement: &Refinement,
+) -> Result<(Solver<'m>, Trace, f64), RenderError> {
+    let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
+    solver.set_overshoot(opts.overshoot);
+    let mut trace = Trace::default();
+    // The refinement passes (and, resuming, the solve before the checkpoint)
+    // count as solve time (set-up excluded), so the trace's times are the
+    // honest time to each accuracy.
+    let mut so_far = refinement.seconds;
+    if let Some(c) = &opts.resume {
+        solver
+            .restore(&c.state)
+            .map_err(|e| RenderError::Checkpoint(e.to_string()))?;
+        trace.resume(c.header.trace.clone(), c.state.shots);
+        so_far = c.header.seconds;
+        if comm.rank() == 0 {
+            log::info!(
+                "resuming after {} shots ({so_far:.2} s of solve)",
+                c.state.shots
+            );
+        }
+    }
+    Ok((solver, trace, so_far))
+}
+
+/// What the final solve left: its loop statistics, trace and solve time.
+struct Solved {
+    stats: LoopStats,
+    trace: Trace,
+    solve: f64,
+}
+
+/// Runs the final solve with the trace, progress and checkpoint hooks.
+#[allow(clippy::too_many_arguments)]
+fn final_solve(
+    scene: &Scene,
+    mesh: &Mesh,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    source: &mut GpuFormFactors,
+    solver: &mut Solver,
+    (trace, so_far): (Trace, f64),
+    header: Header,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Solved, RenderError> {
+    let solve_start = Instant::now()
+        .checked_sub(Duration::from_secs_f64(so_far))
+        .unwrap_or_else(Instant::now);
+    let mut hooks = SolveHooks {
+        comm,
+        nodes: &scene.nodes,
+        ambient: opts.ambient,
+        solve_start,
+        trace,
+        progress,
+        plan: opts.checkpoint.as_ref(),
+        interrupt: opts.interrupt.as_deref(),
+        last_save: Instant::now(),
+        header,
+    };
+    let stats = shoot_until(mesh, &opts.stop, 0.0, comm, source, solver, &mut hooks)?;
+    let trace = hooks.trace;
+    let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
+    Ok(Solved {
+        stats,
+        trace,
+        solve,
+    })
+}
+
+/// Solves `scene` over the ranks of `comm` (every rank calls this with the
+/// same arguments) and, on rank 0, renders the camera view and the report.
+/// Other ranks get `Ok(None)`.
+pub fn render_on(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    load_time: Duration,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Option<Rendered>, RenderError> {
+    opts.validate()?;
+    let mut timings = Timings {
+        load: load_time.as_secs_f64(),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let fingerprint = fingerprint(scene, opts);
+    let (mesh, refinement, factors) = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
+    // The passes' solves count as solve time, below.
+    timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
+    // Their exchanges are not the final solve's.
+    let before = comm.traffic();
+    if comm.rank() == 0 {
+        log::info!(
+            "{}: {} polygons, {} patches, {} elements",
+            scene.name,
+            scene.polygons.len(),
+            mesh.patches.len(),
+            mesh.elements.len()
+        );
+    }
+    let t = Instant::now();
+    let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
+    timings.setup = t.elapsed().as_secs_f64();
+    let (mut solver, trace, so_far) = start_solver(&mesh, opts, comm, &refinement)?;
+    let header = Header {
+        scene: scene.name.clone(),
+        fingerprint,
+        counts: [mesh.patches.len(), mesh.elements.len()],
+        factors,
+        refinement: refinement.clone(),
+        seconds: 0.0,
+        trace: Vec::new(),
+    };
+    let solved = final_solve(
+        scene,
+        &mesh,
+        opts,
+        comm,
+        &mut source,
+        &mut solver,
+        (trace, so_far),
+        header,
+        progress,
+    )?;
+    timings.solve = solved.solve;
+    let excluded = Traffic {
+        sent: solved.trace.traffic.sent + before.sent,
+        received: solved.trace.traffic.received + before.received,
+    };
+    let layout = source.layout();
+    let Some(gathered) = gather_to_root(comm, opts, &mut solver, &solved.stats, &source, excluded)
+    else {
+        return Ok(None);
+    };
+    drop(source);
+    phase_timings(
+        &mut timings,
+        &gathered.phases,
+        &solved.stats,
+        solver.shots(),
+    );
+    let parallel = Parallel::new(
+        comm.size(),
+        layout,
+        opts.exchange,
+        opts.resolution,
+        mesh.elements.len(),
+        solver.shots(),
+        gathered.per_rank,
+        LoadBalance::from_busy(&gathered.busy),
+    );
+    let interrupted = solved.stats.interrupted;
+    let (image, mut report) = finish(gpu, scene, &mesh, opts, &solver, timings, parallel, solved)?;
+    report.refinement = refinement;
+    let radiosity = solver.display_radiosity(opts.ambient);
+    drop(solver);
+    Ok(Some(Rendered {
+        mesh,
+        radiosity,
+        image,
+        report,
+        interrupted,
+    }))
+}
+
+/// A camera image: width, height and linear radiance pixels, top row first.
+type Image = (u32, u32, Vec<[f32; 3]>);
+
+/// What rank 0 holds after the gather, besides the whole solution.
+struct Gathered {
+    /// Rank 0's phase times.
+    phases: PhaseTimes,
+    /// Every rank's statistics.
+    per_rank: Vec<RankStats>,
+    /// Every rank's busy time per shot.
+    busy: Vec<Vec<f64>>,
+}
+
+/// Gathers the solution and every rank's statistics to rank 0, where
+/// `solver` then holds the whole solution; `None` on the other ranks.
+fn gather_to_root(
+    comm: &dyn Collectives,
+    opts: &RenderOptions,
+    solver: &mut Solver,
+    stats: &LoopStats,
+    source: &GpuFormFactors,
+    excluded: Traffic,
+) -> Option<Gathered> {
+    let shots = solver.shots();
+    let (b, u) = solver.local_state();
+    let gathered_b = comm.gather_f64(&b);
+    let gathered_u = comm.gather_f64(&u);
+    // With overshooting the unshot fraction sums elements' |unshot|.
+    let gathered_e = if opts.overshoot {
+        comm.gather_f64(&solver.local_element_unshot())
+    } else {
+        None
+    };
+    let mine = pack_rank_stats(&source.timings, stats, comm.traffic(), excluded);
+    let all_stats = comm.gather_f64(&mine);
+    let busy = comm.gather_f64(&source.busy);
+    let (gathered_b, gathered_u, all_stats, busy) = (gathered_b?, gathered_u?, all_stats?, busy?);
+    solver.assemble(&gathered_b, &gathered_u);
+    if let Some(e) = &gathered_e {
+        solver.assemble_element_unshot(e);
+    }
+    solver.set_shots(shots);
+    Some(Gathered {
+        phases: source.timings,
+        per_rank: all_stats
+            .iter()
+            .enumerate()
+            .map(|(r, v)| unpack_rank_stats(r, v))
+            .collect(),
+        busy,
+    })
+}
+
+/// One rank's phase seconds and bytes, for the gather. The trace's gathers
+/// and the refinement passes (`excluded`) are not the solve's exchange.
+fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, all: Traffic, excluded: Traffic) -> Vec<f64> {
+    vec![
+        stats.select.as_secs_f64(),
+        t.bounds.as_secs_f64(),
+        t.rasterise.as_secs_f64(),
+        t.read_back.as_secs_f64(),
+        t.exchange.as_secs_f64(),
+        t.sum.as_secs_f64(),
+        stats.update.as_secs_f64(),
+        (all.sent - excluded.sent.min(all.sent)) as f64,
+        (all.received - excluded.received.min(all.received)) as f64,
+        t.rects as f64,
+    ]
+}
+
+/// [`pack_rank_stats`] read back, for rank `rank`.
+fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
+    RankStats {
+        rank,
+        select_shooter: v[0],
+        bounds: v[1],
+        rasterise: v[2],
+        read_back: v[3],
+        exchange: v[4],
+        sum_form_factors: v[5],
+        update: v[6],
+        bytes_sent: v[7] as u64,
+        bytes_received: v[8] as u64,
+    }
+}
+
+/// Fills the report's per-phase timings from rank 0's measurements.
+fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots: u64) {
+    timings.select_shooter = stats.select.as_secs_f64();
+    timings.update = stats.update.as_secs_f64();
+    timings.bounds = t.bounds.as_secs_f64();
+    timings.rects_per_shot = t.rects as f64 / shots.max(1) as f64;
+    timings.cached_shots = t.cached;
+    timings.split_shots = t.split;
+    timings.coarse_shots = t.coarse;
+    timings.rasterise = t.rasterise.as_secs_f64();
+    timings.read_back = t.read_back.as_secs_f64();
+    timings.exchange = t.exchange.as_secs_f64();
+    timings.sum_form_factors = t.sum.as_secs_f64();
+    let mut shot_times = stats.shot_times.clone();
+    shot_times.sort();
+    timings.median_shot_ms = shot_times
+        .get(shot_times.len() / 2)
+        .map_or(0.0, |d| d.as_secs_f64() * 1e3);
+}
+
+/// Rank 0's end of a render: the image, and the report with its trace.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    gpu: &Gpu,
+    scene: &Scene,
+    mesh: &Mesh,
+    opts: &RenderOptions,
+    solver: &Solver,
+    mut timings: Timings,
+    parallel: Parallel,
+    solved: Solved,
+) -> Result<(Option<Image>, Report), RenderError> {
+    let t = Instant::now();
+    let camera = scene.camera.unwrap_or_else(|| scene.default_camera());
+    let height = opts.image_height(camera.aspect);
+    let image = if opts.width > 0 {
+        let view = ViewSettings {
+            width: opts.width,
+            height,
+            shading: opts.shading,
+            supersample: 2,
+            wireframe: opts.wireframe,
+        };
+        let radiance = solver.display_radiance(opts.ambient);
+        let pixels = render_view(&gpu.device, &gpu.queue, mesh, &radiance, &camera, &view)?;
+        Some((opts.width, height, pixels))
+    } else {
+        None
+    };
+    timings.image = t.elapsed().as_secs_f64();
+    let shots = solver.shots();
+    let mut report = build_report(
+        scene,
+        mesh,
+        opts,
+        solver,
+        gpu,
+        [opts.width, height],
+        timings,
+        parallel,
+    );
+    report.convergence = solved.trace.finish(&report, solved.solve);
+    if solved.stats.interrupted {
+        report.warnings.push(match &opts.checkpoint {
+            Some(plan) => format!(
+                "interrupted after {shots} shots; the state is saved in {}: resume with --resume {}",
+                plan.path.display(),
+                plan.path.display()
+            ),
+            None => format!("interrupted after {shots} shots (no checkpoint to resume from)"),
+        });
+    }
+    Ok((image, report))
+}
+
+/// The report of a (gathered) solution: settings, counts, progress and surfaces.
+#[allow(clippy::too_many_arguments)]
+pub fn build_report(
+    scene: &Scene,
+    mesh: &Mesh,
+    opts: &RenderOptions,
+    solver: &Solver,
+    gpu: &Gpu,
+    image_size: [u32; 2],
+    timings: Timings,
+    parallel: Parallel,
+) -> Report {
+    let unshot_fraction = solver.unshot_fraction();
+    Report {
+        scene: scene.name.clone(),
+        settings: Settings {
+            resolution: opts.resolution,
+            form_factor: opts.form_factor,
+            threshold: opts.stop.threshold,
+            max_shots: opts.stop.max_shots,
+            mesh: opts.mesh_settings(),
+            raster_pieces: opts.raster_pieces,
+            projection: opts.projection,
+            tessellation_tolerance: (opts.projection == Projection::Tessellated)
+                .then_some(opts.tessellation_tolerance),
+            image_size,
+            shading: opts.shading,
+            ambient: opts.ambient,
+            overshoot: opts.overshoot,
+            coarse: opts
+                .coarse_tier()
+                .map(|c| (c.to_string(), opts.coarse_below)),
+        },
+        device: gpu.describe(),
+        refinement: Refinement::default(),
+        bake: None,
+        counts: Counts {
+            polygons: scene.polygons.len(),
+            patches: mesh.patches.len(),
+            elements: mesh.elements.len(),
+            cells: opts.resolution.cells(),
+            ranks: parallel.ranks,
+        },
+        shots: solver.shots(),
+        unshot_fraction,
+        converged: unshot_fraction <= opts.stop.threshold,
+        emitted_power: solver.emitted_power(),
+        timings,
+        parallel,
+        surfaces: report::surfaces(mesh, &scene.nodes, &solver.display_radiosity(opts.ambient)),
+        convergence: Vec::new(),
+        warnings: scene.warnings.clone(),
+    }
+}
+
+/// The `parallel` section of a one-process solve.
+pub fn single_process(res: Resolution, elements: usize, shots: u64) -> Parallel {
+    Parallel::new(
+        1,
+        TileLayout::whole(res),
+        Exchange::Hemispheres,
+        res,
+        elements,
+        shots,
+        Vec::new(),
+        LoadBalance::default(),
+    )
+}

@@ -1,0 +1,323 @@
+//! Everything a render can be told, its defaults, and what each setting
+//! implies (the coarse tier, the mesh settings, the checkpoint fingerprint).
+
+use crate::checkpoint::Checkpoint;
+use crate::gpu::{GpuError, Shading};
+use crate::hemisphere::{Resolution, TileLayout};
+use crate::mesh::MeshSettings;
+use crate::parallel::Exchange;
+use crate::scene::{Scene, Subdivision};
+pub use crate::settings::{
+    FormFactorMethod, Projection, DEFAULT_COARSE_BELOW, DEFAULT_RASTER_PIECES,
+    DEFAULT_TESSELLATION_TOLERANCE,
+};
+use crate::solver::StopRule;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Everything a render can be told.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// Hemisphere resolution.
+    pub resolution: Resolution,
+    /// How form factors are evaluated.
+    pub form_factor: FormFactorMethod,
+    /// When to stop.
+    pub stop: StopRule,
+    /// How to subdivide.
+    pub mesh: MeshSettings,
+    /// How cells are found: exact per-cell test, or tessellation.
+    pub projection: Projection,
+    /// The tessellated projection's tolerance (cells between an edge's
+    /// curved image and its chords).
+    pub tessellation_tolerance: f32,
+    /// What the hemisphere rasteriser draws: quad polygons as at most N x N
+    /// pieces (the element is found per fragment), or every element (0).
+    pub raster_pieces: u32,
+    /// How the hemisphere is tiled and over which rank grid. Under MPI the
+    /// grid comes from the rank count and only the tile size is used; in one
+    /// process every rank's tiles are drawn in turn (one tile by default).
+    pub layout: Option<TileLayout>,
+    /// Tile size in cells (width along theta, height along phi) when running on
+    /// several ranks; 1 x 1 is the paper's per-cell interleave.
+    pub tile: (u32, u32),
+    /// How ranks exchange form factors.
+    pub exchange: Exchange,
+    /// Image width in pixels (0: no image).
+    pub width: u32,
+    /// Image height (from the camera's aspect ratio when `None`).
+    pub height: Option<u32>,
+    /// Smooth or flat shading.
+    pub shading: Shading,
+    /// Add the ambient term to the image and the reported radiosities.
+    pub ambient: bool,
+    /// Keep form-factor rows of patches that have shot, so a patch that
+    /// shoots again costs no rasterisation (results are identical either way).
+    pub cache_rows: bool,
+    /// Split a hybrid shot into one hemisphere per group of shooter elements
+    /// where a near receiver is partly hidden from the shooter's centre.
+    pub split_shots: bool,
+    /// The hemisphere resolution of weak shooters (see `coarse_below`);
+    /// `None`: half `resolution` along each axis (a quarter of the cells).
+    pub coarse: Option<Resolution>,
+    /// Shooters whose unshot power is below this fraction of the emitted
+    /// power draw their hemisphere at `coarse` (0: every shot at `resolution`).
+    pub coarse_below: f64,
+    /// Shooters overshoot by rho times the ambient term (Feda & Purgathofer
+    /// 1992): fewer shots to the same error, not less time on lavapipe
+    /// (off by default).
+    pub overshoot: bool,
+    /// Draw element edges over the image.
+    pub wireframe: bool,
+    /// Where and how often to save the solve's state (`None`: never).
+    pub checkpoint: Option<CheckpointPlan>,
+    /// Set (by a signal handler, say) to stop after the current shot: the
+    /// state goes to the checkpoint and the result so far is returned.
+    pub interrupt: Option<Arc<AtomicBool>>,
+    /// Continue from this saved state instead of starting afresh.
+    pub resume: Option<Arc<Checkpoint>>,
+}
+
+/// Where a solve saves its state.
+#[derive(Clone, Debug)]
+pub struct CheckpointPlan {
+    /// The checkpoint file (replaced atomically each time).
+    pub path: std::path::PathBuf,
+    /// Save every this often (`None`: only when interrupted).
+    pub every: Option<Duration>,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            resolution: Resolution::default(),
+            form_factor: FormFactorMethod::default(),
+            stop: StopRule::default(),
+            mesh: MeshSettings::default(),
+            raster_pieces: DEFAULT_RASTER_PIECES,
+            projection: Projection::Exact,
+            tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
+            layout: None,
+            tile: (1, 1),
+            exchange: Exchange::Hemispheres,
+            width: 512,
+            height: None,
+            shading: Shading::Smooth,
+            ambient: true,
+            cache_rows: true,
+            split_shots: true,
+            overshoot: false,
+            coarse: None,
+            coarse_below: DEFAULT_COARSE_BELOW,
+            wireframe: false,
+            checkpoint: None,
+            interrupt: None,
+            resume: None,
+        }
+    }
+}
+
+impl RenderOptions {
+    /// The hemisphere resolution weak shooters draw at, if there is a coarse
+    /// tier: `coarse`, or half `resolution` along each axis but no coarser
+    /// than 64 x 256 (weak shooters at 48 x 192 or 32 x 128 leave the 64
+    /// cubes above 1 %: README "Coarse hemispheres for weak shooters"), when
+    /// `coarse_below` is above 0 and it has fewer cells than `resolution`.
+    pub fn coarse_tier(&self) -> Option<Resolution> {
+        let res = self.resolution;
+        let coarse = self.coarse.unwrap_or(Resolution {
+            rows: (res.rows / 2).max(64),
+            cols: (res.cols / 2).max(256),
+        });
+        (self.coarse_below > 0.0 && coarse.cells() < res.cells()).then_some(coarse)
+    }
+
+    /// The mesh settings a render uses: refinement by need only with hybrid
+    /// form factors (hemisphere sums do not measure penumbrae) and without a
+    /// fixed `--patch-size`.
+    pub fn mesh_settings(&self) -> MeshSettings {
+        let mut m = self.mesh;
+        if self.form_factor != FormFactorMethod::Hybrid || m.patch_size.is_some() {
+            m.refine = 0;
+        }
+        m
+    }
+
+    /// Fails on settings no solve can use.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        self.resolution
+            .validate()
+            .map_err(|e| RenderError::Settings(e.to_string()))?;
+        if self.stop.threshold.is_nan() || self.stop.threshold < 0.0 {
+            return Err(RenderError::Settings(format!(
+                "threshold {} must be >= 0",
+                self.stop.threshold
+            )));
+        }
+        Ok(())
+    }
+
+    /// The image height: `height`, or `width` over the camera's aspect ratio.
+    pub fn image_height(&self, aspect: Option<f32>) -> u32 {
+        self.height
+            .unwrap_or_else(|| (self.width as f32 / aspect.unwrap_or(1.0)).round().max(1.0) as u32)
+    }
+}
+
+/// The mesh settings a render uses (see [`RenderOptions::mesh_settings`]).
+pub fn mesh_settings(opts: &RenderOptions) -> MeshSettings {
+    opts.mesh_settings()
+}
+
+/// Why a render failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The GPU failed.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// A setting is unusable.
+    #[error("invalid setting: {0}")]
+    Settings(String),
+    /// A checkpoint could not be written or does not fit this render.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+    /// A shot's fixed-point form-factor sums overflowed (no GPU fault: the
+    /// scene or resolution is beyond what the sums can hold).
+    #[error("the fixed-point form-factor sums of shooter {0} overflowed 64 bits")]
+    Overflow(u32),
+}
+
+/// What a checkpoint must match to be resumed here: the scene's geometry,
+/// materials and subdivision, and every setting that changes the numbers
+/// (not the rank count, tiles or exchange, which do not). Spelled out field
+/// by field (never through `Debug`, whose output Rust does not promise to
+/// keep), in the text checkpoints have always hashed.
+pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
+    let mut geometry = Vec::new();
+    for p in &scene.polygons {
+        let floats = p.vertices.iter().flat_map(|v| v.to_array());
+        for x in floats.chain(p.reflectance).chain(p.emission) {
+            geometry.extend_from_slice(&x.to_bits().to_le_bytes());
+        }
+        let subdivision = option_text(p.subdivision.as_ref().map(subdivision_text));
+        geometry.extend_from_slice(format!("{} {subdivision};", p.node).as_bytes());
+    }
+    let settings = format!(
+        "{} {} {} {} {} {} {} {} {}",
+        opts.resolution,
+        opts.form_factor.name(),
+        mesh_text(&opts.mesh_settings()),
+        opts.split_shots,
+        opts.overshoot,
+        opts.projection.name(),
+        opts.tessellation_tolerance,
+        option_text(opts.coarse_tier().map(|r| format!("\"{r}\""))),
+        opts.coarse_below
+    );
+    crate::checkpoint::fingerprint(&[
+        &geometry,
+        settings.as_bytes(),
+        scene.nodes.join("\n").as_bytes(),
+    ])
+}
+
+fn option_text(x: Option<String>) -> String {
+    x.map_or_else(|| "None".into(), |s| format!("Some({s})"))
+}
+
+fn subdivision_text(s: &Subdivision) -> String {
+    format!(
+        "Subdivision {{ patches: [{}, {}], elements: [{}, {}] }}",
+        s.patches[0], s.patches[1], s.elements[0], s.elements[1]
+    )
+}
+
+fn mesh_text(m: &MeshSettings) -> String {
+    format!(
+        "MeshSettings {{ patch_size: {}, element_size: {}, near_field_ratio: {:?}, max_patches_per_edge: {}, max_elements_per_edge: {}, refine: {} }}",
+        option_text(m.patch_size.map(|x| format!("{x:?}"))),
+        option_text(m.element_size.map(|x| format!("{x:?}"))),
+        m.near_field_ratio,
+        m.max_patches_per_edge,
+        m.max_elements_per_edge,
+        m.refine
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The fingerprint's text is the one checkpoints were written with
+    /// (then through `Debug`): old checkpoints still resume.
+    #[test]
+    fn fingerprint_text_is_the_one_checkpoints_were_written_with() {
+        let s = Subdivision {
+            patches: [3, 4],
+            elements: [2, 1],
+        };
+        assert_eq!(subdivision_text(&s), format!("{s:?}"));
+        for m in [
+            MeshSettings::default(),
+            MeshSettings {
+                patch_size: Some(0.25),
+                element_size: Some(1e-7),
+                near_field_ratio: 0.125,
+                refine: 3,
+                ..MeshSettings::default()
+            },
+        ] {
+            assert_eq!(mesh_text(&m), format!("{m:?}"));
+        }
+        for m in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
+            assert_eq!(m.name(), format!("{m:?}"));
+        }
+        for p in [Projection::Exact, Projection::Tessellated] {
+            assert_eq!(p.name(), format!("{p:?}"));
+        }
+        let coarse = Some(
+            Resolution {
+                rows: 64,
+                cols: 256,
+            }
+            .to_string(),
+        );
+        assert_eq!(
+            option_text(coarse.as_ref().map(|r| format!("\"{r}\""))),
+            format!("{coarse:?}")
+        );
+        assert_eq!(option_text(None), format!("{:?}", None::<String>));
+    }
+
+    #[test]
+    fn coarse_tier_follows_the_resolution() {
+        let mut o = RenderOptions::default();
+        assert_eq!(
+            o.coarse_tier(),
+            Some(Resolution {
+                rows: 64,
+                cols: 256
+            })
+        );
+        o.resolution = Resolution {
+            rows: 256,
+            cols: 1024,
+        };
+        assert_eq!(
+            o.coarse_tier(),
+            Some(Resolution {
+                rows: 128,
+                cols: 512
+            })
+        );
+        o.resolution = Resolution {
+            rows: 64,
+            cols: 256,
+        };
+        assert_eq!(o.coarse_tier(), None, "no coarser than 64x256");
+        o.resolution = Resolution::default();
+        o.coarse_below = 0.0;
+        assert_eq!(o.coarse_tier(), None);
+    }
+}

@@ -1,0 +1,350 @@
+//! The GPU form-factor source: for each shot, a row from the cache or a
+//! hemisphere drawn (at the tier the shooter's power asks for) by every
+//! rank, exchanged, and turned into a row of form factors (hemisphere sums,
+//! or hybrid rows, split where visibility varies across the shooter).
+
+use super::cache::{RowCache, RowKey};
+use super::exchange::Exchanger;
+use super::options::{RenderError, RenderOptions};
+use super::tiers::{layout_for, TierCells, TierChoice};
+use crate::formfactor::{self, Row};
+use crate::gpu::{Gpu, GpuError, HemisphereRasterizer};
+use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, FIXED_ONE};
+use crate::mesh::{Mesh, ShooterFrame};
+use crate::parallel::Collectives;
+use crate::settings::{FormFactorMethod, Projection};
+use crate::solver::{FormFactorSource, ShotRegion, Transfer};
+use std::time::{Duration, Instant};
+
+/// Time one rank spent per phase, summed over shots.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PhaseTimes {
+    /// Finding cell rectangles (CPU).
+    pub bounds: Duration,
+    /// Drawing and waiting for the GPU.
+    pub rasterise: Duration,
+    /// Reading the item buffer back.
+    pub read_back: Duration,
+    /// The form-factor exchange between ranks.
+    pub exchange: Duration,
+    /// Summing delta form factors.
+    pub sum: Duration,
+    /// Rectangles drawn.
+    pub rects: u64,
+    /// Shots answered from the form-factor row cache (no rasterisation).
+    pub cached: u64,
+    /// Shots split into one hemisphere per group of shooter elements.
+    pub split: u64,
+    /// Shots drawn at the coarse resolution (weak shooters).
+    pub coarse: u64,
+}
+
+impl PhaseTimes {
+    /// Time drawing (bounds, rasterising, reading back).
+    fn drawing(&self) -> Duration {
+        self.bounds + self.rasterise + self.read_back
+    }
+}
+
+/// One resolution tier: its rasteriser and its cells.
+struct Tier {
+    raster: HemisphereRasterizer,
+    cells: TierCells,
+}
+
+impl Tier {
+    /// Uploads the mesh and builds the pipelines for resolution `res`.
+    fn new(
+        gpu: &Gpu,
+        mesh: &Mesh,
+        opts: &RenderOptions,
+        res: Resolution,
+        ranks: usize,
+        extent: f32,
+    ) -> Result<Self, RenderError> {
+        let layout = layout_for(opts, res, ranks)?;
+        let mut raster =
+            HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_pieces, extent)?;
+        if opts.projection == Projection::Tessellated {
+            raster.use_tessellation(&gpu.device, opts.tessellation_tolerance)?;
+        }
+        raster.set_count_coverage(opts.form_factor == FormFactorMethod::Hybrid);
+        Ok(Self {
+            raster,
+            cells: TierCells::new(res, layout, ranks, opts.form_factor),
+        })
+    }
+}
+
+/// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
+/// exchanging them between ranks as DESIGN.md section 3 describes. Returns
+/// the form factors of this rank's elements only.
+pub struct GpuFormFactors<'a> {
+    gpu: &'a Gpu,
+    mesh: &'a Mesh,
+    comm: &'a dyn Collectives,
+    /// The hemisphere at the shot resolution, and at the coarse one for weak
+    /// shooters (see [`RenderOptions::coarse_below`]).
+    tiers: Vec<Tier>,
+    choice: TierChoice,
+    /// The tier the last hemisphere was drawn in.
+    last_tier: usize,
+    method: FormFactorMethod,
+    exchanger: Exchanger<'a>,
+    acc: FormFactorAccumulator,
+    items: Vec<u32>,
+    pairs: Vec<(u32, u64)>,
+    /// Time spent so far.
+    pub timings: PhaseTimes,
+    /// This rank's busy time (everything but waiting in collectives) per shot.
+    pub busy: Vec<f64>,
+    /// Per patch, from its first uncached hybrid shot: this rank's receivers'
+    /// penumbra and total shares (see `refine::PatchStats`).
+    pub penumbra: Vec<[u64; 2]>,
+    /// Form-factor rows of patches that have shot, for when they shoot again.
+    /// Keyed by tier too: a weak shot of a patch that first shot strong
+    /// draws (once) at the coarse tier, so that the cache, and a resumed
+    /// solve's empty one, change no number.
+    cache: RowCache,
+    /// Whether shots split where visibility varies across the shooter.
+    split: bool,
+}
+
+impl<'a> GpuFormFactors<'a> {
+    /// Uploads the mesh and builds the pipelines. With one process and a
+    /// multi-rank `layout`, every rank's tiles are drawn here in turn.
+    pub fn new(
+        gpu: &'a Gpu,
+        mesh: &'a Mesh,
+        opts: &RenderOptions,
+        comm: &'a dyn Collectives,
+        extent: f32,
+    ) -> Result<Self, RenderError> {
+        let n = comm.size();
+        let tiers = TierChoice::resolutions(opts)
+            .into_iter()
+            .map(|res| Tier::new(gpu, mesh, opts, res, n, extent))
+            .collect::<Result<Vec<_>, _>>()?;
+        let patches = mesh.elements.iter().map(|e| e.patch);
+        Ok(Self {
+            gpu,
+            mesh,
+            comm,
+            tiers,
+            choice: TierChoice::new(opts, mesh.emitted_power()),
+            last_tier: 0,
+            method: opts.form_factor,
+            exchanger: Exchanger::new(comm, opts.exchange, opts.form_factor, patches),
+            acc: FormFactorAccumulator::new(mesh.elements.len()),
+            items: Vec::new(),
+            pairs: Vec::new(),
+            timings: PhaseTimes::default(),
+            busy: Vec::new(),
+            penumbra: vec![[0, 0]; mesh.patches.len()],
+            cache: RowCache::for_ranks(opts.cache_rows, n),
+            split: opts.split_shots,
+        })
+    }
+
+    /// Bytes of the row computed by the last shot that the cache has not
+    /// decided on yet (this rank's share).
+    pub fn pending_bytes(&self) -> u64 {
+        self.cache.pending_bytes()
+    }
+
+    /// Keeps the pending row if the cache has room for `all_ranks_bytes`
+    /// (the pending bytes summed over ranks, the same number on every rank).
+    pub fn settle_cache(&mut self, all_ranks_bytes: u64) {
+        self.cache.settle(all_ranks_bytes);
+    }
+
+    /// The tile layout in use.
+    pub fn layout(&self) -> TileLayout {
+        self.tiers[0].cells.layout
+    }
+
+    /// The item buffer of the last hemisphere this rank drew, and its resolution.
+    pub fn last_items(&self) -> (&[u32], Resolution) {
+        (&self.items, self.tiers[self.last_tier].cells.resolution)
+    }
+
+    /// Draws the hemisphere of `shooter` at `centre` (every rank its tiles)
+    /// in tier `tier`, exchanges, and leaves this rank's per-element sums in
+    /// `self.pairs`. Returns the time spent in the exchange.
+    fn hemisphere(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+    ) -> Result<Duration, RenderError> {
+        let frame = self.mesh.shooter_frame_at(shooter, centre);
+        self.last_tier = tier;
+        let layout = self.tiers[tier].cells.layout;
+        let mut exchange = Duration::ZERO;
+        if self.comm.size() == 1 {
+            // One process, perhaps standing in for a rank grid: draw every
+            // rank's tiles in turn.
+            for ry in 0..layout.py {
+                for rx in 0..layout.px {
+                    self.draw(&frame, (rx, ry))?;
+                    let Tier { raster, cells } = &self.tiers[tier];
+                    Exchanger::add_own(&mut self.acc, cells, &self.items, raster.coverage_pairs());
+                }
+            }
+        } else {
+            let own = self.tiers[tier].cells.grid_position(self.comm.rank());
+            self.draw(&frame, own)?;
+            let Tier { raster, cells } = &mut self.tiers[tier];
+            exchange =
+                self.exchanger
+                    .exchange(&mut self.acc, cells, &self.items, raster.coverage_pairs());
+        }
+        if self.acc.take_overflow() {
+            return Err(RenderError::Overflow(shooter));
+        }
+        self.acc.drain_fixed(&mut self.pairs);
+        Ok(exchange)
+    }
+
+    /// Draws this rank's tiles `own` of the last tier's hemisphere.
+    fn draw(&mut self, frame: &ShooterFrame, own: (u32, u32)) -> Result<(), GpuError> {
+        let tier = &mut self.tiers[self.last_tier];
+        let stats = tier.raster.render(
+            &self.gpu.device,
+            &self.gpu.queue,
+            frame,
+            &tier.cells.layout,
+            own,
+            &mut self.items,
+        )?;
+        self.timings.bounds += stats.bounds;
+        self.timings.rects += stats.rects as u64;
+        self.timings.rasterise += stats.rasterise;
+        self.timings.read_back += stats.readback;
+        Ok(())
+    }
+
+    /// The row of a shooter drawn afresh, and the time spent in exchanges.
+    fn fresh_row(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+    ) -> Result<(Row, Duration), RenderError> {
+        let exchange = self.hemisphere(shooter, centre, tier)?;
+        match self.method {
+            FormFactorMethod::Hemisphere => Ok((
+                Row {
+                    columns: 1,
+                    ids: self.pairs.iter().map(|p| p.0).collect(),
+                    values: self.pairs.iter().map(|p| p.1 as f64 / FIXED_ONE).collect(),
+                    ..Row::default()
+                },
+                exchange,
+            )),
+            FormFactorMethod::Hybrid => {
+                let (row, more) = self.hybrid_row(shooter, tier)?;
+                Ok((row, exchange + more))
+            }
+        }
+    }
+
+    /// The hybrid row from the hemisphere just drawn, redrawn split into
+    /// groups of the shooter's elements where visibility varies across it.
+    fn hybrid_row(&mut self, shooter: u32, tier: usize) -> Result<(Row, Duration), RenderError> {
+        let m = self.mesh.patches[shooter as usize].elements.len();
+        let columns = if m <= formfactor::MAX_SHOOTER_COLUMNS {
+            m
+        } else {
+            1
+        };
+        let row = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
+        if let Some(p) = self.penumbra.get_mut(shooter as usize) {
+            *p = [row.partial + row.near_hidden, row.total + row.near_hidden];
+        }
+        if !(self.split && columns > 1) {
+            return Ok((row, Duration::ZERO));
+        }
+        let (split, mut exchange) = self.needs_split(&row);
+        if !split {
+            return Ok((row, exchange));
+        }
+        let mut merged = Row {
+            columns,
+            ..Row::default()
+        };
+        for (group, at) in formfactor::split_groups(self.mesh, shooter, columns) {
+            exchange += self.hemisphere(shooter, at, tier)?;
+            merged.merge(&formfactor::hybrid_row(
+                self.mesh,
+                shooter,
+                &self.pairs,
+                group,
+            ));
+        }
+        self.timings.split += 1;
+        Ok((merged, exchange))
+    }
+
+    /// Refinement by need: a near receiver partly hidden from the shooter's
+    /// centre means visibility varies across the shooter, so each group of
+    /// its elements looks for itself. Each rank has its receivers' share:
+    /// they are summed (exactly). Returns the decision and the time spent
+    /// in the collective.
+    fn needs_split(&self, row: &Row) -> (bool, Duration) {
+        if self.comm.size() == 1 {
+            return (
+                formfactor::needs_split(row.near_hidden, row.total),
+                Duration::ZERO,
+            );
+        }
+        let t = Instant::now();
+        let all = self
+            .comm
+            .all_gather_f64(&[row.near_hidden as f64, row.total as f64]);
+        let (h, tot) = all
+            .chunks_exact(2)
+            .fold((0u64, 0u64), |(h, t), c| (h + c[0] as u64, t + c[1] as u64));
+        (formfactor::needs_split(h, tot), t.elapsed())
+    }
+}
+
+impl FormFactorSource for GpuFormFactors<'_> {
+    type Error = RenderError;
+
+    fn form_factors(
+        &mut self,
+        shooter: u32,
+        region: &ShotRegion,
+        out: &mut Vec<Transfer>,
+    ) -> Result<(), RenderError> {
+        let start = Instant::now();
+        let tier = self.choice.tier_for(region.power);
+        let key = RowKey::new(shooter, region.centre, tier);
+        if let Some(row) = self.cache.get(&key) {
+            row.combine(region, out);
+            self.timings.cached += 1;
+            let spent = start.elapsed();
+            self.timings.sum += spent;
+            self.busy.push(spent.as_secs_f64());
+            return Ok(());
+        }
+        let before = self.timings.drawing();
+        if tier > 0 {
+            self.timings.coarse += 1;
+        }
+        let (row, exchange) = self.fresh_row(shooter, region.centre, tier)?;
+        row.combine(region, out);
+        self.cache.offer(key, row);
+        if self.comm.size() == 1 {
+            // One process: the decision needs nobody else.
+            self.cache.settle(self.cache.pending_bytes());
+        }
+        let total = start.elapsed();
+        let drawn = self.timings.drawing() - before;
+        self.timings.exchange += exchange;
+        self.timings.sum += total.saturating_sub(exchange + drawn);
+        self.busy.push((total - exchange).as_secs_f64());
+        Ok(())
+    }
+}

@@ -1,0 +1,205 @@
+//! Resolution tiers: a shot is drawn at the fine resolution, or at the
+//! coarse one when its shooter is weak, and each tier knows, without a GPU,
+//! how its hemisphere is tiled over the ranks and what each cell weighs.
+
+use super::options::{FormFactorMethod, RenderError, RenderOptions};
+use crate::hemisphere::{Resolution, TileLayout, EMPTY};
+use crate::parallel::rank_grid;
+
+/// Which tier a shot draws in: the coarse one (tier 1, when there is one)
+/// for shooters with less unshot power than a share of the emitted power.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TierChoice {
+    /// How many tiers there are (1 or 2).
+    pub tiers: usize,
+    /// Shooters with less unshot power than this (W, sum over RGB) draw coarse.
+    pub coarse_below: f64,
+}
+
+impl TierChoice {
+    /// The choice `opts` describes for a mesh emitting `emitted_power`.
+    pub fn new(opts: &RenderOptions, emitted_power: f64) -> Self {
+        Self {
+            tiers: 1 + opts.coarse_tier().is_some() as usize,
+            coarse_below: opts.coarse_below * emitted_power,
+        }
+    }
+
+    /// The tier a shooter of unshot power `power` draws in.
+    pub fn tier_for(&self, power: f64) -> usize {
+        if self.tiers > 1 && power < self.coarse_below {
+            1
+        } else {
+            0
+        }
+    }
+
+    /// The resolution of each tier `opts` asks for, fine first.
+    pub fn resolutions(opts: &RenderOptions) -> Vec<Resolution> {
+        std::iter::once(opts.resolution)
+            .chain(opts.coarse_tier())
+            .collect()
+    }
+}
+
+/// The tile layout of a hemisphere of `res` over `ranks` ranks: the rank
+/// grid with `opts.tile` tiles on several ranks, else `opts.layout` (one
+/// process drawing every rank's tiles in turn) or one whole tile.
+pub fn layout_for(
+    opts: &RenderOptions,
+    res: Resolution,
+    ranks: usize,
+) -> Result<TileLayout, RenderError> {
+    let layout = if ranks > 1 {
+        let (px, py) = rank_grid(ranks);
+        TileLayout {
+            tile_w: opts.tile.0,
+            tile_h: opts.tile.1,
+            px,
+            py,
+        }
+    } else {
+        opts.layout.unwrap_or_else(|| TileLayout::whole(res))
+    };
+    if layout.tile_w == 0 || layout.tile_h == 0 || layout.px == 0 || layout.py == 0 {
+        return Err(RenderError::Settings(format!(
+            "tile layout {layout:?} has a zero size"
+        )));
+    }
+    Ok(layout)
+}
+
+/// Everything of one tier's hemisphere that needs no GPU: its layout, what a
+/// cell adds to the element it shows, and which cells each rank owns.
+#[derive(Clone, Debug)]
+pub struct TierCells {
+    /// The hemisphere resolution.
+    pub resolution: Resolution,
+    /// How its cells are tiled over the ranks.
+    pub layout: TileLayout,
+    /// What one cell adds to the element it shows, per row: its delta form
+    /// factor in fixed point (hemisphere) or one visible cell (hybrid).
+    pub weights: Vec<u64>,
+    /// Cells (row-major indices) of each rank's tiles (hemisphere exchange;
+    /// empty in one process).
+    pub cells_of: Vec<Vec<u32>>,
+    /// How many cells each rank owns (known to all, so never exchanged).
+    pub cell_counts: Vec<usize>,
+    /// The whole hemisphere's cells, assembled from every rank's.
+    pub full: Vec<u32>,
+}
+
+impl TierCells {
+    /// The cells of a hemisphere of `res` laid out by `layout` over `ranks`
+    /// ranks, weighted for `method`.
+    pub fn new(
+        res: Resolution,
+        layout: TileLayout,
+        ranks: usize,
+        method: FormFactorMethod,
+    ) -> Self {
+        let weights = match method {
+            FormFactorMethod::Hybrid => vec![crate::formfactor::VISIBLE_ONE; res.rows as usize],
+            FormFactorMethod::Hemisphere => res.delta_form_factors_fixed(),
+        };
+        let mut cells_of = vec![Vec::new(); ranks];
+        if ranks > 1 && layout.ranks() as usize == ranks {
+            for p in 0..res.rows {
+                for t in 0..res.cols {
+                    let (x, y) = layout.owner(p, t);
+                    cells_of[(y * layout.px + x) as usize].push(p * res.cols + t);
+                }
+            }
+        }
+        Self {
+            resolution: res,
+            layout,
+            weights,
+            cell_counts: cells_of.iter().map(Vec::len).collect(),
+            cells_of,
+            full: vec![EMPTY; res.cells()],
+        }
+    }
+
+    /// The rank-grid position (x, y) of rank `rank`.
+    pub fn grid_position(&self, rank: usize) -> (u32, u32) {
+        let rank = rank as u32;
+        (rank % self.layout.px, rank / self.layout.px)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_cell_belongs_to_exactly_one_rank() {
+        let res = Resolution { rows: 12, cols: 40 };
+        let opts = RenderOptions {
+            tile: (3, 2),
+            ..RenderOptions::default()
+        };
+        for ranks in [2, 3, 4, 6] {
+            let layout = layout_for(&opts, res, ranks).expect("layout");
+            let cells = TierCells::new(res, layout, ranks, FormFactorMethod::Hybrid);
+            let mut seen = vec![0u8; res.cells()];
+            for (r, own) in cells.cells_of.iter().enumerate() {
+                assert_eq!(cells.cell_counts[r], own.len());
+                assert!(!own.is_empty(), "{ranks} ranks: rank {r} owns no cell");
+                for &c in own {
+                    seen[c as usize] += 1;
+                    let (p, t) = (c / res.cols, c % res.cols);
+                    let (x, y) = layout.owner(p, t);
+                    assert_eq!(cells.grid_position(r), (x, y));
+                }
+            }
+            assert!(seen.iter().all(|&n| n == 1), "{ranks} ranks");
+        }
+    }
+
+    #[test]
+    fn weights_follow_the_method() {
+        let res = Resolution { rows: 8, cols: 32 };
+        let one = TileLayout::whole(res);
+        let h = TierCells::new(res, one, 1, FormFactorMethod::Hemisphere);
+        let sum: f64 = h.weights.iter().map(|&w| w as f64).sum::<f64>() * res.cols as f64;
+        assert!(
+            (sum / crate::hemisphere::FIXED_ONE - 1.0).abs() < 1e-9,
+            "{sum}"
+        );
+        let y = TierCells::new(res, one, 1, FormFactorMethod::Hybrid);
+        assert!(y
+            .weights
+            .iter()
+            .all(|&w| w == crate::formfactor::VISIBLE_ONE));
+        assert!(h.cells_of[0].is_empty(), "one process needs no cell lists");
+    }
+
+    #[test]
+    fn weak_shooters_draw_coarse_only_when_there_is_a_coarse_tier() {
+        let opts = RenderOptions::default();
+        let c = TierChoice::new(&opts, 100.0);
+        assert_eq!(c.tiers, 2);
+        assert_eq!(c.tier_for(0.29), 1);
+        assert_eq!(c.tier_for(0.3), 0);
+        let none = TierChoice::new(
+            &RenderOptions {
+                coarse_below: 0.0,
+                ..opts.clone()
+            },
+            100.0,
+        );
+        assert_eq!(none.tier_for(0.0), 0);
+        assert_eq!(TierChoice::resolutions(&opts).len(), 2);
+    }
+
+    #[test]
+    fn a_zero_tile_is_an_error() {
+        let opts = RenderOptions {
+            tile: (0, 4),
+            ..RenderOptions::default()
+        };
+        assert!(layout_for(&opts, Resolution::default(), 2).is_err());
+        assert!(layout_for(&opts, Resolution::default(), 1).is_ok());
+    }
+}

@@ -1,0 +1,152 @@
+//! The convergence trace the report carries (per-node radiosities at
+//! log-spaced shot counts), and the gather of a distributed solution to
+//! rank 0 that the trace and the checkpoints share.
+
+use crate::parallel::{Collectives, Traffic};
+use crate::report::{self, Report, TracePoint};
+use crate::solver::Solver;
+use std::time::{Duration, Instant};
+
+/// Gathers every rank's share of `solver` to rank 0 and assembles the whole
+/// solution there (`None` on the other ranks): radiosities, unshot
+/// radiosities, shots, retention, overshooting, and with `elements` the
+/// elements' unshot radiosities (a checkpoint needs them, and so does the
+/// unshot fraction under overshooting). Every rank must call it.
+pub fn gather_whole<'m>(
+    comm: &dyn Collectives,
+    solver: &Solver<'m>,
+    elements: bool,
+) -> Option<Solver<'m>> {
+    let (b, u) = solver.local_state();
+    let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
+    let ge = if elements {
+        comm.gather_f64(&solver.local_element_unshot())
+    } else {
+        None
+    };
+    let mut whole = Solver::new(solver.mesh());
+    whole.assemble(&gb?, &gu?);
+    if let Some(e) = &ge {
+        whole.assemble_element_unshot(e);
+    }
+    whole.set_overshoot(solver.overshoot());
+    whole.set_shots(solver.shots());
+    whole.copy_retention(solver);
+    Some(whole)
+}
+
+/// The report's convergence trace as the solve goes: when to record, and the
+/// points so far (rank 0's; other ranks only take part in the gathers).
+#[derive(Default)]
+pub struct Trace {
+    /// Recorded points.
+    pub points: Vec<TracePoint>,
+    /// The next shot count to record after the first 32.
+    next: u64,
+    /// Time spent gathering and summarising (left out of the solve time).
+    pub spent: Duration,
+    /// Bytes the trace's gathers moved (left out of the exchange's traffic).
+    pub traffic: Traffic,
+}
+
+impl Trace {
+    /// Whether a point is due after `shots` shots: every shot up to 32, then
+    /// at every power of two and at counts growing by 2^(1/4). The
+    /// same on every rank, since it depends on the shot count alone.
+    pub fn due(&mut self, shots: u64) -> bool {
+        if shots <= 32 || shots.is_power_of_two() {
+            return true;
+        }
+        if shots >= self.next.max(33) {
+            self.next = ((shots as f64) * 2f64.powf(0.25)).ceil() as u64;
+            return true;
+        }
+        false
+    }
+
+    /// Records the solution now. Every rank must call this at the same shot;
+    /// with several ranks the owners' radiosities are gathered to rank 0.
+    pub fn record(
+        &mut self,
+        comm: &dyn Collectives,
+        solver: &Solver,
+        nodes: &[String],
+        ambient: bool,
+        solve_start: Instant,
+    ) {
+        let seconds = solve_start
+            .elapsed()
+            .saturating_sub(self.spent)
+            .as_secs_f64();
+        self.record_at(comm, solver, nodes, ambient, seconds);
+    }
+
+    /// [`Trace::record`] with the solve time given (e.g. a viewer's, which
+    /// leaves its pauses out).
+    pub fn record_at(
+        &mut self,
+        comm: &dyn Collectives,
+        solver: &Solver,
+        nodes: &[String],
+        ambient: bool,
+        seconds: f64,
+    ) {
+        let t = Instant::now();
+        let before = comm.traffic();
+        let summary = if comm.size() == 1 {
+            Some((
+                report::surfaces(solver.mesh(), nodes, &solver.display_radiosity(ambient)),
+                solver.unshot_fraction(),
+            ))
+        } else {
+            // With overshooting the unshot fraction sums elements' |unshot|.
+            gather_whole(comm, solver, solver.overshoot()).map(|whole| {
+                (
+                    report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),
+                    whole.unshot_fraction(),
+                )
+            })
+        };
+        if let Some((surfaces, unshot_fraction)) = summary {
+            self.points.push(TracePoint {
+                shots: solver.shots(),
+                seconds,
+                unshot_fraction,
+                surfaces,
+            });
+        }
+        self.spent += t.elapsed();
+        let after = comm.traffic();
+        self.traffic.sent += after.sent - before.sent;
+        self.traffic.received += after.received - before.received;
+    }
+
+    /// The trace with its last point made equal to the final result.
+    pub fn finish(self, report: &Report, seconds: f64) -> Vec<TracePoint> {
+        self.ending_with(report, seconds)
+    }
+
+    /// Continues a trace saved after `shots` shots (its points, and the
+    /// schedule of the points to come, as if it had run here).
+    pub fn resume(&mut self, points: Vec<TracePoint>, shots: u64) {
+        self.points = points;
+        for s in 1..=shots {
+            self.due(s);
+        }
+    }
+
+    /// The points so far, the last made equal to `report` (which the trace keeps going after).
+    pub fn ending_with(&self, report: &Report, seconds: f64) -> Vec<TracePoint> {
+        let mut points = self.points.clone();
+        if points.last().is_some_and(|p| p.shots == report.shots) {
+            points.pop();
+        }
+        points.push(TracePoint {
+            shots: report.shots,
+            seconds,
+            unshot_fraction: report.unshot_fraction,
+            surfaces: report.surfaces.clone(),
+        });
+        points
+    }
+}

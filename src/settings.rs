@@ -1,0 +1,62 @@
+//! The choices a render is told about that the report records: plain data,
+//! low in the module graph so that the report, the checkpoint and the render
+//! driver can all name them without importing one another.
+
+/// How the form factor from a shooter to each element is evaluated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum FormFactorMethod {
+    /// Spencer's hemisphere alone: the sum of the delta form factors of the
+    /// cells that show each element (a point shooter at the patch centre).
+    Hemisphere,
+    /// Receiver-side (Baum, Rushmeier & Winget 1989): Lambert's contour
+    /// integral from each element's centre to the shooter patch, times the
+    /// fraction of the cells its projection covers that show it.
+    #[default]
+    Hybrid,
+}
+
+impl FormFactorMethod {
+    /// The name the command line and the checkpoint fingerprint use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Hemisphere => "Hemisphere",
+            Self::Hybrid => "Hybrid",
+        }
+    }
+}
+
+/// How a piece's cells are found on the hemisphere (`--projection`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Projection {
+    /// A conservative cell rectangle per piece, and an exact per-cell ray
+    /// test in the fragment shader (depth written per cell).
+    #[default]
+    Exact,
+    /// Pieces cut into triangles fine enough that each edge's curved image
+    /// is within a tolerance of its chord, projected in the vertex shader;
+    /// fixed-function rasterisation and depth.
+    Tessellated,
+}
+
+impl Projection {
+    /// The name the checkpoint fingerprint uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Exact => "Exact",
+            Self::Tessellated => "Tessellated",
+        }
+    }
+}
+
+/// Pieces per quad polygon edge the hemisphere rasteriser draws by default
+/// (chosen by `radiosity bench`; see README "Performance").
+pub const DEFAULT_RASTER_PIECES: u32 = 1;
+
+/// Shooters below this fraction of the emitted power draw the coarse
+/// hemisphere (`--coarse-below`; README "Coarse hemispheres for weak shooters").
+pub const DEFAULT_COARSE_BELOW: f64 = 3e-3;
+
+/// Default tolerance of the tessellated projection, in cells.
+pub const DEFAULT_TESSELLATION_TOLERANCE: f32 = 0.1;
