@@ -185,26 +185,85 @@ pub fn hybrid_row(
     counts: &[(u32, u64)],
     columns: std::ops::Range<usize>,
 ) -> Row {
-    let sp = &mesh.patches[shooter as usize];
-    let spoly = &mesh.polygons[sp.polygon as usize];
-    let own = sp.elements.clone();
-    let outlines: Vec<([DVec3; 4], usize)> = if own.len() <= MAX_SHOOTER_COLUMNS {
-        own.map(|k| outline(&mesh.elements[k as usize].corners))
-            .collect()
-    } else {
-        vec![outline(&sp.corners)]
-    };
+    let geo = ShooterGeometry::new(mesh, shooter);
     let mut row = Row {
-        columns: outlines.len(),
+        columns: geo.outlines.len(),
         ..Row::default()
     };
-    let (s_normal, s_origin) = (spoly.normal.as_dvec3(), sp.centre.as_dvec3());
-    let (patch_outline, patch_n) = outline(&sp.corners);
-    let radius = patch_outline[..patch_n]
-        .iter()
-        .map(|c| c.distance(s_origin))
-        .fold(0.0f64, f64::max);
     // First the receivers and their visibilities (cheap), then the integrals.
+    let (jobs, partly) = receivers(mesh, &geo, counts, &mut row.near_hidden);
+    let shares = column_shares(mesh, &geo, &columns);
+    let values = integrals(mesh, &geo, &shares, &columns, &jobs);
+    let m = geo.outlines.len();
+    for ((&(j, _), v), &part) in jobs.iter().zip(values.chunks_exact(m)).zip(&partly) {
+        if v.iter().any(|&f| f > 0.0) {
+            row.ids.push(j);
+            row.values.extend_from_slice(v);
+            let share = to_share(v.iter().sum());
+            row.total += share;
+            if part {
+                row.partial += share;
+            }
+        }
+    }
+    row
+}
+
+/// What a hybrid row needs of its shooter patch.
+struct ShooterGeometry<'m> {
+    patch: &'m crate::mesh::Patch,
+    /// One outline per column: each element's, or the whole patch's.
+    outlines: Vec<([DVec3; 4], usize)>,
+    normal: DVec3,
+    origin: DVec3,
+    /// The patch's own outline and its corner count.
+    outline: ([DVec3; 4], usize),
+    /// The farthest corner from the centre.
+    radius: f64,
+}
+
+impl<'m> ShooterGeometry<'m> {
+    fn new(mesh: &'m Mesh, shooter: u32) -> Self {
+        let sp = &mesh.patches[shooter as usize];
+        let spoly = &mesh.polygons[sp.polygon as usize];
+        let own = sp.elements.clone();
+        let outlines: Vec<([DVec3; 4], usize)> = if own.len() <= MAX_SHOOTER_COLUMNS {
+            own.map(|k| outline(&mesh.elements[k as usize].corners))
+                .collect()
+        } else {
+            vec![outline(&sp.corners)]
+        };
+        let origin = sp.centre.as_dvec3();
+        let (patch_outline, patch_n) = outline(&sp.corners);
+        let radius = patch_outline[..patch_n]
+            .iter()
+            .map(|c| c.distance(origin))
+            .fold(0.0f64, f64::max);
+        Self {
+            patch: sp,
+            outlines,
+            normal: spoly.normal.as_dvec3(),
+            origin,
+            outline: (patch_outline, patch_n),
+            radius,
+        }
+    }
+
+    /// The patch's own outline.
+    fn patch_outline(&self) -> &[DVec3] {
+        &self.outline.0[..self.outline.1]
+    }
+}
+
+/// The receivers a shot reaches, with their visibilities (`(element, V)`),
+/// and whether each is partly hidden; adds to `near_hidden` what near
+/// receivers lose to occlusion seen from the shooter's centre.
+fn receivers(
+    mesh: &Mesh,
+    geo: &ShooterGeometry,
+    counts: &[(u32, u64)],
+    near_hidden: &mut u64,
+) -> (Vec<(u32, f64)>, Vec<bool>) {
     let mut jobs: Vec<(u32, f64)> = Vec::new();
     let mut partly = Vec::new();
     let mut k = 0;
@@ -240,14 +299,14 @@ pub fn hybrid_row(
             };
             // The shooter emits from its front only.
             let x = element_centre(&mesh.elements[j as usize]).as_dvec3();
-            if s_normal.dot(x - s_origin) <= 0.0 {
+            if geo.normal.dot(x - geo.origin) <= 0.0 {
                 continue;
             }
-            if cov > vis && x.distance(s_origin) < NEAR_FIELD * radius {
+            if cov > vis && x.distance(geo.origin) < NEAR_FIELD * geo.radius {
                 let e = &mesh.elements[j as usize];
                 let n = mesh.polygons[e.polygon as usize].normal.as_dvec3();
-                let f = point_to_polygon(x, n, &patch_outline[..patch_n]) * e.area / sp.area;
-                row.near_hidden += to_share(f * (cov - vis) as f64 / cov as f64);
+                let f = point_to_polygon(x, n, geo.patch_outline()) * e.area / geo.patch.area;
+                *near_hidden += to_share(f * (cov - vis) as f64 / cov as f64);
             }
             if v > 0.0 {
                 jobs.push((j, v));
@@ -255,17 +314,20 @@ pub fn hybrid_row(
             }
         }
     }
-    // Where the spread over the shooter's elements matters: receivers nearer
-    // than NEAR_FIELD shooter radii. Farther ones get one integral over the
-    // whole patch, shared out by element area (which any spread then sums back
-    // to, since the weights average to 1 over the area).
-    let in_columns = |k: usize| columns.contains(&k);
-    let shares: Vec<f64> = if outlines.len() > 1 {
+    (jobs, partly)
+}
+
+/// Each column's share of a far receiver's one integral over the whole
+/// patch: by element area (which any spread then sums back to, since the
+/// weights average to 1 over the area), 0 outside `columns`.
+fn column_shares(mesh: &Mesh, geo: &ShooterGeometry, columns: &std::ops::Range<usize>) -> Vec<f64> {
+    let sp = geo.patch;
+    if geo.outlines.len() > 1 {
         sp.elements
             .clone()
             .enumerate()
             .map(|(k, e)| {
-                if in_columns(k) {
+                if columns.contains(&k) {
                     mesh.elements[e as usize].area / sp.area
                 } else {
                     0.0
@@ -273,8 +335,22 @@ pub fn hybrid_row(
             })
             .collect()
     } else {
-        vec![if in_columns(0) { 1.0 } else { 0.0 }]
-    };
+        vec![if columns.contains(&0) { 1.0 } else { 0.0 }]
+    }
+}
+
+/// The form factors of `jobs` (receiver, visibility), one per column, in
+/// order. Where the spread over the shooter's elements matters (receivers
+/// nearer than NEAR_FIELD shooter radii) one integral per column; farther
+/// ones one integral over the whole patch, shared out by `shares`.
+fn integrals(
+    mesh: &Mesh,
+    geo: &ShooterGeometry,
+    shares: &[f64],
+    columns: &std::ops::Range<usize>,
+    jobs: &[(u32, f64)],
+) -> Vec<f64> {
+    let outlines = &geo.outlines;
     let eval = |jobs: &[(u32, f64)]| -> Vec<f64> {
         let mut values = Vec::with_capacity(jobs.len() * outlines.len());
         let mut column = vec![0.0; outlines.len()];
@@ -282,11 +358,11 @@ pub fn hybrid_row(
             let e = &mesh.elements[j as usize];
             let x = element_centre(e).as_dvec3();
             let normal = mesh.polygons[e.polygon as usize].normal.as_dvec3();
-            let scale = v * e.area / sp.area;
-            let reach = radius.max(element_radius(e, x));
-            if x.distance(s_origin) > NEAR_FIELD * reach {
+            let scale = v * e.area / geo.patch.area;
+            let reach = geo.radius.max(element_radius(e, x));
+            if x.distance(geo.origin) > NEAR_FIELD * reach {
                 // Far: one integral over the whole patch, at the element's centre.
-                let f = scale * point_to_polygon(x, normal, &patch_outline[..patch_n]);
+                let f = scale * point_to_polygon(x, normal, geo.patch_outline());
                 values.extend(shares.iter().map(|a| f * a));
             } else {
                 // Near: per shooter element, averaged over four points of the
@@ -294,8 +370,8 @@ pub fn hybrid_row(
                 // integrand bends within the element).
                 column.iter_mut().for_each(|c| *c = 0.0);
                 for y in sub_points(e) {
-                    for (k, (c, (o, n))) in column.iter_mut().zip(&outlines).enumerate() {
-                        if in_columns(k) {
+                    for (k, (c, (o, n))) in column.iter_mut().zip(outlines).enumerate() {
+                        if columns.contains(&k) {
                             *c += point_to_polygon(y, normal, &o[..*n]);
                         }
                     }
@@ -311,34 +387,20 @@ pub fn hybrid_row(
     } else {
         1
     };
-    let values = if threads <= 1 {
-        eval(&jobs)
-    } else {
-        let chunk = jobs.len().div_ceil(threads);
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = jobs
-                .chunks(chunk)
-                .map(|c| scope.spawn(move || eval(c)))
-                .collect();
-            handles
-                .into_iter()
-                .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .collect()
-        })
-    };
-    let m = outlines.len();
-    for ((&(j, _), v), &part) in jobs.iter().zip(values.chunks_exact(m)).zip(&partly) {
-        if v.iter().any(|&f| f > 0.0) {
-            row.ids.push(j);
-            row.values.extend_from_slice(v);
-            let share = to_share(v.iter().sum());
-            row.total += share;
-            if part {
-                row.partial += share;
-            }
-        }
+    if threads <= 1 {
+        return eval(jobs);
     }
-    row
+    let chunk = jobs.len().div_ceil(threads);
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = jobs
+            .chunks(chunk)
+            .map(|c| scope.spawn(move || eval(c)))
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    })
 }
 
 /// Fixed-point scale of the form factors a split decision sums: per

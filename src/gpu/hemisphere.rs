@@ -8,13 +8,12 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
+use super::proxies::{in_view, Instance, Lookup, Ownership, Proxies};
 use super::target::RenderTarget;
 use super::GpuError;
-use crate::hemisphere::{cell_bounds, Resolution, TileLayout, EMPTY};
+use crate::hemisphere::{Resolution, TileLayout, EMPTY};
 use crate::mesh::{Mesh, ShooterFrame};
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
-use std::ops::Range;
 use std::time::{Duration, Instant};
 
 /// The WGSL source of the hemisphere pipeline.
@@ -27,20 +26,6 @@ struct ShotUniform {
     tiles: [u32; 4],
     own: [u32; 4],
     depth: [f32; 4],
-}
-
-/// One rectangle to draw, with what the fragment test needs (see the shader's `Rect`).
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct Instance {
-    rect: [f32; 4],
-    edges: [[f32; 3]; 4],
-    plane: [f32; 4],
-    item: [u32; 2],
-    origin: [f32; 4],
-    axis: [f32; 4],
-    bilinear: [f32; 4],
-    grid: [u32; 4],
 }
 
 /// One piece as the tessellated projection's fragment shader reads it (see
@@ -91,85 +76,12 @@ pub struct RasterStats {
     pub readback: Duration,
 }
 
-/// A polygon's pieces and what culling needs.
-struct PolygonProxies {
-    proxies: Range<u32>,
-    normal: Vec3,
-    centre: Vec3,
-    radius: f32,
-    /// Its bilinear element grid, when it is drawn in pieces (an index into `quads`).
-    quad: Option<u32>,
-    /// The solid it bounds, if any (an index into `Mesh::solids`).
-    solid: Option<u32>,
-}
-
-/// A quad polygon drawn in pieces: its corners (world space) and element
-/// grid (elements along u and v, elements per patch along u and v), from
-/// which the fragment shader finds the element at a hit point.
-struct QuadGrid {
-    corners: [Vec3; 4],
-    grid: [u32; 4],
-}
-
-/// The outline of a quad polygon (its patches' outer corners), or `None` for
-/// a triangle.
-fn polygon_outline(mesh: &Mesh, poly: &crate::mesh::MeshPolygon) -> Option<[Vec3; 4]> {
-    let patches = &mesh.patches[poly.patches.start as usize..poly.patches.end as usize];
-    let first = patches.first()?;
-    if first.corners[3] == first.corners[2] {
-        return None;
-    }
-    let [pu, pv] = poly.patch_grid;
-    let at = |i: u32, j: u32| &patches[(j * pu + i) as usize];
-    Some([
-        at(0, 0).corners[0],
-        at(pu - 1, 0).corners[1],
-        at(pu - 1, pv - 1).corners[2],
-        at(0, pv - 1).corners[3],
-    ])
-}
-
-/// What the fragment shader needs to find the element of a piece of a quad
-/// polygon at a hit point, in the shooter's frame: the polygon's bilinear map
-/// p = o + u e1 + v e2 + u v g written in a 2-D basis of its plane (x along e1).
-#[derive(Clone, Copy, Default)]
-struct Lookup {
-    /// o (shooter frame), and g's y coordinate.
-    origin: [f32; 4],
-    /// The plane's x axis (shooter frame).
-    axis: [f32; 4],
-    /// |e1|, e2.x, e2.y, g.x.
-    bilinear: [f32; 4],
-    /// Elements along u, along v, per patch along u, per patch along v (all 0: a single element).
-    grid: [u32; 4],
-}
-
-impl Lookup {
-    fn new(q: &QuadGrid, shooter: &ShooterFrame, n: Vec3) -> Self {
-        let c = q.corners.map(|p| shooter.to_local(p - shooter.centre));
-        let (e1, e2, g) = (c[1] - c[0], c[3] - c[0], c[0] - c[1] + c[2] - c[3]);
-        let x = e1.normalize_or_zero();
-        let y = n.cross(x);
-        Self {
-            origin: [c[0].x, c[0].y, c[0].z, g.dot(y)],
-            axis: [x.x, x.y, x.z, 0.0],
-            bilinear: [e1.length(), e2.dot(x), e2.dot(y), g.dot(x)],
-            grid: q.grid,
-        }
-    }
-}
-
 /// Pipelines, buffers and scene geometry for hemisphere rendering, created once.
 pub struct HemisphereRasterizer {
     res: Resolution,
     far: f32,
-    /// Corners of every rasterisation proxy (world space).
-    corners: Vec<[Vec3; 4]>,
-    /// Element each proxy belongs to (the polygon's first element for a piece of a quad grid).
-    element: Vec<u32>,
-    /// Quad polygons drawn in pieces.
-    quads: Vec<QuadGrid>,
-    polygons: Vec<PolygonProxies>,
+    /// Every polygon's rasterisation proxies.
+    proxies: Proxies,
     /// The mesh's closed solids, and per shot whether the shooter is outside
     /// each (then its back faces are not drawn: see `Mesh::solids`).
     solids: Vec<crate::mesh::Solid>,
@@ -222,79 +134,25 @@ impl HemisphereRasterizer {
                 limits.max_texture_dimension_2d
             )));
         }
-        let mut corners = Vec::new();
-        let mut element = Vec::new();
-        let mut quads = Vec::new();
-        let mut polygons = Vec::with_capacity(mesh.polygons.len());
-        for (k, poly) in mesh.polygons.iter().enumerate() {
-            let first = corners.len() as u32;
-            let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);
-            for id in poly.elements.clone() {
-                for p in mesh.elements[id as usize].corners {
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
-            }
-            let outline = polygon_outline(mesh, poly);
-            let quad = match outline {
-                Some(c) if pieces > 0 => {
-                    let (nu, nv) = (
-                        poly.patch_grid[0] * poly.element_grid[0],
-                        poly.patch_grid[1] * poly.element_grid[1],
-                    );
-                    let (su, sv) = (pieces.min(nu), pieces.min(nv));
-                    let at = |u: f32, v: f32| crate::mesh::bilinear(&c, u, v);
-                    for j in 0..sv {
-                        for i in 0..su {
-                            let (u0, u1) = (i as f32 / su as f32, (i + 1) as f32 / su as f32);
-                            let (v0, v1) = (j as f32 / sv as f32, (j + 1) as f32 / sv as f32);
-                            corners.push([at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)]);
-                            element.push(poly.elements.start);
-                        }
-                    }
-                    quads.push(QuadGrid {
-                        corners: c,
-                        grid: [nu, nv, poly.element_grid[0], poly.element_grid[1]],
-                    });
-                    Some(quads.len() as u32 - 1)
-                }
-                _ => {
-                    for id in poly.elements.clone() {
-                        corners.push(mesh.elements[id as usize].corners);
-                        element.push(id);
-                    }
-                    None
-                }
-            };
-            polygons.push(PolygonProxies {
-                proxies: first..corners.len() as u32,
-                normal: poly.normal,
-                centre: 0.5 * (lo + hi),
-                radius: 0.5 * (hi - lo).length(),
-                quad,
-                solid: mesh.solid_of.get(k).copied().flatten(),
-            });
-        }
-        let max_instances = 2 * corners.len().max(1) as u64;
+        let proxies = Proxies::build(mesh, pieces);
+        let proxy_count = proxies.corners.len();
+        let max_instances = 2 * proxy_count.max(1) as u64;
         let instance_bytes = max_instances * std::mem::size_of::<Instance>() as u64;
         if instance_bytes > limits.max_buffer_size {
             return Err(GpuError::TooLarge(format!(
                 "{} rasterisation proxies need {instance_bytes} bytes of rectangles",
-                corners.len()
+                proxy_count
             )));
         }
-        let instance_buf = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("rectangles"),
-            size: instance_bytes,
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let uniform = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shot"),
-            size: std::mem::size_of::<ShotUniform>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        use wgpu::BufferUsages as U;
+        let instance_buf = buffer(
+            device,
+            "rectangles",
+            instance_bytes,
+            U::VERTEX | U::COPY_DST,
+        );
+        let uniform_bytes = std::mem::size_of::<ShotUniform>() as u64;
+        let uniform = buffer(device, "shot", uniform_bytes, U::UNIFORM | U::COPY_DST);
         // One u32 per element (at least one, as a binding may not be empty).
         let coverage_bytes = 4 * mesh.elements.len().max(1) as u64;
         if coverage_bytes > limits.max_storage_buffer_binding_size {
@@ -303,52 +161,16 @@ impl HemisphereRasterizer {
                 mesh.elements.len()
             )));
         }
-        let coverage_buf = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("coverage"),
-            size: coverage_bytes,
-            usage: wgpu::BufferUsages::STORAGE
-                | wgpu::BufferUsages::COPY_SRC
-                | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let coverage_read = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("coverage readback"),
-            size: coverage_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        // Cell directions from f64, the same on every driver.
-        let table = crate::hemisphere::direction_table(res);
-        let trig = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("cell directions"),
-            size: std::mem::size_of_val(table.as_slice()) as u64,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: true,
-        });
-        trig.slice(..)
-            .get_mapped_range_mut()
-            .map_err(|e| GpuError::Failed(e.to_string()))?
-            .copy_from_slice(bytemuck::cast_slice(&table));
-        trig.unmap();
+        let coverage_usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+        let coverage_buf = buffer(device, "coverage", coverage_bytes, coverage_usage);
+        let readback_usage = U::MAP_READ | U::COPY_DST;
+        let coverage_read = buffer(device, "coverage readback", coverage_bytes, readback_usage);
+        let trig = direction_buffer(device, res)?;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("hemisphere.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let pipeline = item_pipeline(
-            device,
-            &module,
-            ("vs", "fs"),
-            wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Instance>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &wgpu::vertex_attr_array![
-                    0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
-                    4 => Float32x3, 5 => Float32x4, 6 => Uint32x2, 7 => Float32x4,
-                    8 => Float32x4, 9 => Float32x4, 10 => Uint32x4
-                ],
-            },
-            wgpu::PrimitiveTopology::TriangleStrip,
-        );
+        let pipeline = rect_pipeline(device, &module);
         let group = item_bind_group(device, &pipeline, &[&uniform, &coverage_buf, &trig]);
         let target = RenderTarget::new(
             device,
@@ -361,11 +183,8 @@ impl HemisphereRasterizer {
         Ok(Self {
             res,
             far: extent.max(1e-6) * 2.0,
-            instances: Vec::with_capacity(corners.len()),
-            corners,
-            element,
-            quads,
-            polygons,
+            instances: Vec::with_capacity(proxy_count),
+            proxies,
             solids: mesh.solids.clone(),
             outside: Vec::new(),
             cull_solids: true,
@@ -412,7 +231,8 @@ impl HemisphereRasterizer {
             },
             wgpu::PrimitiveTopology::TriangleList,
         );
-        let piece_bytes = (self.corners.len().max(1) * std::mem::size_of::<PieceGpu>()) as u64;
+        let piece_bytes =
+            (self.proxies.corners.len().max(1) * std::mem::size_of::<PieceGpu>()) as u64;
         let pieces = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("pieces"),
             size: piece_bytes,
@@ -444,17 +264,17 @@ impl HemisphereRasterizer {
         };
         t.pieces.clear();
         t.vertices.clear();
-        let (outside, corners) = (&self.outside, &self.corners);
-        for (k, poly) in self.polygons.iter().enumerate() {
+        let (outside, corners) = (&self.outside, &self.proxies.corners);
+        for (k, poly) in self.proxies.polygons.iter().enumerate() {
             if !in_view(k, poly, corners, outside, shooter) {
                 continue;
             }
             let n = shooter.to_local(poly.normal);
             let lookup = poly.quad.map_or_else(Lookup::default, |q| {
-                Lookup::new(&self.quads[q as usize], shooter, n)
+                Lookup::new(&self.proxies.quads[q as usize], shooter, n)
             });
             for i in poly.proxies.clone() {
-                let d = self.corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
+                let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
                 if d.iter().all(|c| c.z <= 0.0) {
                     continue;
                 }
@@ -462,7 +282,12 @@ impl HemisphereRasterizer {
                 let piece = t.pieces.len() as u32;
                 t.pieces.push(PieceGpu {
                     plane: [n.x, n.y, n.z, offset],
-                    item: [self.element[i as usize], (offset >= 0.0) as u32, 0, 0],
+                    item: [
+                        self.proxies.element[i as usize],
+                        (offset >= 0.0) as u32,
+                        0,
+                        0,
+                    ],
                     origin: lookup.origin,
                     axis: lookup.axis,
                     bilinear: lookup.bilinear,
@@ -524,123 +349,15 @@ impl HemisphereRasterizer {
         self.res
     }
 
-    /// Fills `self.instances` with a rectangle for every proxy the shooter can
-    /// see, in proxy order (so the draw order, and with it every depth tie, is
-    /// the same on every run), seam copies right after their originals. Large
-    /// scenes split the polygons between threads and join the lists in order.
-    fn collect_rects(&mut self, shooter: &ShooterFrame, ownership: Option<Ownership>) {
-        self.instances.clear();
-        let threads = if self.corners.len() < PARALLEL_PROXIES {
-            1
-        } else {
-            std::thread::available_parallelism()
-                .map_or(1, |n| n.get())
-                .min(8)
-        };
-        let (res, far, corners, element, quads, outside) = (
-            self.res,
-            self.far,
-            &self.corners,
-            &self.element,
-            &self.quads,
-            &self.outside,
-        );
-        let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
-            for (k, poly) in polys.iter().enumerate() {
-                if !in_view(first + k, poly, corners, outside, shooter) {
-                    continue;
-                }
-                let n = shooter.to_local(poly.normal);
-                let lookup = poly.quad.map_or_else(Lookup::default, |q| {
-                    Lookup::new(&quads[q as usize], shooter, n)
-                });
-                for i in poly.proxies.clone() {
-                    let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                    push_piece(
-                        out,
-                        &d,
-                        n,
-                        element[i as usize],
-                        &lookup,
-                        res,
-                        far,
-                        ownership,
-                    );
-                }
-            }
-        };
-        if threads <= 1 {
-            visit(&self.polygons, 0, &mut self.instances);
-            return;
-        }
-        // Contiguous runs of polygons with about equal proxy counts.
-        let per = self.corners.len().div_ceil(threads) as u32;
-        let mut bounds = vec![0usize];
-        for (k, poly) in self.polygons.iter().enumerate() {
-            if poly.proxies.end >= per * bounds.len() as u32 && bounds.len() < threads {
-                bounds.push(k + 1);
-            }
-        }
-        bounds.push(self.polygons.len());
-        bounds.dedup();
-        let polygons = &self.polygons;
-        let parts: Vec<Vec<Instance>> = std::thread::scope(|scope| {
-            let handles: Vec<_> = bounds
-                .windows(2)
-                .map(|w| {
-                    let (lo, hi) = (w[0], w[1]);
-                    scope.spawn(move || {
-                        let mut out = Vec::new();
-                        visit(&polygons[lo..hi], lo, &mut out);
-                        out
-                    })
-                })
-                .collect();
-            // A panic in a worker is a bug; surface it on this thread.
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .collect()
-        });
-        for part in parts {
-            self.instances.extend_from_slice(&part);
-        }
-    }
-
-    /// Renders the cells of the tiles that rank `own` of `layout` owns, as seen
-    /// from `shooter`, into `items` (row-major, R_phi x R_theta). Cells other
-    /// ranks own are [`EMPTY`].
-    pub fn render(
+    /// Writes the shot's uniform and the rectangles (or triangles) it draws.
+    fn upload(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        shooter: &ShooterFrame,
         layout: &TileLayout,
         own: (u32, u32),
-        items: &mut Vec<u32>,
-    ) -> Result<RasterStats, GpuError> {
-        let start = Instant::now();
-        // With 1 x 1 tiles over several ranks, draw only this rank's cells,
-        // packed (see the shader); otherwise draw all and discard others' cells.
-        // The tessellated projection always draws the full image: packing
-        // would move its vertices relative to the rasteriser's sub-pixel
-        // grid, and rank counts would no longer agree bit for bit.
-        let lattice =
-            layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1 && self.tess.is_none();
-        // Over several ranks, skip rectangles that hold none of this rank's cells.
-        let ownership = (layout.ranks() > 1).then_some(Ownership {
-            tile: [layout.tile_w as f32, layout.tile_h as f32],
-            grid: [layout.px as f32, layout.py as f32],
-            own: [own.0 as f32, own.1 as f32],
-            cells: [self.res.cols as f32, self.res.rows as f32],
-        });
-        self.find_outside(shooter);
-        if self.tess.is_some() {
-            self.collect_triangles(shooter);
-        } else {
-            self.collect_rects(shooter, ownership);
-        }
-        let bounds = start.elapsed();
+        lattice: bool,
+    ) {
         let u = ShotUniform {
             res: [self.res.rows, self.res.cols, 0, 0],
             tiles: [
@@ -679,6 +396,10 @@ impl HemisphereRasterizer {
                 queue.write_buffer(&self.instance_buf, 0, bytes);
             }
         }
+    }
+
+    /// Records and submits the drawing and the copies out.
+    fn submit(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::SubmissionIndex {
         let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("shot"),
         });
@@ -717,7 +438,20 @@ impl HemisphereRasterizer {
         if self.count_coverage {
             enc.copy_buffer_to_buffer(&self.coverage_buf, 0, &self.coverage_read, 0, None);
         }
-        let submission = queue.submit([enc.finish()]);
+        queue.submit([enc.finish()])
+    }
+
+    /// Reads this rank's cells of the item buffer into `items` (a packed
+    /// lattice unpacked to its places); returns when the wait ended.
+    fn read_items(
+        &self,
+        device: &wgpu::Device,
+        submission: wgpu::SubmissionIndex,
+        layout: &TileLayout,
+        own: (u32, u32),
+        lattice: bool,
+        items: &mut Vec<u32>,
+    ) -> Result<Option<Instant>, GpuError> {
         items.clear();
         let mut waited = None;
         let word = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
@@ -731,28 +465,35 @@ impl HemisphereRasterizer {
                 own.0 as usize,
                 own.1 as usize,
             );
-            self.target
-                .read_rows(device, submission.clone(), |r, row| {
-                    waited.get_or_insert_with(Instant::now);
-                    let p = r * py + y0;
-                    if p < rows {
-                        for (c, b) in row
-                            .chunks_exact(4)
-                            .enumerate()
-                            .take_while(|(c, _)| c * px + x0 < cols)
-                        {
-                            items[p * cols + c * px + x0] = word(b);
-                        }
+            self.target.read_rows(device, submission, |r, row| {
+                waited.get_or_insert_with(Instant::now);
+                let p = r * py + y0;
+                if p < rows {
+                    for (c, b) in row
+                        .chunks_exact(4)
+                        .enumerate()
+                        .take_while(|(c, _)| c * px + x0 < cols)
+                    {
+                        items[p * cols + c * px + x0] = word(b);
                     }
-                })?;
+                }
+            })?;
         } else {
             items.reserve(self.res.cells());
-            self.target
-                .read_rows(device, submission.clone(), |_, row| {
-                    waited.get_or_insert_with(Instant::now);
-                    items.extend(row.chunks_exact(4).map(word));
-                })?;
+            self.target.read_rows(device, submission, |_, row| {
+                waited.get_or_insert_with(Instant::now);
+                items.extend(row.chunks_exact(4).map(word));
+            })?;
         }
+        Ok(waited)
+    }
+
+    /// Reads the coverage counts, when counting.
+    fn read_coverage(
+        &mut self,
+        device: &wgpu::Device,
+        submission: wgpu::SubmissionIndex,
+    ) -> Result<(), GpuError> {
         if self.count_coverage {
             // The item buffer's wait covered this submission; this map is immediate.
             super::map_read(device, &self.coverage_read, submission)?;
@@ -771,6 +512,54 @@ impl HemisphereRasterizer {
             }
             self.coverage_read.unmap();
         }
+        Ok(())
+    }
+
+    /// Renders the cells of the tiles that rank `own` of `layout` owns, as seen
+    /// from `shooter`, into `items` (row-major, R_phi x R_theta). Cells other
+    /// ranks own are [`EMPTY`].
+    pub fn render(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        shooter: &ShooterFrame,
+        layout: &TileLayout,
+        own: (u32, u32),
+        items: &mut Vec<u32>,
+    ) -> Result<RasterStats, GpuError> {
+        let start = Instant::now();
+        // With 1 x 1 tiles over several ranks, draw only this rank's cells,
+        // packed (see the shader); otherwise draw all and discard others' cells.
+        // The tessellated projection always draws the full image: packing
+        // would move its vertices relative to the rasteriser's sub-pixel
+        // grid, and rank counts would no longer agree bit for bit.
+        let lattice =
+            layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1 && self.tess.is_none();
+        // Over several ranks, skip rectangles that hold none of this rank's cells.
+        let ownership = (layout.ranks() > 1).then_some(Ownership {
+            tile: [layout.tile_w as f32, layout.tile_h as f32],
+            grid: [layout.px as f32, layout.py as f32],
+            own: [own.0 as f32, own.1 as f32],
+            cells: [self.res.cols as f32, self.res.rows as f32],
+        });
+        self.find_outside(shooter);
+        if self.tess.is_some() {
+            self.collect_triangles(shooter);
+        } else {
+            self.proxies.collect_rects(
+                shooter,
+                &self.outside,
+                self.res,
+                self.far,
+                ownership,
+                &mut self.instances,
+            );
+        }
+        let bounds = start.elapsed();
+        self.upload(device, queue, layout, own, lattice);
+        let submission = self.submit(device, queue);
+        let waited = self.read_items(device, submission.clone(), layout, own, lattice, items)?;
+        self.read_coverage(device, submission)?;
         let read_start = waited.unwrap_or_else(Instant::now);
         let rasterise = read_start - start - bounds;
         Ok(RasterStats {
@@ -785,125 +574,56 @@ impl HemisphereRasterizer {
     }
 }
 
-/// Whether polygon `k` (`poly`) can show in the shooter's hemisphere: the
-/// shooter never sees its own polygon, polygons wholly below its plane, or
-/// the hidden back faces of solids it is outside of. The one cull both
-/// projections use.
-fn in_view(
-    k: usize,
-    poly: &PolygonProxies,
-    corners: &[[Vec3; 4]],
-    outside: &[bool],
-    shooter: &ShooterFrame,
-) -> bool {
-    k as u32 != shooter.polygon
-        && (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius > 0.0
-        && !hidden_back_face(poly, corners, outside, shooter)
+/// A buffer of `size` bytes for `usage`, not mapped.
+fn buffer(
+    device: &wgpu::Device,
+    label: &str,
+    size: u64,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size,
+        usage,
+        mapped_at_creation: false,
+    })
 }
 
-/// Whether `poly` is a back face of a solid that the shooter is outside of
-/// (`outside`, per solid): then a front face of the same solid is nearer in
-/// every direction it covers, and it need not be drawn.
-fn hidden_back_face(
-    poly: &PolygonProxies,
-    corners: &[[Vec3; 4]],
-    outside: &[bool],
-    shooter: &ShooterFrame,
-) -> bool {
-    poly.solid
-        .is_some_and(|s| outside.get(s as usize).copied().unwrap_or(false))
-        && corners
-            .get(poly.proxies.start as usize)
-            .is_some_and(|c| (shooter.centre - c[0]).dot(poly.normal) < 0.0)
+/// The cell directions from f64 (`hemisphere::direction_table`), the same
+/// on every driver, as a storage buffer.
+fn direction_buffer(device: &wgpu::Device, res: Resolution) -> Result<wgpu::Buffer, GpuError> {
+    let table = crate::hemisphere::direction_table(res);
+    let trig = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("cell directions"),
+        size: std::mem::size_of_val(table.as_slice()) as u64,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: true,
+    });
+    trig.slice(..)
+        .get_mapped_range_mut()
+        .map_err(|e| GpuError::Failed(e.to_string()))?
+        .copy_from_slice(bytemuck::cast_slice(&table));
+    trig.unmap();
+    Ok(trig)
 }
 
-/// Scenes with at least this many proxies find their rectangles on several threads.
-const PARALLEL_PROXIES: usize = 8192;
-
-/// Adds the rectangle(s) of one planar quad `d` (corners in the shooter's frame)
-/// of element `element` on a plane with normal `n`; with an `ownership`, only
-/// rectangles that hold a cell of one of this rank's tiles.
-/// The tiles one rank of a grid owns: tile (p, t) of `tile_w` x `tile_h`
-/// cells with t mod px = ox and p mod py = oy.
-#[derive(Clone, Copy)]
-struct Ownership {
-    tile: [f32; 2],
-    grid: [f32; 2],
-    own: [f32; 2],
-    cells: [f32; 2],
-}
-
-impl Ownership {
-    /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
-    fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
-        let any = |lo: f32, hi: f32, axis: usize| {
-            // Cells whose centres are inside, then the tiles holding them.
-            let (c0, c1) = (
-                (lo - 0.5).ceil().max(0.0),
-                (hi - 0.5).floor().min(self.cells[axis] - 1.0),
-            );
-            let (t0, t1) = (
-                (c0 / self.tile[axis]).floor(),
-                (c1 / self.tile[axis]).floor(),
-            );
-            c0 <= c1
-                && ((t0 - self.own[axis]) / self.grid[axis]).ceil()
-                    <= ((t1 - self.own[axis]) / self.grid[axis]).floor()
-        };
-        any(x0, x1, 0) && any(y0, y1, 1)
-    }
-}
-
-#[allow(clippy::too_many_arguments)]
-fn push_piece(
-    out: &mut Vec<Instance>,
-    d: &[Vec3; 4],
-    n: Vec3,
-    element: u32,
-    lookup: &Lookup,
-    res: Resolution,
-    far: f32,
-    ownership: Option<Ownership>,
-) {
-    let Some(r) = cell_bounds(d, res, far) else {
-        return;
-    };
-    let cols = res.cols as f32;
-    let mine = |x0: f32, x1: f32| ownership.is_none_or(|o| o.holds_own(x0, x1, r.y0, r.y1));
-    let (primary, wrapped) = (
-        mine(r.x0, r.x1),
-        r.x1 > cols && mine(r.x0 - cols, r.x1 - cols),
-    );
-    if !primary && !wrapped {
-        return;
-    }
-    // The shooter is in front when it is on the side n points to.
-    let offset = n.dot(d[0]);
-    let back = offset >= 0.0;
-    // Inside <=> the direction is on the inner side of every edge plane; which
-    // side is inner depends on the side the shooter sees.
-    let sign = if back { 1.0 } else { -1.0 };
-    let edges =
-        std::array::from_fn(|k| (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array());
-    let inst = Instance {
-        rect: [r.x0, r.x1, r.y0, r.y1],
-        edges,
-        plane: [n.x, n.y, n.z, offset],
-        item: [element, back as u32],
-        origin: lookup.origin,
-        axis: lookup.axis,
-        bilinear: lookup.bilinear,
-        grid: lookup.grid,
-    };
-    if primary {
-        out.push(inst);
-    }
-    if wrapped {
-        out.push(Instance {
-            rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
-            ..inst
-        });
-    }
+/// The exact projection's pipeline: one instanced rectangle per piece.
+fn rect_pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule) -> wgpu::RenderPipeline {
+    item_pipeline(
+        device,
+        module,
+        ("vs", "fs"),
+        wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Instance>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &wgpu::vertex_attr_array![
+                0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
+                4 => Float32x3, 5 => Float32x4, 6 => Uint32x2, 7 => Float32x4,
+                8 => Float32x4, 9 => Float32x4, 10 => Uint32x4
+            ],
+        },
+        wgpu::PrimitiveTopology::TriangleStrip,
+    )
 }
 
 /// A pipeline that draws element ids into the R32Uint item buffer with a

@@ -5,6 +5,7 @@
 //! doing work with `&Device, &Queue`, so tests can share one device.
 
 mod hemisphere;
+mod proxies;
 mod target;
 mod view;
 

@@ -172,13 +172,7 @@ pub fn render_on(
     // Their exchanges are not the final solve's.
     let before = comm.traffic();
     if comm.rank() == 0 {
-        log::info!(
-            "{}: {} polygons, {} patches, {} elements",
-            scene.name,
-            scene.polygons.len(),
-            mesh.patches.len(),
-            mesh.elements.len()
-        );
+        log_mesh(scene, &mesh);
     }
     let t = Instant::now();
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
@@ -221,16 +215,7 @@ pub fn render_on(
         &solved.stats,
         solver.shots(),
     );
-    let parallel = Parallel::new(
-        comm.size(),
-        layout,
-        opts.exchange,
-        opts.resolution,
-        mesh.elements.len(),
-        solver.shots(),
-        gathered.per_rank,
-        LoadBalance::from_busy(&gathered.busy),
-    );
+    let parallel = gathered.parallel(layout, opts, &mesh, solver.shots());
     let interrupted = solved.stats.interrupted;
     let (image, mut report) = finish(gpu, scene, &mesh, opts, &solver, timings, parallel, solved)?;
     report.refinement = refinement;
@@ -248,6 +233,16 @@ pub fn render_on(
 /// A camera image: width, height and linear radiance pixels, top row first.
 type Image = (u32, u32, Vec<[f32; 3]>);
 
+fn log_mesh(scene: &Scene, mesh: &Mesh) {
+    log::info!(
+        "{}: {} polygons, {} patches, {} elements",
+        scene.name,
+        scene.polygons.len(),
+        mesh.patches.len(),
+        mesh.elements.len()
+    );
+}
+
 /// What rank 0 holds after the gather, besides the whole solution.
 struct Gathered {
     /// Rank 0's phase times.
@@ -256,6 +251,28 @@ struct Gathered {
     per_rank: Vec<RankStats>,
     /// Every rank's busy time per shot.
     busy: Vec<Vec<f64>>,
+}
+
+impl Gathered {
+    /// The report's `parallel` section from what was gathered.
+    fn parallel(
+        self,
+        layout: TileLayout,
+        opts: &RenderOptions,
+        mesh: &Mesh,
+        shots: u64,
+    ) -> Parallel {
+        Parallel::new(
+            self.per_rank.len(),
+            layout,
+            opts.exchange,
+            opts.resolution,
+            mesh.elements.len(),
+            shots,
+            self.per_rank,
+            LoadBalance::from_busy(&self.busy),
+        )
+    }
 }
 
 /// Gathers the solution and every rank's statistics to rank 0, where

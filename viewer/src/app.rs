@@ -700,7 +700,13 @@ impl eframe::App for Viewer {
 
     fn on_exit(&mut self) {
         if let Some(path) = &self.args.frame_stats {
-            let stats = self.frames.summary(self.view_ms);
+            let snap = self.snapshot();
+            let stats = BenchStats {
+                frames: self.frames.summary(self.view_ms),
+                shots: snap.shots,
+                solve_seconds: snap.elapsed.as_secs_f64(),
+                converged: snap.converged,
+            };
             if let Err(e) = radiosity::output::write_json(path, &stats) {
                 eprintln!("cannot write {}: {e}", path.display());
             }
@@ -722,7 +728,18 @@ struct FrameTimes {
     count: u64,
 }
 
-/// What `--frame-stats` writes (and the side panel shows).
+/// What `--frame-stats` writes: the frame times, and how far the solve got
+/// in how much solve time (pauses left out).
+#[derive(serde::Serialize)]
+struct BenchStats {
+    #[serde(flatten)]
+    frames: FrameSummary,
+    shots: u64,
+    solve_seconds: f64,
+    converged: bool,
+}
+
+/// The frame times `--frame-stats` writes (and the side panel shows).
 #[derive(serde::Serialize)]
 struct FrameSummary {
     frames: u64,

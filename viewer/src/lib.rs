@@ -29,7 +29,8 @@ pub struct Args {
     #[arg(long, requires = "shots")]
     pub screenshot: Option<PathBuf>,
     /// On exit, write frame-time statistics (JSON: median UI and
-    /// frame-to-frame milliseconds, the last view image's drawing time) here.
+    /// frame-to-frame milliseconds, the last view image's drawing time) and
+    /// the solve's shots, solve seconds and whether it converged, here.
     #[arg(long)]
     pub frame_stats: Option<PathBuf>,
     /// Close the window after this many seconds (for benchmarks).

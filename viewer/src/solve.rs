@@ -248,8 +248,6 @@ struct Publisher<'s, W: Fn()> {
     shared: &'s Mutex<Snapshot>,
     wake: &'s W,
     ambient: bool,
-    /// Small scenes publish every shot; large ones at about 10 Hz.
-    every_shot: bool,
     last_publish: Instant,
     /// Solve time so far (pauses left out).
     solve_time: Duration,
@@ -282,7 +280,6 @@ impl<'s, W: Fn()> Publisher<'s, W> {
             shared,
             wake,
             ambient: opts.ambient,
-            every_shot: mesh.elements.len() < PUBLISH_EVERY_SHOT_BELOW,
             last_publish: Instant::now(),
             solve_time: Duration::ZERO,
             trace: Trace::default(),
@@ -313,11 +310,13 @@ impl<'s, W: Fn()> Publisher<'s, W> {
         let point = (s.shots, self.solve_time.as_secs_f64(), s.unshot_fraction);
         Arc::make_mut(&mut s.history).push(point);
         s.shooter = Some(shooter);
-        if self.every_shot || self.last_publish.elapsed() > PUBLISH_PERIOD {
+        // The window redraws what is published: at most about 10 times a
+        // second, so drawing never takes the cores the solve needs.
+        if self.last_publish.elapsed() > PUBLISH_PERIOD {
             self.publish(&mut s, solver, source);
+            drop(s);
+            (self.wake)();
         }
-        drop(s);
-        (self.wake)();
         Ok(())
     }
 
@@ -344,10 +343,7 @@ impl<'s, W: Fn()> Publisher<'s, W> {
     }
 }
 
-/// Scenes with fewer elements publish their radiance after every shot.
-const PUBLISH_EVERY_SHOT_BELOW: usize = 20_000;
-
-/// How often larger scenes publish while solving.
+/// How often a running solve publishes its state.
 const PUBLISH_PERIOD: Duration = Duration::from_millis(100);
 
 /// Writes the image, the report (and with `req.bake` the bake) of the

@@ -148,3 +148,69 @@ fn pause_step_resume_restart_quit() {
     solve::send(&tx, Command::Quit);
     handle.join().expect("the solve thread ends cleanly");
 }
+
+/// The viewer drives the renderer's own shooting loop: the same settings
+/// give the same shots, unshot fraction and radiance, bit for bit, and the
+/// same convergence trace.
+#[test]
+fn the_viewer_and_the_renderer_give_the_same_numbers() {
+    let gpu = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let mut options = RenderOptions {
+        resolution: Resolution {
+            rows: 32,
+            cols: 128,
+        },
+        width: 0,
+        // Both on: the ambient term and overshooting are where the two
+        // drivers once differed.
+        overshoot: true,
+        ..RenderOptions::default()
+    };
+    options.stop.threshold = 0.01;
+    let rendered = radiosity::render::render(&gpu, &scene, &options, Duration::ZERO, &mut |_| {})
+        .expect("render");
+
+    let shared = Arc::new(Mutex::new(Snapshot::default()));
+    let (tx, rx) = std::sync::mpsc::channel();
+    let thread_shared = shared.clone();
+    let viewer_scene = scene.clone();
+    let viewer_options = options.clone();
+    let handle = std::thread::spawn(move || {
+        solve::run(
+            gpu,
+            viewer_scene,
+            Settings {
+                options: viewer_options,
+                pause_at: None,
+            },
+            rx,
+            thread_shared,
+            || {},
+        )
+    });
+    let s = wait_for(&shared, "convergence", |s| s.converged);
+    solve::send(&tx, Command::Quit);
+    handle.join().expect("solve thread");
+
+    assert_eq!(s.shots, rendered.report.shots, "shots");
+    assert_eq!(s.unshot_fraction, rendered.report.unshot_fraction);
+    let radiance: Vec<[f32; 3]> = rendered
+        .radiosity
+        .iter()
+        .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
+        .collect();
+    assert_eq!(*s.radiance, radiance, "per-element radiance");
+    // The trace at the same shot counts (the report's last point is the
+    // final result, which the viewer's trace need not have reached).
+    let report_trace = &rendered.report.convergence;
+    let mut compared = 0;
+    for p in s.trace.iter() {
+        if let Some(q) = report_trace.iter().find(|q| q.shots == p.shots) {
+            assert_eq!(p.surfaces, q.surfaces, "trace at {} shots", p.shots);
+            assert_eq!(p.unshot_fraction, q.unshot_fraction);
+            compared += 1;
+        }
+    }
+    assert!(compared >= 10, "{compared} trace points compared");
+}

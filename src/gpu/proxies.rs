@@ -1,0 +1,376 @@
+//! The CPU side of a shot: every polygon's rasterisation proxies (built
+//! once), the cull of polygons the shooter cannot see, and each visible
+//! proxy's conservative cell rectangle with its edge planes, as the
+//! rectangles the GPU draws.
+
+use crate::hemisphere::{cell_bounds, Resolution};
+use crate::mesh::{Mesh, ShooterFrame};
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+use std::ops::Range;
+
+/// One rectangle to draw, with what the fragment test needs (see the shader's `Rect`).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+pub(super) struct Instance {
+    rect: [f32; 4],
+    edges: [[f32; 3]; 4],
+    plane: [f32; 4],
+    item: [u32; 2],
+    origin: [f32; 4],
+    axis: [f32; 4],
+    bilinear: [f32; 4],
+    grid: [u32; 4],
+}
+
+/// A polygon's pieces and what culling needs.
+pub(super) struct PolygonProxies {
+    pub(super) proxies: Range<u32>,
+    pub(super) normal: Vec3,
+    pub(super) centre: Vec3,
+    pub(super) radius: f32,
+    /// Its bilinear element grid, when it is drawn in pieces (an index into `quads`).
+    pub(super) quad: Option<u32>,
+    /// The solid it bounds, if any (an index into `Mesh::solids`).
+    pub(super) solid: Option<u32>,
+}
+
+/// A quad polygon drawn in pieces: its corners (world space) and element
+/// grid (elements along u and v, elements per patch along u and v), from
+/// which the fragment shader finds the element at a hit point.
+pub(super) struct QuadGrid {
+    pub(super) corners: [Vec3; 4],
+    pub(super) grid: [u32; 4],
+}
+
+/// The outline of a quad polygon (its patches' outer corners), or `None` for
+/// a triangle.
+fn polygon_outline(mesh: &Mesh, poly: &crate::mesh::MeshPolygon) -> Option<[Vec3; 4]> {
+    let patches = &mesh.patches[poly.patches.start as usize..poly.patches.end as usize];
+    let first = patches.first()?;
+    if first.corners[3] == first.corners[2] {
+        return None;
+    }
+    let [pu, pv] = poly.patch_grid;
+    let at = |i: u32, j: u32| &patches[(j * pu + i) as usize];
+    Some([
+        at(0, 0).corners[0],
+        at(pu - 1, 0).corners[1],
+        at(pu - 1, pv - 1).corners[2],
+        at(0, pv - 1).corners[3],
+    ])
+}
+
+/// What the fragment shader needs to find the element of a piece of a quad
+/// polygon at a hit point, in the shooter's frame: the polygon's bilinear map
+/// p = o + u e1 + v e2 + u v g written in a 2-D basis of its plane (x along e1).
+#[derive(Clone, Copy, Default)]
+pub(super) struct Lookup {
+    /// o (shooter frame), and g's y coordinate.
+    pub(super) origin: [f32; 4],
+    /// The plane's x axis (shooter frame).
+    pub(super) axis: [f32; 4],
+    /// |e1|, e2.x, e2.y, g.x.
+    pub(super) bilinear: [f32; 4],
+    /// Elements along u, along v, per patch along u, per patch along v (all 0: a single element).
+    pub(super) grid: [u32; 4],
+}
+
+impl Lookup {
+    pub(super) fn new(q: &QuadGrid, shooter: &ShooterFrame, n: Vec3) -> Self {
+        let c = q.corners.map(|p| shooter.to_local(p - shooter.centre));
+        let (e1, e2, g) = (c[1] - c[0], c[3] - c[0], c[0] - c[1] + c[2] - c[3]);
+        let x = e1.normalize_or_zero();
+        let y = n.cross(x);
+        Self {
+            origin: [c[0].x, c[0].y, c[0].z, g.dot(y)],
+            axis: [x.x, x.y, x.z, 0.0],
+            bilinear: [e1.length(), e2.dot(x), e2.dot(y), g.dot(x)],
+            grid: q.grid,
+        }
+    }
+}
+
+/// Every polygon's rasterisation proxies: quad polygons as at most
+/// `pieces` x `pieces` pieces (the fragment shader finds the element), or
+/// every element on its own (0, and triangles).
+pub(super) struct Proxies {
+    /// Corners of every proxy (world space).
+    pub(super) corners: Vec<[Vec3; 4]>,
+    /// Element each proxy belongs to (the polygon's first element for a piece of a quad grid).
+    pub(super) element: Vec<u32>,
+    /// Quad polygons drawn in pieces.
+    pub(super) quads: Vec<QuadGrid>,
+    pub(super) polygons: Vec<PolygonProxies>,
+}
+
+impl Proxies {
+    /// The proxies of `mesh` (see [`super::HemisphereRasterizer::new`]).
+    pub(super) fn build(mesh: &Mesh, pieces: u32) -> Self {
+        let mut corners = Vec::new();
+        let mut element = Vec::new();
+        let mut quads = Vec::new();
+        let mut polygons = Vec::with_capacity(mesh.polygons.len());
+        for (k, poly) in mesh.polygons.iter().enumerate() {
+            let first = corners.len() as u32;
+            let (mut lo, mut hi) = (Vec3::MAX, Vec3::MIN);
+            for id in poly.elements.clone() {
+                for p in mesh.elements[id as usize].corners {
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+            let outline = polygon_outline(mesh, poly);
+            let quad = match outline {
+                Some(c) if pieces > 0 => {
+                    let (nu, nv) = (
+                        poly.patch_grid[0] * poly.element_grid[0],
+                        poly.patch_grid[1] * poly.element_grid[1],
+                    );
+                    let (su, sv) = (pieces.min(nu), pieces.min(nv));
+                    let at = |u: f32, v: f32| crate::mesh::bilinear(&c, u, v);
+                    for j in 0..sv {
+                        for i in 0..su {
+                            let (u0, u1) = (i as f32 / su as f32, (i + 1) as f32 / su as f32);
+                            let (v0, v1) = (j as f32 / sv as f32, (j + 1) as f32 / sv as f32);
+                            corners.push([at(u0, v0), at(u1, v0), at(u1, v1), at(u0, v1)]);
+                            element.push(poly.elements.start);
+                        }
+                    }
+                    quads.push(QuadGrid {
+                        corners: c,
+                        grid: [nu, nv, poly.element_grid[0], poly.element_grid[1]],
+                    });
+                    Some(quads.len() as u32 - 1)
+                }
+                _ => {
+                    for id in poly.elements.clone() {
+                        corners.push(mesh.elements[id as usize].corners);
+                        element.push(id);
+                    }
+                    None
+                }
+            };
+            polygons.push(PolygonProxies {
+                proxies: first..corners.len() as u32,
+                normal: poly.normal,
+                centre: 0.5 * (lo + hi),
+                radius: 0.5 * (hi - lo).length(),
+                quad,
+                solid: mesh.solid_of.get(k).copied().flatten(),
+            });
+        }
+        Self {
+            corners,
+            element,
+            quads,
+            polygons,
+        }
+    }
+
+    /// Fills `self.instances` with a rectangle for every proxy the shooter can
+    /// see, in proxy order (so the draw order, and with it every depth tie, is
+    /// the same on every run), seam copies right after their originals. Large
+    /// scenes split the polygons between threads and join the lists in order.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn collect_rects(
+        &self,
+        shooter: &ShooterFrame,
+        outside: &[bool],
+        res: Resolution,
+        far: f32,
+        ownership: Option<Ownership>,
+        instances: &mut Vec<Instance>,
+    ) {
+        instances.clear();
+        let threads = if self.corners.len() < PARALLEL_PROXIES {
+            1
+        } else {
+            std::thread::available_parallelism()
+                .map_or(1, |n| n.get())
+                .min(8)
+        };
+        let (corners, element, quads) = (&self.corners, &self.element, &self.quads);
+        let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
+            for (k, poly) in polys.iter().enumerate() {
+                if !in_view(first + k, poly, corners, outside, shooter) {
+                    continue;
+                }
+                let n = shooter.to_local(poly.normal);
+                let lookup = poly.quad.map_or_else(Lookup::default, |q| {
+                    Lookup::new(&quads[q as usize], shooter, n)
+                });
+                for i in poly.proxies.clone() {
+                    let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
+                    push_piece(
+                        out,
+                        &d,
+                        n,
+                        element[i as usize],
+                        &lookup,
+                        res,
+                        far,
+                        ownership,
+                    );
+                }
+            }
+        };
+        if threads <= 1 {
+            visit(&self.polygons, 0, instances);
+            return;
+        }
+        // Contiguous runs of polygons with about equal proxy counts.
+        let per = self.corners.len().div_ceil(threads) as u32;
+        let mut bounds = vec![0usize];
+        for (k, poly) in self.polygons.iter().enumerate() {
+            if poly.proxies.end >= per * bounds.len() as u32 && bounds.len() < threads {
+                bounds.push(k + 1);
+            }
+        }
+        bounds.push(self.polygons.len());
+        bounds.dedup();
+        let polygons = &self.polygons;
+        let parts: Vec<Vec<Instance>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = bounds
+                .windows(2)
+                .map(|w| {
+                    let (lo, hi) = (w[0], w[1]);
+                    scope.spawn(move || {
+                        let mut out = Vec::new();
+                        visit(&polygons[lo..hi], lo, &mut out);
+                        out
+                    })
+                })
+                .collect();
+            // A panic in a worker is a bug; surface it on this thread.
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
+        for part in parts {
+            instances.extend_from_slice(&part);
+        }
+    }
+}
+
+/// Whether polygon `k` (`poly`) can show in the shooter's hemisphere: the
+/// shooter never sees its own polygon, polygons wholly below its plane, or
+/// the hidden back faces of solids it is outside of. The one cull both
+/// projections use.
+pub(super) fn in_view(
+    k: usize,
+    poly: &PolygonProxies,
+    corners: &[[Vec3; 4]],
+    outside: &[bool],
+    shooter: &ShooterFrame,
+) -> bool {
+    k as u32 != shooter.polygon
+        && (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius > 0.0
+        && !hidden_back_face(poly, corners, outside, shooter)
+}
+
+/// Whether `poly` is a back face of a solid that the shooter is outside of
+/// (`outside`, per solid): then a front face of the same solid is nearer in
+/// every direction it covers, and it need not be drawn.
+fn hidden_back_face(
+    poly: &PolygonProxies,
+    corners: &[[Vec3; 4]],
+    outside: &[bool],
+    shooter: &ShooterFrame,
+) -> bool {
+    poly.solid
+        .is_some_and(|s| outside.get(s as usize).copied().unwrap_or(false))
+        && corners
+            .get(poly.proxies.start as usize)
+            .is_some_and(|c| (shooter.centre - c[0]).dot(poly.normal) < 0.0)
+}
+
+/// Scenes with at least this many proxies find their rectangles on several threads.
+const PARALLEL_PROXIES: usize = 8192;
+
+/// The tiles one rank of a grid owns: tile (p, t) of `tile_w` x `tile_h`
+/// cells with t mod px = ox and p mod py = oy.
+#[derive(Clone, Copy)]
+pub(super) struct Ownership {
+    pub(super) tile: [f32; 2],
+    pub(super) grid: [f32; 2],
+    pub(super) own: [f32; 2],
+    pub(super) cells: [f32; 2],
+}
+
+impl Ownership {
+    /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
+    fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
+        let any = |lo: f32, hi: f32, axis: usize| {
+            // Cells whose centres are inside, then the tiles holding them.
+            let (c0, c1) = (
+                (lo - 0.5).ceil().max(0.0),
+                (hi - 0.5).floor().min(self.cells[axis] - 1.0),
+            );
+            let (t0, t1) = (
+                (c0 / self.tile[axis]).floor(),
+                (c1 / self.tile[axis]).floor(),
+            );
+            c0 <= c1
+                && ((t0 - self.own[axis]) / self.grid[axis]).ceil()
+                    <= ((t1 - self.own[axis]) / self.grid[axis]).floor()
+        };
+        any(x0, x1, 0) && any(y0, y1, 1)
+    }
+}
+
+/// Adds the rectangle(s) of one planar quad `d` (corners in the shooter's frame)
+/// of element `element` on a plane with normal `n`; with an `ownership`, only
+/// rectangles that hold a cell of one of this rank's tiles.
+#[allow(clippy::too_many_arguments)]
+fn push_piece(
+    out: &mut Vec<Instance>,
+    d: &[Vec3; 4],
+    n: Vec3,
+    element: u32,
+    lookup: &Lookup,
+    res: Resolution,
+    far: f32,
+    ownership: Option<Ownership>,
+) {
+    let Some(r) = cell_bounds(d, res, far) else {
+        return;
+    };
+    let cols = res.cols as f32;
+    let mine = |x0: f32, x1: f32| ownership.is_none_or(|o| o.holds_own(x0, x1, r.y0, r.y1));
+    let (primary, wrapped) = (
+        mine(r.x0, r.x1),
+        r.x1 > cols && mine(r.x0 - cols, r.x1 - cols),
+    );
+    if !primary && !wrapped {
+        return;
+    }
+    // The shooter is in front when it is on the side n points to.
+    let offset = n.dot(d[0]);
+    let back = offset >= 0.0;
+    // Inside <=> the direction is on the inner side of every edge plane; which
+    // side is inner depends on the side the shooter sees.
+    let sign = if back { 1.0 } else { -1.0 };
+    let edges =
+        std::array::from_fn(|k| (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array());
+    let inst = Instance {
+        rect: [r.x0, r.x1, r.y0, r.y1],
+        edges,
+        plane: [n.x, n.y, n.z, offset],
+        item: [element, back as u32],
+        origin: lookup.origin,
+        axis: lookup.axis,
+        bilinear: lookup.bilinear,
+        grid: lookup.grid,
+    };
+    if primary {
+        out.push(inst);
+    }
+    if wrapped {
+        out.push(Instance {
+            rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
+            ..inst
+        });
+    }
+}
