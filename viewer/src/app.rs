@@ -53,6 +53,10 @@ impl Orbit {
 /// Least time between view redraws that only new radiosities ask for.
 const VIEW_REFRESH: std::time::Duration = std::time::Duration::from_millis(250);
 
+/// The longest a background change (new radiosities, a new view image)
+/// waits for a frame.
+const BACKGROUND_FRAME: std::time::Duration = std::time::Duration::from_millis(200);
+
 /// What the last drawn view was drawn from, to redraw only on change.
 #[derive(Clone, Copy, PartialEq)]
 struct ViewKey {
@@ -137,13 +141,18 @@ impl Viewer {
             None => None,
         };
         let view_ctx = cc.egui_ctx.clone();
-        let worker = ViewWorker::start(gpu(), move || view_ctx.request_repaint())?;
+        // Background news (a new view image, a new solution) repaints at
+        // most every BACKGROUND_FRAME: a frame costs lavapipe tens of ms of
+        // both cores, which the solve needs. Input still repaints at once.
+        let worker = ViewWorker::start(gpu(), move || {
+            view_ctx.request_repaint_after(BACKGROUND_FRAME)
+        })?;
         let (solver_gpu, solver_shared, ctx) = (gpu(), shared.clone(), cc.egui_ctx.clone());
         std::thread::Builder::new()
             .name("solve".into())
             .spawn(move || {
                 solve::run(solver_gpu, scene, settings, rx, solver_shared, move || {
-                    ctx.request_repaint()
+                    ctx.request_repaint_after(BACKGROUND_FRAME)
                 })
             })
             .map_err(|e| format!("cannot start the solve thread: {e}"))?;
@@ -684,16 +693,21 @@ impl eframe::App for Viewer {
             });
         self.take_screenshot_when_ready(&ctx, &snap);
         self.frames.record(frame_start);
-        if self.args.frame_stats.is_some() {
+        if self.args.continuous {
             // Benchmark: paint continuously, so frame-to-frame time is the
             // frame rate the viewer can keep up while it solves.
             ctx.request_repaint();
         }
-        if self
+        let timed_out = self
             .args
             .exit_after
-            .is_some_and(|s| self.started.elapsed().as_secs_f64() >= s)
-        {
+            .is_some_and(|s| self.started.elapsed().as_secs_f64() >= s);
+        if let Some(s) = self.args.exit_after {
+            // An idle window paints no frames: wake it when it is time to go.
+            let left = s - self.started.elapsed().as_secs_f64();
+            ctx.request_repaint_after(std::time::Duration::from_secs_f64(left.max(0.0)));
+        }
+        if timed_out || (self.args.exit_when_converged && snap.converged) {
             ctx.send_viewport_cmd(egui::ViewportCommand::Close);
         }
     }

@@ -36,6 +36,14 @@ pub struct Args {
     /// Close the window after this many seconds (for benchmarks).
     #[arg(long)]
     pub exit_after: Option<f64>,
+    /// Close the window once the solve has converged (for benchmarks).
+    #[arg(long)]
+    pub exit_when_converged: bool,
+    /// Repaint every frame, as fast as the machine allows, instead of when
+    /// something changed (for the frame-rate benchmark: `--frame-stats`
+    /// then measures the frame rate the viewer keeps up while it solves).
+    #[arg(long)]
+    pub continuous: bool,
     /// Compare the convergence plot with this reference (a report or a
     /// `radiosity accuracy` reference JSON with `surfaces`): the plot then
     /// shows the area-weighted mean error per surface against time.

@@ -344,7 +344,7 @@ impl<'s, W: Fn()> Publisher<'s, W> {
 }
 
 /// How often a running solve publishes its state.
-const PUBLISH_PERIOD: Duration = Duration::from_millis(100);
+const PUBLISH_PERIOD: Duration = Duration::from_millis(250);
 
 /// Writes the image, the report (and with `req.bake` the bake) of the
 /// current state, through the renderer's own write path.
