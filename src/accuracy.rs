@@ -314,6 +314,31 @@ fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Runs `scripts/pathtrace.py` on the exported scene `json`; returns what
+/// it printed (one JSON line per level).
+fn run_path_tracer(args: &AccuracyArgs, json: &Path) -> Result<String> {
+    let out = std::process::Command::new(&args.python)
+        .arg(&args.pathtracer)
+        .arg(json)
+        .args([
+            "--variant",
+            &args.variant,
+            "--max-spp",
+            &args.max_spp.to_string(),
+        ])
+        .args(["--max-seconds", "60"])
+        .output()
+        .with_context(|| format!("cannot run {} {}", args.python, args.pathtracer))?;
+    if !out.status.success() {
+        bail!(
+            "{} failed: {}",
+            args.pathtracer,
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
 fn path_tracer(
     scene: &Scene,
     args: &AccuracyArgs,
@@ -332,29 +357,11 @@ fn path_tracer(
         "accuracy: path tracing {} with Mitsuba 3 ({})...",
         scene.name, args.variant
     );
-    let out = std::process::Command::new(&args.python)
-        .arg(&args.pathtracer)
-        .arg(&json)
-        .args([
-            "--variant",
-            &args.variant,
-            "--max-spp",
-            &args.max_spp.to_string(),
-        ])
-        .args(["--max-seconds", "60"])
-        .output()
-        .with_context(|| format!("cannot run {} {}", args.python, args.pathtracer))?;
-    if !out.status.success() {
-        bail!(
-            "{} failed: {}",
-            args.pathtracer,
-            String::from_utf8_lossy(&out.stderr).trim()
-        );
-    }
+    let stdout = run_path_tracer(args, &json)?;
     let mut points = Vec::new();
     let mut variant = args.variant.clone();
     let mut last: Option<Level> = None;
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
+    for line in stdout.lines() {
         if let Ok(v) = serde_json::from_str::<serde_json::Value>(line) {
             if let Some(name) = v.get("variant").and_then(|n| n.as_str()) {
                 variant = name.to_string();
@@ -375,20 +382,20 @@ fn path_tracer(
     // The path tracer's most converged estimate, kept as an independent check
     // of the reference.
     if let Some(l) = last {
-        output::write_json(
-            &args
-                .references
-                .join(format!("pathtracer-{}.json", stem(&scene.name))),
-            &Reference {
-                scene: scene.name.clone(),
-                how: format!(
-                    "Mitsuba 3 {variant}, path integrator, {} spp per node (scripts/pathtrace.py)",
-                    l.spp
-                ),
-                seconds: l.seconds,
-                surfaces: l.surfaces,
-            },
-        )?;
+        let how = format!(
+            "Mitsuba 3 {variant}, path integrator, {} spp per node (scripts/pathtrace.py)",
+            l.spp
+        );
+        let path = args
+            .references
+            .join(format!("pathtracer-{}.json", stem(&scene.name)));
+        let r = Reference {
+            scene: scene.name.clone(),
+            how,
+            seconds: l.seconds,
+            surfaces: l.surfaces,
+        };
+        output::write_json(&path, &r)?;
     }
     Ok(Curve {
         label: format!("path tracer (Mitsuba 3 {variant}, spp doubling)"),
@@ -455,89 +462,98 @@ fn finish_scene(
     Ok(())
 }
 
+/// One scene's error chart (see [`chart`]).
+fn draw<DB: plotters::prelude::DrawingBackend>(
+    root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
+    scene: &str,
+    curves: &[Curve],
+) -> Result<(), String> {
+    use plotters::prelude::*;
+    let e = |x: &dyn std::fmt::Display| x.to_string();
+    let ((x0, x1), (y0, y1)) = extent(curves);
+    if x1 <= 0.0 || y1 <= 0.0 {
+        return Ok(());
+    }
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("{scene}: area-weighted mean error per surface vs solve time"),
+            ("sans-serif", 22),
+        )
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (x0 * 0.8..x1 * 1.25).log_scale(),
+            (y0.min(0.005) * 0.8..y1 * 1.25).log_scale(),
+        )
+        .map_err(|x| e(&x))?;
+    chart
+        .configure_mesh()
+        .x_desc("seconds (log)")
+        .y_desc("relative error (log)")
+        .draw()
+        .map_err(|x| e(&x))?;
+    chart
+        .draw_series(LineSeries::new(
+            [(x0 * 0.8, 0.01), (x1 * 1.25, 0.01)],
+            BLACK.mix(0.5),
+        ))
+        .map_err(|x| e(&x))?
+        .label("1 %")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+    for (i, c) in curves.iter().enumerate() {
+        let color = if c.method == "pathtracer" {
+            BLACK.to_rgba()
+        } else {
+            Palette99::pick(i).to_rgba()
+        };
+        let points: Vec<(f64, f64)> = c
+            .points
+            .iter()
+            .filter(|p| p.seconds > 0.0 && p.mean > 0.0)
+            .map(|p| (p.seconds, p.mean))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+            .map_err(|x| e(&x))?
+            .label(c.label.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 2, color.filled())))
+            .map_err(|x| e(&x))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))
+}
+
+/// The range of the curves' positive seconds and mean errors.
+fn extent(curves: &[Curve]) -> ((f64, f64), (f64, f64)) {
+    let pts = || {
+        curves
+            .iter()
+            .flat_map(|c| c.points.iter())
+            .filter(|p| p.seconds > 0.0 && p.mean > 0.0)
+    };
+    let x = pts().fold((f64::MAX, 0.0f64), |(a, b), p| {
+        (a.min(p.seconds), b.max(p.seconds))
+    });
+    let y = pts().fold((f64::MAX, 0.0f64), |(a, b), p| {
+        (a.min(p.mean), b.max(p.mean))
+    });
+    (x, y)
+}
+
 fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
     use plotters::prelude::*;
-    fn draw<DB: DrawingBackend>(
-        root: DrawingArea<DB, plotters::coord::Shift>,
-        scene: &str,
-        curves: &[Curve],
-    ) -> Result<(), String> {
-        let e = |x: &dyn std::fmt::Display| x.to_string();
-        let pts = || {
-            curves
-                .iter()
-                .flat_map(|c| c.points.iter())
-                .filter(|p| p.seconds > 0.0 && p.mean > 0.0)
-        };
-        let (x0, x1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| {
-            (a.min(p.seconds), b.max(p.seconds))
-        });
-        let (y0, y1) = pts().fold((f64::MAX, 0.0f64), |(a, b), p| {
-            (a.min(p.mean), b.max(p.mean))
-        });
-        if x1 <= 0.0 || y1 <= 0.0 {
-            return Ok(());
-        }
-        root.fill(&WHITE).map_err(|x| e(&x))?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(
-                format!("{scene}: area-weighted mean error per surface vs solve time"),
-                ("sans-serif", 22),
-            )
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(
-                (x0 * 0.8..x1 * 1.25).log_scale(),
-                (y0.min(0.005) * 0.8..y1 * 1.25).log_scale(),
-            )
-            .map_err(|x| e(&x))?;
-        chart
-            .configure_mesh()
-            .x_desc("seconds (log)")
-            .y_desc("relative error (log)")
-            .draw()
-            .map_err(|x| e(&x))?;
-        chart
-            .draw_series(LineSeries::new(
-                [(x0 * 0.8, 0.01), (x1 * 1.25, 0.01)],
-                BLACK.mix(0.5),
-            ))
-            .map_err(|x| e(&x))?
-            .label("1 %")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
-        for (i, c) in curves.iter().enumerate() {
-            let color = if c.method == "pathtracer" {
-                BLACK.to_rgba()
-            } else {
-                Palette99::pick(i).to_rgba()
-            };
-            let points: Vec<(f64, f64)> = c
-                .points
-                .iter()
-                .filter(|p| p.seconds > 0.0 && p.mean > 0.0)
-                .map(|p| (p.seconds, p.mean))
-                .collect();
-            chart
-                .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
-                .map_err(|x| e(&x))?
-                .label(c.label.as_str())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-            chart
-                .draw_series(points.iter().map(|&p| Circle::new(p, 2, color.filled())))
-                .map_err(|x| e(&x))?;
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|x| e(&x))?;
-        root.present().map_err(|x| e(&x))
-    }
     let svg = out.join(format!("error-{scene}.svg"));
     draw(
         SVGBackend::new(&svg, (1000, 620)).into_drawing_area(),
@@ -553,6 +569,119 @@ fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
     )
     .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
     Ok(())
+}
+
+/// The projections study: both projections at four resolutions, and the
+/// tessellated one at three tolerances.
+fn projection_curves(
+    gpu: &Gpu,
+    scene: &Scene,
+    base: &RenderOptions,
+    reference: &[Surface],
+) -> Result<Vec<Curve>> {
+    let mut curves = Vec::new();
+    let method = if scene.name == "squares" {
+        FormFactorMethod::Hemisphere
+    } else {
+        FormFactorMethod::Hybrid
+    };
+    let m = format!("{method:?}").to_lowercase();
+    for projection in [Projection::Exact, Projection::Tessellated] {
+        for rows in [64u32, 128, 256, 512] {
+            let mut o = base.clone();
+            o.form_factor = method;
+            o.projection = projection;
+            o.resolution = Resolution {
+                rows,
+                cols: 4 * rows,
+            };
+            eprintln!(
+                "projections: {} {projection:?} {}",
+                scene.name, o.resolution
+            );
+            let label = format!("{m} {projection:?} {}", o.resolution).to_lowercase();
+            curves.push(run_curve(gpu, scene, &o, label, reference)?);
+        }
+    }
+    for tol in [0.05f32, 0.5, 2.0] {
+        let mut o = base.clone();
+        o.form_factor = method;
+        o.projection = Projection::Tessellated;
+        o.tessellation_tolerance = tol;
+        eprintln!("projections: {} tessellated, tolerance {tol}", scene.name);
+        let label = format!("{m} tessellated 128x512, tolerance {tol} cells");
+        curves.push(run_curve(gpu, scene, &o, label, reference)?);
+    }
+    Ok(curves)
+}
+
+/// The solver's curves: both methods at every resolution, and the default
+/// against each of its levers turned the other way.
+fn solver_curves(
+    gpu: &Gpu,
+    scene: &Scene,
+    base: &RenderOptions,
+    args: &AccuracyArgs,
+    reference: &[Surface],
+) -> Result<Vec<Curve>> {
+    let mut curves = Vec::new();
+    for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
+        for &res in &args.resolutions {
+            let mut o = base.clone();
+            o.form_factor = method;
+            o.resolution = res;
+            eprintln!("accuracy: {} {method:?} {res}", scene.name);
+            let coarse = o
+                .coarse_tier()
+                .map(|c| format!(", weak shooters {c}"))
+                .unwrap_or_default();
+            let label = format!("{} {res}{coarse}", format!("{method:?}").to_lowercase());
+            curves.push(run_curve(gpu, scene, &o, label, reference)?);
+        }
+    }
+    if base.mesh.refine > 0 {
+        // Refinement by need against the mesh it starts from, unrefined.
+        let mut o = base.clone();
+        o.mesh.refine = 0;
+        eprintln!("accuracy: {} hybrid, no refinement", scene.name);
+        let label = "hybrid 128x512, no refinement (--refine 0)".to_string();
+        curves.push(run_curve(gpu, scene, &o, label, reference)?);
+    }
+    if base.coarse_below > 0.0 {
+        // Coarse hemispheres for weak shooters against every shot at 128 x 512.
+        let mut o = base.clone();
+        o.coarse_below = 0.0;
+        eprintln!("accuracy: {} hybrid, every shot fine", scene.name);
+        let label = "hybrid 128x512, every shot at 128x512 (--coarse-below 0)".to_string();
+        curves.push(run_curve(gpu, scene, &o, label, reference)?);
+    }
+    {
+        // Overshooting (Feda & Purgathofer 1992) against none.
+        let mut o = base.clone();
+        o.overshoot = !base.overshoot;
+        eprintln!("accuracy: {} hybrid, overshoot {}", scene.name, o.overshoot);
+        let label = if o.overshoot {
+            "hybrid 128x512, overshooting (--overshoot)"
+        } else {
+            "hybrid 128x512, no overshooting"
+        };
+        curves.push(run_curve(gpu, scene, &o, label.to_string(), reference)?);
+    }
+    for &n in &args.patch_fractions {
+        let p = scene.extent() / n.max(1.0);
+        for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
+            let mut o = base.clone();
+            o.form_factor = method;
+            o.mesh.patch_size = Some(p);
+            eprintln!("accuracy: {} {method:?} patches {p} m", scene.name);
+            let label = format!(
+                "{} 128x512, {p:.3} m patches",
+                format!("{method:?}").to_lowercase()
+            );
+            curves.push(run_curve(gpu, scene, &o, label, reference)?);
+        }
+    }
+    Ok(curves)
 }
 
 /// Runs the accuracy benchmark.
@@ -589,97 +718,11 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
         };
         let mut curves = Vec::new();
         if args.projections {
-            let method = if name == "squares" {
-                FormFactorMethod::Hemisphere
-            } else {
-                FormFactorMethod::Hybrid
-            };
-            let m = format!("{method:?}").to_lowercase();
-            for projection in [Projection::Exact, Projection::Tessellated] {
-                for rows in [64u32, 128, 256, 512] {
-                    let mut o = base.clone();
-                    o.form_factor = method;
-                    o.projection = projection;
-                    o.resolution = Resolution {
-                        rows,
-                        cols: 4 * rows,
-                    };
-                    eprintln!(
-                        "projections: {} {projection:?} {}",
-                        scene.name, o.resolution
-                    );
-                    let label = format!("{m} {projection:?} {}", o.resolution).to_lowercase();
-                    curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
-                }
-            }
-            for tol in [0.05f32, 0.5, 2.0] {
-                let mut o = base.clone();
-                o.form_factor = method;
-                o.projection = Projection::Tessellated;
-                o.tessellation_tolerance = tol;
-                eprintln!("projections: {} tessellated, tolerance {tol}", scene.name);
-                let label = format!("{m} tessellated 128x512, tolerance {tol} cells");
-                curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
-            }
+            let curves = projection_curves(&gpu, &scene, &base, &reference)?;
             finish_scene(&args, &scene, curves, &mut csv, &mut summary)?;
             continue;
         }
-        for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
-            for &res in &args.resolutions {
-                let mut o = base.clone();
-                o.form_factor = method;
-                o.resolution = res;
-                eprintln!("accuracy: {} {method:?} {res}", scene.name);
-                let coarse = o
-                    .coarse_tier()
-                    .map(|c| format!(", weak shooters {c}"))
-                    .unwrap_or_default();
-                let label = format!("{} {res}{coarse}", format!("{method:?}").to_lowercase());
-                curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
-            }
-        }
-        if base.mesh.refine > 0 {
-            // Refinement by need against the mesh it starts from, unrefined.
-            let mut o = base.clone();
-            o.mesh.refine = 0;
-            eprintln!("accuracy: {} hybrid, no refinement", scene.name);
-            let label = "hybrid 128x512, no refinement (--refine 0)".to_string();
-            curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
-        }
-        if base.coarse_below > 0.0 {
-            // Coarse hemispheres for weak shooters against every shot at 128 x 512.
-            let mut o = base.clone();
-            o.coarse_below = 0.0;
-            eprintln!("accuracy: {} hybrid, every shot fine", scene.name);
-            let label = "hybrid 128x512, every shot at 128x512 (--coarse-below 0)".to_string();
-            curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
-        }
-        {
-            // Overshooting (Feda & Purgathofer 1992) against none.
-            let mut o = base.clone();
-            o.overshoot = !base.overshoot;
-            eprintln!("accuracy: {} hybrid, overshoot {}", scene.name, o.overshoot);
-            let label = if o.overshoot {
-                "hybrid 128x512, overshooting (--overshoot)"
-            } else {
-                "hybrid 128x512, no overshooting"
-            };
-            curves.push(run_curve(&gpu, &scene, &o, label.to_string(), &reference)?);
-        }
-        for &n in &args.patch_fractions {
-            let p = scene.extent() / n.max(1.0);
-            for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
-                let mut o = base.clone();
-                o.form_factor = method;
-                o.mesh.patch_size = Some(p);
-                eprintln!("accuracy: {} {method:?} patches {p} m", scene.name);
-                let label = format!(
-                    "{} 128x512, {p:.3} m patches",
-                    format!("{method:?}").to_lowercase()
-                );
-                curves.push(run_curve(&gpu, &scene, &o, label, &reference)?);
-            }
-        }
+        curves.extend(solver_curves(&gpu, &scene, &base, &args, &reference)?);
         if !args.pathtracer.is_empty() {
             match path_tracer(&scene, &args, &reference, tmp.path()) {
                 Ok(c) => curves.push(c),

@@ -74,38 +74,12 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
             .map(DMat4::from_cols_array)
             .filter(|m| m.determinant().is_finite() && m.determinant() != 0.0)
             .unwrap_or(DMat4::IDENTITY);
-        let to_local = world.inverse();
-        let (mut pos, mut col, mut idx) = (Vec::<f32>::new(), Vec::<f32>::new(), Vec::<u32>::new());
-        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        let mut material = None;
-        for (e, b) in mesh.elements.iter().zip(radiosity) {
-            let poly = &mesh.polygons[e.polygon as usize];
-            if poly.node != n {
-                continue;
-            }
-            material.get_or_insert((poly.reflectance, poly.exitance));
-            let colour = b.map(|x| ((x / std::f64::consts::PI * scale).clamp(0.0, 1.0)) as f32);
-            let corners: &[glam::Vec3] = if e.corners[3] == e.corners[2] {
-                &e.corners[..3]
-            } else {
-                &e.corners
-            };
-            let base = (pos.len() / 3) as u32;
-            for c in corners {
-                let p = to_local.transform_point3(c.as_dvec3() + origin);
-                lo = lo.min(p);
-                hi = hi.max(p);
-                pos.extend(p.to_array().map(|x| x as f32));
-                col.extend_from_slice(&colour);
-            }
-            for k in 1..corners.len() as u32 - 1 {
-                idx.extend_from_slice(&[base, base + k, base + k + 1]);
-                triangles += 1;
-            }
-        }
-        let Some((reflectance, exitance)) = material else {
+        let g = node_geometry(mesh, radiosity, n, world.inverse(), origin, scale);
+        let Some((reflectance, exitance)) = g.material else {
             continue;
         };
+        triangles += g.triangles;
+        let (pos, col, idx, lo, hi) = (g.pos, g.col, g.idx, g.lo, g.hi);
         let count = pos.len() / 3;
         let p = view(&mut bin, bytemuck::cast_slice(&pos), 34962);
         let c = view(&mut bin, bytemuck::cast_slice(&col), 34962);
@@ -121,21 +95,7 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
             json!({"bufferView": i, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
         );
         let m = materials.len();
-        let radiance = exitance.map(|x| x / std::f64::consts::PI);
-        let mut material = json!({
-            "name": name,
-            "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
-            "extensions": {"KHR_materials_unlit": {}},
-            "extras": {"reflectance": reflectance, "emitted_radiance": radiance},
-        });
-        // Emitters stay emitters (so the file loads back here as a scene),
-        // normalised: KHR_materials_emissive_strength beside unlit draws a
-        // validator warning, and the radiance itself is in the extras.
-        let peak = radiance.iter().copied().fold(0.0f64, f64::max);
-        if peak > 0.0 {
-            material["emissiveFactor"] = json!(radiance.map(|x| x / peak.max(1.0)));
-        }
-        materials.push(material);
+        materials.push(baked_material(name, reflectance, exitance));
         meshes.push(json!({"name": name, "primitives": [{"attributes": {"POSITION": a, "COLOR_0": a + 1}, "indices": a + 2, "material": m, "mode": 4}]}));
         let mut node = json!({"name": name, "mesh": meshes.len() - 1});
         if world != DMat4::IDENTITY {
@@ -156,20 +116,102 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
         )}],
     });
     if let Some(cam) = &scene.camera {
-        let n = doc["nodes"].as_array().map_or(0, Vec::len);
-        let position = (cam.position.as_dvec3() + origin)
-            .to_array()
-            .map(|x| x as f32);
-        doc["cameras"] = json!([{"type": "perspective", "perspective": {
-            "yfov": cam.yfov, "znear": cam.znear, "aspectRatio": cam.aspect.unwrap_or(1.0)}}]);
-        if let Some(nodes) = doc["nodes"].as_array_mut() {
-            nodes.push(json!({"name": "camera", "camera": 0, "translation": position, "rotation": cam.rotation.to_array()}));
-        }
-        if let Some(list) = doc["scenes"][0]["nodes"].as_array_mut() {
-            list.push(json!(n));
-        }
+        add_camera(&mut doc, cam, origin);
     }
     (doc, triangles)
+}
+
+/// Adds `cam` (in the scene's frame, offset by `origin`) as a camera node.
+fn add_camera(doc: &mut Value, cam: &crate::scene::Camera, origin: DVec3) {
+    let n = doc["nodes"].as_array().map_or(0, Vec::len);
+    let position = (cam.position.as_dvec3() + origin)
+        .to_array()
+        .map(|x| x as f32);
+    doc["cameras"] = json!([{"type": "perspective", "perspective": {
+            "yfov": cam.yfov, "znear": cam.znear, "aspectRatio": cam.aspect.unwrap_or(1.0)}}]);
+    if let Some(nodes) = doc["nodes"].as_array_mut() {
+        nodes.push(json!({"name": "camera", "camera": 0, "translation": position, "rotation": cam.rotation.to_array()}));
+    }
+    if let Some(list) = doc["scenes"][0]["nodes"].as_array_mut() {
+        list.push(json!(n));
+    }
+}
+
+/// One node's elements as triangles in its own frame (`to_local`), with
+/// their colours, bounds and material.
+struct NodeGeometry {
+    pos: Vec<f32>,
+    col: Vec<f32>,
+    idx: Vec<u32>,
+    lo: DVec3,
+    hi: DVec3,
+    /// The node's reflectance and exitance; `None`: the node has no elements.
+    material: Option<([f64; 3], [f64; 3])>,
+    triangles: usize,
+}
+
+fn node_geometry(
+    mesh: &Mesh,
+    radiosity: &[[f64; 3]],
+    n: usize,
+    to_local: DMat4,
+    origin: DVec3,
+    scale: f64,
+) -> NodeGeometry {
+    let mut g = NodeGeometry {
+        pos: Vec::new(),
+        col: Vec::new(),
+        idx: Vec::new(),
+        lo: DVec3::splat(f64::INFINITY),
+        hi: DVec3::splat(f64::NEG_INFINITY),
+        material: None,
+        triangles: 0,
+    };
+    for (e, b) in mesh.elements.iter().zip(radiosity) {
+        let poly = &mesh.polygons[e.polygon as usize];
+        if poly.node != n {
+            continue;
+        }
+        g.material.get_or_insert((poly.reflectance, poly.exitance));
+        let colour = b.map(|x| ((x / std::f64::consts::PI * scale).clamp(0.0, 1.0)) as f32);
+        let corners: &[glam::Vec3] = if e.corners[3] == e.corners[2] {
+            &e.corners[..3]
+        } else {
+            &e.corners
+        };
+        let base = (g.pos.len() / 3) as u32;
+        for c in corners {
+            let p = to_local.transform_point3(c.as_dvec3() + origin);
+            g.lo = g.lo.min(p);
+            g.hi = g.hi.max(p);
+            g.pos.extend(p.to_array().map(|x| x as f32));
+            g.col.extend_from_slice(&colour);
+        }
+        for k in 1..corners.len() as u32 - 1 {
+            g.idx.extend_from_slice(&[base, base + k, base + k + 1]);
+            g.triangles += 1;
+        }
+    }
+    g
+}
+
+/// An unlit material that shows the vertex colours; emitters stay emitters
+/// (so the file loads back here as a scene), normalised:
+/// KHR_materials_emissive_strength beside unlit draws a validator warning,
+/// and the radiance itself is in the extras.
+fn baked_material(name: &str, reflectance: [f64; 3], exitance: [f64; 3]) -> Value {
+    let radiance = exitance.map(|x| x / std::f64::consts::PI);
+    let mut material = json!({
+        "name": name,
+        "pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0], "metallicFactor": 0.0, "roughnessFactor": 1.0},
+        "extensions": {"KHR_materials_unlit": {}},
+        "extras": {"reflectance": reflectance, "emitted_radiance": radiance},
+    });
+    let peak = radiance.iter().copied().fold(0.0f64, f64::max);
+    if peak > 0.0 {
+        material["emissiveFactor"] = json!(radiance.map(|x| x / peak.max(1.0)));
+    }
+    material
 }
 
 /// Writes the bake to `path` (`.glb` binary, anything else glTF JSON), atomically.

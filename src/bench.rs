@@ -279,8 +279,24 @@ pub fn report(args: ReportArgs) -> Result<()> {
             ))
     });
     std::fs::create_dir_all(&args.out)?;
+    let csv = results_csv(&runs);
+    output::write_atomic(&args.out.join("results.csv"), csv.as_bytes())?;
+    for scene in scene_names(&runs) {
+        scene_charts(&args.out, &runs, scene)?;
+    }
+    sweep_charts(&args.out, &runs)?;
+    eprintln!(
+        "wrote {} runs to {}",
+        runs.len(),
+        args.out.join("results.csv").display()
+    );
+    Ok(())
+}
+
+/// `docs/bench/results.csv`'s text: one line per run.
+fn results_csv(runs: &[Run]) -> String {
     let mut csv = String::from("scene,ranks,exchange,tile,resolution,shots,ms_per_shot,bytes_per_shot,formula_bytes_per_shot,eps_mean,eps_max,eps_min\n");
-    for r in &runs {
+    for r in runs {
         csv += &format!(
             "{},{},{},{},{},{},{:.3},{:.0},{},{:.4},{:.4},{:.4}\n",
             r.scene,
@@ -297,76 +313,88 @@ pub fn report(args: ReportArgs) -> Result<()> {
             r.eps[2]
         );
     }
-    output::write_atomic(&args.out.join("results.csv"), csv.as_bytes())?;
+    csv
+}
+
+/// The scenes of `runs`, in order, once each.
+fn scene_names(runs: &[Run]) -> Vec<&str> {
+    let mut scenes: Vec<&str> = runs.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    scenes
+}
+
+/// One scene's charts: time and bytes per shot against ranks per exchange,
+/// and the load balance.
+fn scene_charts(out: &std::path::Path, runs: &[Run], scene: &str) -> Result<()> {
     let default = |r: &&Run| {
         !r.tag.starts_with("sweep-")
             && r.resolution == "128x512"
             && (r.tile == "1x1" || r.ranks == 1.0)
     };
-    let mut scenes: Vec<&str> = runs.iter().map(|r| r.scene.as_str()).collect();
-    scenes.dedup();
-    for scene in scenes {
-        let of_scene: Vec<&Run> = runs
+    let of_scene: Vec<&Run> = runs
+        .iter()
+        .filter(|r| r.scene == scene)
+        .filter(default)
+        .collect();
+    let by_exchange = |value: &dyn Fn(&Run) -> f64, multi_only: bool| -> Series {
+        ["hemispheres", "form-factors", "sparse"]
             .iter()
-            .filter(|r| r.scene == scene)
-            .filter(default)
-            .collect();
-        let by_exchange = |value: &dyn Fn(&Run) -> f64, multi_only: bool| -> Series {
-            ["hemispheres", "form-factors", "sparse"]
-                .iter()
-                .map(|ex| {
-                    // One rank runs no exchange: its point belongs to every series.
-                    let mut pts: Vec<(f64, f64)> = of_scene
-                        .iter()
-                        .filter(|r| r.exchange == *ex || (r.ranks == 1.0 && !multi_only))
-                        .map(|r| (r.ranks, value(r)))
-                        .collect();
-                    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    (ex.to_string(), pts)
-                })
-                .collect()
-        };
-        let name = scene.replace(['/', '.'], "_");
-        chart(
-            &args.out,
-            &format!("time-{name}"),
-            &format!("{scene}: time per shot"),
-            ("ranks", "ms per shot"),
-            &by_exchange(&|r| r.ms_per_shot, false),
-            false,
-        )?;
-        chart(
-            &args.out,
-            &format!("bytes-{name}"),
-            &format!("{scene}: bytes received per rank per shot"),
-            ("ranks", "bytes"),
-            &by_exchange(&|r| r.bytes_per_shot, true),
-            true,
-        )?;
-        let hemis: Vec<&&Run> = of_scene
-            .iter()
-            .filter(|r| r.exchange == "hemispheres")
-            .collect();
-        let eps: Series = ["mean", "max", "min"]
-            .iter()
-            .enumerate()
-            .map(|(k, n)| {
-                (
-                    format!("epsilon {n}"),
-                    hemis.iter().map(|r| (r.ranks, r.eps[k])).collect(),
-                )
+            .map(|ex| {
+                // One rank runs no exchange: its point belongs to every series.
+                let mut pts: Vec<(f64, f64)> = of_scene
+                    .iter()
+                    .filter(|r| r.exchange == *ex || (r.ranks == 1.0 && !multi_only))
+                    .map(|r| (r.ranks, value(r)))
+                    .collect();
+                pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+                (ex.to_string(), pts)
             })
-            .collect();
-        chart(
-            &args.out,
-            &format!("balance-{name}"),
-            &format!("{scene}: load balance (hemispheres)"),
-            ("ranks", "T_min / T_max"),
-            &eps,
-            false,
-        )?;
-    }
-    // The sweeps: load balance against resolution (R_phi) and tile size (cells).
+            .collect()
+    };
+    let name = scene.replace(['/', '.'], "_");
+    chart(
+        out,
+        &format!("time-{name}"),
+        &format!("{scene}: time per shot"),
+        ("ranks", "ms per shot"),
+        &by_exchange(&|r| r.ms_per_shot, false),
+        false,
+    )?;
+    chart(
+        out,
+        &format!("bytes-{name}"),
+        &format!("{scene}: bytes received per rank per shot"),
+        ("ranks", "bytes"),
+        &by_exchange(&|r| r.bytes_per_shot, true),
+        true,
+    )?;
+    let hemis: Vec<&&Run> = of_scene
+        .iter()
+        .filter(|r| r.exchange == "hemispheres")
+        .collect();
+    let eps: Series = ["mean", "max", "min"]
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            (
+                format!("epsilon {n}"),
+                hemis.iter().map(|r| (r.ranks, r.eps[k])).collect(),
+            )
+        })
+        .collect();
+    chart(
+        out,
+        &format!("balance-{name}"),
+        &format!("{scene}: load balance (hemispheres)"),
+        ("ranks", "T_min / T_max"),
+        &eps,
+        false,
+    )?;
+    Ok(())
+}
+
+/// The sweeps: load balance against resolution (R_phi) and tile size (cells).
+fn sweep_charts(out: &std::path::Path, runs: &[Run]) -> Result<()> {
     let sweep = |prefix: &str, x: &dyn Fn(&Run) -> f64| -> Series {
         let mut pts: Vec<&Run> = runs.iter().filter(|r| r.tag.starts_with(prefix)).collect();
         pts.sort_by(|a, b| x(a).total_cmp(&x(b)));
@@ -386,7 +414,7 @@ pub fn report(args: ReportArgs) -> Result<()> {
         (it.next().unwrap_or(0.0), it.next().unwrap_or(0.0))
     };
     chart(
-        &args.out,
+        out,
         "balance-resolution",
         "load balance against hemisphere resolution",
         ("R_phi (R_theta = 4 R_phi)", "T_min / T_max"),
@@ -398,17 +426,12 @@ pub fn report(args: ReportArgs) -> Result<()> {
         w * h
     };
     chart(
-        &args.out,
+        out,
         "balance-tile",
         "load balance against tile size",
         ("cells per tile", "T_min / T_max"),
         &sweep("sweep-tile-", &tile_cells),
         false,
     )?;
-    eprintln!(
-        "wrote {} runs to {}",
-        runs.len(),
-        args.out.join("results.csv").display()
-    );
     Ok(())
 }

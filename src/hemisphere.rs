@@ -358,26 +358,7 @@ pub fn tessellate(d: &[Vec3; 4], res: Resolution, tolerance: f32, mut emit: impl
     let tri = d[3] == d[2];
     let corners: &[Vec3] = if tri { &d[..3] } else { &d[..] };
     if let Some(pole) = pole_point(corners) {
-        // The piece holds the pole: a fan of quads from row 0, one per cut
-        // of its outline. Their sides are meridians, straight in cell
-        // space, so only the outline needs cutting.
-        let m = corners.len();
-        for k in 0..m {
-            let (a, b) = (corners[k], corners[(k + 1) % m]);
-            let mut n = 1u32;
-            while n < MAX_TESSELLATION
-                && (0..n).any(|i| {
-                    let (s, t) = (i as f32 / n as f32, (i + 1) as f32 / n as f32);
-                    bend(a + (b - a) * s, a + (b - a) * t, res) > tolerance
-                })
-            {
-                n *= 2;
-            }
-            for i in 0..n {
-                let (s, t) = (i as f32 / n as f32, (i + 1) as f32 / n as f32);
-                pole_quad(pole, a + (b - a) * s, a + (b - a) * t, res, &mut emit);
-            }
-        }
+        pole_fan(corners, pole, res, tolerance, &mut emit);
         return;
     }
     let at = |u: f32, v: f32| -> Vec3 {
@@ -423,8 +404,49 @@ pub fn tessellate(d: &[Vec3; 4], res: Resolution, tolerance: f32, mut emit: impl
         }
         n *= 2;
     }
+    emit_grid(tri, n, at, res, &mut emit);
+}
+
+/// A piece holding the pole: a fan of quads from row 0, one per cut of its
+/// outline. Their sides are meridians, straight in cell space, so only the
+/// outline needs cutting.
+fn pole_fan(
+    corners: &[Vec3],
+    pole: Vec3,
+    res: Resolution,
+    tolerance: f32,
+    emit: &mut impl FnMut(TessPoint),
+) {
+    let m = corners.len();
+    for k in 0..m {
+        let (a, b) = (corners[k], corners[(k + 1) % m]);
+        let mut n = 1u32;
+        while n < MAX_TESSELLATION
+            && (0..n).any(|i| {
+                let (s, t) = (i as f32 / n as f32, (i + 1) as f32 / n as f32);
+                bend(a + (b - a) * s, a + (b - a) * t, res) > tolerance
+            })
+        {
+            n *= 2;
+        }
+        for i in 0..n {
+            let (s, t) = (i as f32 / n as f32, (i + 1) as f32 / n as f32);
+            pole_quad(pole, a + (b - a) * s, a + (b - a) * t, res, emit);
+        }
+    }
+}
+
+/// Emits the triangles of an `n` x `n` grid over a piece (`at` maps (u, v)
+/// to its point), or of the lattice over a triangle, clipped at the horizon.
+fn emit_grid(
+    tri: bool,
+    n: u32,
+    at: impl Fn(f32, f32) -> Vec3,
+    res: Resolution,
+    emit: &mut impl FnMut(TessPoint),
+) {
     let f = n as f32;
-    let mut out = |a: Vec3, b: Vec3, c: Vec3| clip_and_emit([a, b, c], res, &mut emit);
+    let mut out = |a: Vec3, b: Vec3, c: Vec3| clip_and_emit([a, b, c], res, emit);
     if tri {
         for j in 0..n {
             for i in 0..(n - j) {
@@ -615,40 +637,11 @@ pub struct CellRect {
     pub y1: f32,
 }
 
-/// Rectangles grow by this many cells to absorb rounding.
-const RECT_MARGIN: f32 = 0.01;
-
-/// Bounds, in cells, of the projection of a convex planar quad (a triangle
-/// repeats a corner) whose corners `d` are given in the shooter's frame
-/// (z = normal, relative to the hemisphere centre). `None` when no cell centre
-/// can see it: it lies on or below the tangent plane, or falls between cell centres.
-///
-/// Azimuth: a convex piece that holds neither pole spans less than pi, and its
-/// extreme azimuths are at corners, so the smallest arc holding every corner
-/// bounds it; a wider span means a pole is inside and every column is taken.
-/// Polar angle: the largest is at a corner (or clipped at the horizon); the
-/// smallest at a corner or inside an edge's great-circle arc.
-pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect> {
-    use std::f32::consts::{FRAC_PI_2 as HALF_PI, PI as PI32, TAU};
-    let zmax = d.iter().fold(f32::MIN, |m, c| m.max(c.z));
-    if zmax <= 1e-6 * far {
-        return None;
-    }
-    let (rows, cols) = (res.rows as f32, res.cols as f32);
-    let mut u = [Vec3::Z; 4];
-    for k in 0..4 {
-        let len = d[k].length();
-        if len < 1e-7 * far {
-            // A corner at the centre: the piece may fill the hemisphere.
-            return Some(CellRect {
-                x0: 0.0,
-                x1: cols,
-                y0: 0.0,
-                y1: rows,
-            });
-        }
-        u[k] = d[k] / len;
-    }
+/// The smallest arc of azimuth holding the unit directions `u`: its start,
+/// its span, and whether every column is taken (a pole is inside, or a
+/// corner lies on the axis).
+fn azimuth_range(u: &[Vec3; 4]) -> (f32, f32, bool) {
+    use std::f32::consts::{PI as PI32, TAU};
     let wrap = |a: f32| a - TAU * (a / TAU).floor();
     let mut full = false;
     let mut a = [0.0f32; 4];
@@ -669,9 +662,15 @@ pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect>
     if span >= 0.999 * PI32 {
         full = true;
     }
-    // The polar range in f64, as atan2(rho, z): f32 acos(z) is off by up
-    // to sqrt(2 eps) near the pole (0.03 rows at R_phi = 512, more above),
-    // which no small margin covers.
+    (t0, span, full)
+}
+
+/// The polar range of a piece with corners `d`, in f64, as atan2(rho, z):
+/// the largest angle is at a corner, the smallest at a corner or inside an
+/// edge's great-circle arc. (f32 acos(z) is off by up to sqrt(2 eps) near
+/// the pole, 0.03 rows at R_phi = 512 and more above, which no small margin
+/// covers.)
+fn polar_range(d: &[Vec3; 4]) -> (f64, f64) {
     let w = d.map(|c| c.as_dvec3().normalize_or_zero());
     let polar = |v: glam::DVec3| v.x.hypot(v.y).atan2(v.z);
     let (mut phi_min, mut phi_max) = (std::f64::consts::FRAC_PI_2, 0.0f64);
@@ -694,6 +693,45 @@ pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect>
             }
         }
     }
+    (phi_min, phi_max)
+}
+
+/// Rectangles grow by this many cells to absorb rounding.
+const RECT_MARGIN: f32 = 0.01;
+
+/// Bounds, in cells, of the projection of a convex planar quad (a triangle
+/// repeats a corner) whose corners `d` are given in the shooter's frame
+/// (z = normal, relative to the hemisphere centre). `None` when no cell centre
+/// can see it: it lies on or below the tangent plane, or falls between cell centres.
+///
+/// Azimuth: a convex piece that holds neither pole spans less than pi, and its
+/// extreme azimuths are at corners, so the smallest arc holding every corner
+/// bounds it; a wider span means a pole is inside and every column is taken.
+/// Polar angle: the largest is at a corner (or clipped at the horizon); the
+/// smallest at a corner or inside an edge's great-circle arc.
+pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect> {
+    use std::f32::consts::{FRAC_PI_2 as HALF_PI, TAU};
+    let zmax = d.iter().fold(f32::MIN, |m, c| m.max(c.z));
+    if zmax <= 1e-6 * far {
+        return None;
+    }
+    let (rows, cols) = (res.rows as f32, res.cols as f32);
+    let mut u = [Vec3::Z; 4];
+    for k in 0..4 {
+        let len = d[k].length();
+        if len < 1e-7 * far {
+            // A corner at the centre: the piece may fill the hemisphere.
+            return Some(CellRect {
+                x0: 0.0,
+                x1: cols,
+                y0: 0.0,
+                y1: rows,
+            });
+        }
+        u[k] = d[k] / len;
+    }
+    let (t0, span, full) = azimuth_range(&u);
+    let (phi_min, phi_max) = polar_range(d);
     let (phi_min, phi_max) = (phi_min as f32, phi_max as f32);
     let phi_max = phi_max.min(HALF_PI);
     let y1 = phi_max / HALF_PI * rows + RECT_MARGIN;

@@ -394,70 +394,7 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
             );
         }
     }
-    // Flags: random lists of real flags with odd values; parsing either
-    // accepts or says why, and never panics.
-    let flags = [
-        "--resolution",
-        "--threshold",
-        "--max-shots",
-        "--patch-size",
-        "--element-size",
-        "--near-field-ratio",
-        "--refine",
-        "--raster-pieces",
-        "--width",
-        "--height",
-        "--tile",
-        "--exchange",
-        "--form-factor",
-        "--shading",
-        "--exposure",
-        "--checkpoint-every",
-        "--max-patches-per-edge",
-        "--coarse-resolution",
-        "--coarse-below",
-        "--overshoot",
-    ];
-    let values = [
-        "0",
-        "-1",
-        "1",
-        "1e9",
-        "NaN",
-        "inf",
-        "-inf",
-        "0x0",
-        "128x512",
-        "1x1",
-        "x",
-        "",
-        "1e-300",
-        "4294967296",
-        "hybrid",
-        "sparse",
-        "flat",
-        "0.5",
-        "65536x65536",
-    ];
-    let (mut accepted, mut refused) = (0u64, 0u64);
-    let mut rng = radiosity::fuzz::Rng(seed ^ 0x00f1_a6f1_a65e_ed00);
-    let mut next = move |n: usize| rng.below(n);
-    for _ in 0..flag_cases {
-        let mut argv = vec!["radiosity".to_string(), "render".into(), "cornell".into()];
-        for _ in 0..1 + next(4) {
-            argv.push(flags[next(flags.len())].into());
-            argv.push(values[next(values.len())].into());
-        }
-        let outcome = std::panic::catch_unwind(|| Cli::try_parse_from(&argv).is_ok());
-        match outcome {
-            Ok(true) => accepted += 1,
-            Ok(false) => refused += 1,
-            Err(_) => {
-                eprintln!("BUG: flags {argv:?} panicked");
-                bugs.push(argv.join(" "));
-            }
-        }
-    }
+    let (accepted, refused) = fuzz_flags(seed, flag_cases, &mut bugs);
     println!(
         "{cases} scene cases (seeds {seed}..{}): {rejected} rejected with an error, {rendered} rendered with finite reports, {failed} failed with an error; {flag_cases} flag lists: {accepted} accepted, {refused} refused; {} bugs ({:.0} s)",
         seed + cases,
@@ -471,6 +408,77 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Flags the fuzzer passes, with odd values.
+const FUZZ_FLAGS: [&str; 20] = [
+    "--resolution",
+    "--threshold",
+    "--max-shots",
+    "--patch-size",
+    "--element-size",
+    "--near-field-ratio",
+    "--refine",
+    "--raster-pieces",
+    "--width",
+    "--height",
+    "--tile",
+    "--exchange",
+    "--form-factor",
+    "--shading",
+    "--exposure",
+    "--checkpoint-every",
+    "--max-patches-per-edge",
+    "--coarse-resolution",
+    "--coarse-below",
+    "--overshoot",
+];
+/// The values it gives them.
+const FUZZ_VALUES: [&str; 19] = [
+    "0",
+    "-1",
+    "1",
+    "1e9",
+    "NaN",
+    "inf",
+    "-inf",
+    "0x0",
+    "128x512",
+    "1x1",
+    "x",
+    "",
+    "1e-300",
+    "4294967296",
+    "hybrid",
+    "sparse",
+    "flat",
+    "0.5",
+    "65536x65536",
+];
+
+/// Random lists of real flags with odd values: parsing either accepts or
+/// says why, and never panics. Returns (accepted, refused); a panic is a bug.
+fn fuzz_flags(seed: u64, flag_cases: u64, bugs: &mut Vec<String>) -> (u64, u64) {
+    let (mut accepted, mut refused) = (0u64, 0u64);
+    let mut rng = radiosity::fuzz::Rng(seed ^ 0x00f1_a6f1_a65e_ed00);
+    let mut next = move |n: usize| rng.below(n);
+    for _ in 0..flag_cases {
+        let mut argv = vec!["radiosity".to_string(), "render".into(), "cornell".into()];
+        for _ in 0..1 + next(4) {
+            argv.push(FUZZ_FLAGS[next(FUZZ_FLAGS.len())].into());
+            argv.push(FUZZ_VALUES[next(FUZZ_VALUES.len())].into());
+        }
+        let outcome = std::panic::catch_unwind(|| Cli::try_parse_from(&argv).is_ok());
+        match outcome {
+            Ok(true) => accepted += 1,
+            Ok(false) => refused += 1,
+            Err(_) => {
+                eprintln!("BUG: flags {argv:?} panicked");
+                bugs.push(argv.join(" "));
+            }
+        }
+    }
+    (accepted, refused)
 }
 
 fn write_scene(name: &str, out: &Path) -> Result<()> {

@@ -159,7 +159,6 @@ impl Solid {
 /// pieces (a room seen from inside) are not solids. Returns the solids and,
 /// per polygon, the solid it bounds.
 pub fn find_solids(polygons: &[crate::scene::Polygon]) -> (Vec<Solid>, Vec<Option<u32>>) {
-    type Key = [i64; 3];
     let mut by_node: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
     for (i, p) in polygons.iter().enumerate() {
         by_node.entry(p.node).or_default().push(i);
@@ -170,98 +169,117 @@ pub fn find_solids(polygons: &[crate::scene::Polygon]) -> (Vec<Solid>, Vec<Optio
         if members.len() < 4 {
             continue;
         }
-        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-        for &i in members {
-            for &v in &polygons[i].vertices {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
-        }
-        let size = (hi - lo).length() as f64;
-        if !(size > 0.0 && size.is_finite()) {
-            continue;
-        }
-        let eps = 1e-6 * size;
-        let key = |v: Vec3| -> Key {
-            let q = |x: f32| (x as f64 / eps).round() as i64;
-            [q(v.x), q(v.y), q(v.z)]
-        };
-        // Directed edges (counter-clockwise about each normal) and their owners.
-        let mut edges: std::collections::HashMap<(Key, Key), (u32, usize)> = Default::default();
-        for (m, &i) in members.iter().enumerate() {
-            let v = &polygons[i].vertices;
-            for k in 0..v.len() {
-                let (a, b) = (key(v[k]), key(v[(k + 1) % v.len()]));
-                if a != b {
-                    edges.entry((a, b)).or_insert((0, m)).0 += 1;
-                }
-            }
-        }
-        // Connected pieces: polygons joined by a shared edge (union-find).
-        let mut parent: Vec<usize> = (0..members.len()).collect();
-        fn root(parent: &mut [usize], mut x: usize) -> usize {
-            while parent[x] != x {
-                parent[x] = parent[parent[x]];
-                x = parent[x];
-            }
-            x
-        }
-        // A piece is open if any of its edges is not matched exactly once,
-        // the other way round.
-        let mut open = vec![false; members.len()];
-        for (&(a, b), &(count, m)) in &edges {
-            match edges.get(&(b, a)) {
-                Some(&(back, n)) if count == 1 && back == 1 => {
-                    let (ra, rb) = (root(&mut parent, m), root(&mut parent, n));
-                    parent[ra] = rb;
-                }
-                _ => open[m] = true,
-            }
-        }
-        let mut pieces: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
-        for m in 0..members.len() {
-            let r = root(&mut parent, m);
-            pieces.entry(r).or_default().push(m);
-        }
-        for piece in pieces.values() {
-            if piece.len() < 4 || piece.iter().any(|&m| open[m]) {
+        for piece in closed_pieces(polygons, members) {
+            let Some(solid) = outward_solid(polygons, members, &piece) else {
                 continue;
-            }
-            let (mut plo, mut phi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-            for &m in piece {
-                for &v in &polygons[members[m]].vertices {
-                    plo = plo.min(v);
-                    phi = phi.max(v);
-                }
-            }
-            // Divergence theorem: the volume enclosed, positive when the
-            // normals face out.
-            let centre = (0.5 * (plo + phi)).as_dvec3();
-            let volume: f64 = piece
-                .iter()
-                .map(|&m| {
-                    let p = &polygons[members[m]];
-                    let c = p.vertices.iter().map(|v| v.as_dvec3()).sum::<glam::DVec3>()
-                        / p.vertices.len() as f64;
-                    p.area() as f64 * (c - centre).dot(p.normal.as_dvec3()) / 3.0
-                })
-                .sum();
-            let psize = (phi - plo).length() as f64;
-            if volume <= 1e-9 * psize * psize * psize {
-                continue;
-            }
-            let margin = Vec3::splat((1e-4 * psize) as f32);
+            };
             let index = solids.len() as u32;
-            solids.push(Solid {
-                lo: plo - margin,
-                hi: phi + margin,
-            });
-            for &m in piece {
+            solids.push(solid);
+            for &m in &piece {
                 solid_of[members[m]] = Some(index);
             }
         }
     }
     (solids, solid_of)
+}
+
+/// The closed pieces of one node's polygons (`members`, indices into
+/// `polygons`): polygons joined by shared edges, each edge matched exactly
+/// once the other way round. Pieces hold indices into `members`.
+fn closed_pieces(polygons: &[crate::scene::Polygon], members: &[usize]) -> Vec<Vec<usize>> {
+    type Key = [i64; 3];
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &i in members {
+        for &v in &polygons[i].vertices {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    let size = (hi - lo).length() as f64;
+    if !(size > 0.0 && size.is_finite()) {
+        return Vec::new();
+    }
+    let eps = 1e-6 * size;
+    let key = |v: Vec3| -> Key {
+        let q = |x: f32| (x as f64 / eps).round() as i64;
+        [q(v.x), q(v.y), q(v.z)]
+    };
+    // Directed edges (counter-clockwise about each normal) and their owners.
+    let mut edges: std::collections::HashMap<(Key, Key), (u32, usize)> = Default::default();
+    for (m, &i) in members.iter().enumerate() {
+        let v = &polygons[i].vertices;
+        for k in 0..v.len() {
+            let (a, b) = (key(v[k]), key(v[(k + 1) % v.len()]));
+            if a != b {
+                edges.entry((a, b)).or_insert((0, m)).0 += 1;
+            }
+        }
+    }
+    // Connected pieces: polygons joined by a shared edge (union-find).
+    let mut parent: Vec<usize> = (0..members.len()).collect();
+    fn root(parent: &mut [usize], mut x: usize) -> usize {
+        while parent[x] != x {
+            parent[x] = parent[parent[x]];
+            x = parent[x];
+        }
+        x
+    }
+    // A piece is open if any of its edges is not matched exactly once,
+    // the other way round.
+    let mut open = vec![false; members.len()];
+    for (&(a, b), &(count, m)) in &edges {
+        match edges.get(&(b, a)) {
+            Some(&(back, n)) if count == 1 && back == 1 => {
+                let (ra, rb) = (root(&mut parent, m), root(&mut parent, n));
+                parent[ra] = rb;
+            }
+            _ => open[m] = true,
+        }
+    }
+    let mut pieces: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for m in 0..members.len() {
+        let r = root(&mut parent, m);
+        pieces.entry(r).or_default().push(m);
+    }
+    pieces
+        .into_values()
+        .filter(|piece| piece.len() >= 4 && !piece.iter().any(|&m| open[m]))
+        .collect()
+}
+
+/// The solid a closed piece bounds, if its normals face out (the volume
+/// the divergence theorem gives is positive), with a grown bounding box.
+fn outward_solid(
+    polygons: &[crate::scene::Polygon],
+    members: &[usize],
+    piece: &[usize],
+) -> Option<Solid> {
+    let (mut plo, mut phi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for &m in piece {
+        for &v in &polygons[members[m]].vertices {
+            plo = plo.min(v);
+            phi = phi.max(v);
+        }
+    }
+    let centre = (0.5 * (plo + phi)).as_dvec3();
+    let volume: f64 = piece
+        .iter()
+        .map(|&m| {
+            let p = &polygons[members[m]];
+            let c = p.vertices.iter().map(|v| v.as_dvec3()).sum::<glam::DVec3>()
+                / p.vertices.len() as f64;
+            p.area() as f64 * (c - centre).dot(p.normal.as_dvec3()) / 3.0
+        })
+        .sum();
+    let psize = (phi - plo).length() as f64;
+    if volume <= 1e-9 * psize * psize * psize {
+        return None;
+    }
+    let margin = Vec3::splat((1e-4 * psize) as f32);
+    Some(Solid {
+        lo: plo - margin,
+        hi: phi + margin,
+    })
 }
 
 impl Mesh {

@@ -127,11 +127,10 @@ impl HemisphereRasterizer {
         extent: f32,
     ) -> Result<Self, GpuError> {
         let limits = device.limits();
-        if res.cols > limits.max_texture_dimension_2d || res.rows > limits.max_texture_dimension_2d
-        {
+        let most = limits.max_texture_dimension_2d;
+        if res.cols > most || res.rows > most {
             return Err(GpuError::TooLarge(format!(
-                "hemisphere {res} exceeds the texture limit {}",
-                limits.max_texture_dimension_2d
+                "hemisphere {res} exceeds the texture limit {most}"
             )));
         }
         let proxies = Proxies::build(mesh, pieces);

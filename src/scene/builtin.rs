@@ -204,166 +204,171 @@ const CORNELL_BLOCK: Grid = ([3, 3], [2, 2]);
 const CORNELL_TALL_BLOCK: Grid = ([6, 3], [2, 2]);
 const CORNELL_LIGHT: Grid = ([2, 2], [2, 2]);
 
+/// A quad's corners.
+type Quad = [[f32; 3]; 4];
+
+// The Cornell box's measured geometry, millimetres.
+const CORNELL_MM_FLOOR: [Quad; 1] = [[
+    [552.8, 0.0, 0.0],
+    [0.0, 0.0, 0.0],
+    [0.0, 0.0, 559.2],
+    [549.6, 0.0, 559.2],
+]];
+const CORNELL_MM_CEILING: [Quad; 1] = [[
+    [556.0, 548.8, 0.0],
+    [556.0, 548.8, 559.2],
+    [0.0, 548.8, 559.2],
+    [0.0, 548.8, 0.0],
+]];
+const CORNELL_MM_BACK: [Quad; 1] = [[
+    [549.6, 0.0, 559.2],
+    [0.0, 0.0, 559.2],
+    [0.0, 548.8, 559.2],
+    [556.0, 548.8, 559.2],
+]];
+const CORNELL_MM_RIGHT_GREEN: [Quad; 1] = [[
+    [0.0, 0.0, 559.2],
+    [0.0, 0.0, 0.0],
+    [0.0, 548.8, 0.0],
+    [0.0, 548.8, 559.2],
+]];
+const CORNELL_MM_LEFT_RED: [Quad; 1] = [[
+    [552.8, 0.0, 0.0],
+    [549.6, 0.0, 559.2],
+    [556.0, 548.8, 559.2],
+    [556.0, 548.8, 0.0],
+]];
+const CORNELL_MM_LIGHT: [Quad; 1] = [[
+    [343.0, 547.8, 227.0],
+    [343.0, 547.8, 332.0],
+    [213.0, 547.8, 332.0],
+    [213.0, 547.8, 227.0],
+]];
+const CORNELL_MM_SHORT_BLOCK: [Quad; 5] = [
+    [
+        [130.0, 165.0, 65.0],
+        [82.0, 165.0, 225.0],
+        [240.0, 165.0, 272.0],
+        [290.0, 165.0, 114.0],
+    ],
+    [
+        [290.0, 0.0, 114.0],
+        [290.0, 165.0, 114.0],
+        [240.0, 165.0, 272.0],
+        [240.0, 0.0, 272.0],
+    ],
+    [
+        [130.0, 0.0, 65.0],
+        [130.0, 165.0, 65.0],
+        [290.0, 165.0, 114.0],
+        [290.0, 0.0, 114.0],
+    ],
+    [
+        [82.0, 0.0, 225.0],
+        [82.0, 165.0, 225.0],
+        [130.0, 165.0, 65.0],
+        [130.0, 0.0, 65.0],
+    ],
+    [
+        [240.0, 0.0, 272.0],
+        [240.0, 165.0, 272.0],
+        [82.0, 165.0, 225.0],
+        [82.0, 0.0, 225.0],
+    ],
+];
+const CORNELL_MM_TALL_BLOCK: [Quad; 5] = [
+    [
+        [423.0, 330.0, 247.0],
+        [265.0, 330.0, 296.0],
+        [314.0, 330.0, 456.0],
+        [472.0, 330.0, 406.0],
+    ],
+    [
+        [423.0, 0.0, 247.0],
+        [423.0, 330.0, 247.0],
+        [472.0, 330.0, 406.0],
+        [472.0, 0.0, 406.0],
+    ],
+    [
+        [472.0, 0.0, 406.0],
+        [472.0, 330.0, 406.0],
+        [314.0, 330.0, 456.0],
+        [314.0, 0.0, 456.0],
+    ],
+    [
+        [314.0, 0.0, 456.0],
+        [314.0, 330.0, 456.0],
+        [265.0, 330.0, 296.0],
+        [265.0, 0.0, 296.0],
+    ],
+    [
+        [265.0, 0.0, 296.0],
+        [265.0, 330.0, 296.0],
+        [423.0, 330.0, 247.0],
+        [423.0, 0.0, 247.0],
+    ],
+];
+
 /// The Cornell box from the Cornell Program of Computer Graphics' measured
 /// data (millimetres, converted to metres), open at the front, with the light
 /// quad 1 mm below the ceiling facing down.
 fn cornell() -> String {
     let room_centre = Vec3::new(0.278, 0.274, 0.280);
-    let floor = [[
-        [552.8, 0.0, 0.0],
-        [0.0, 0.0, 0.0],
-        [0.0, 0.0, 559.2],
-        [549.6, 0.0, 559.2],
-    ]];
-    let ceiling = [[
-        [556.0, 548.8, 0.0],
-        [556.0, 548.8, 559.2],
-        [0.0, 548.8, 559.2],
-        [0.0, 548.8, 0.0],
-    ]];
-    let back = [[
-        [549.6, 0.0, 559.2],
-        [0.0, 0.0, 559.2],
-        [0.0, 548.8, 559.2],
-        [556.0, 548.8, 559.2],
-    ]];
-    let right_green = [[
-        [0.0, 0.0, 559.2],
-        [0.0, 0.0, 0.0],
-        [0.0, 548.8, 0.0],
-        [0.0, 548.8, 559.2],
-    ]];
-    let left_red = [[
-        [552.8, 0.0, 0.0],
-        [549.6, 0.0, 559.2],
-        [556.0, 548.8, 559.2],
-        [556.0, 548.8, 0.0],
-    ]];
-    let light = [[
-        [343.0, 547.8, 227.0],
-        [343.0, 547.8, 332.0],
-        [213.0, 547.8, 332.0],
-        [213.0, 547.8, 227.0],
-    ]];
-    let short_block = [
-        [
-            [130.0, 165.0, 65.0],
-            [82.0, 165.0, 225.0],
-            [240.0, 165.0, 272.0],
-            [290.0, 165.0, 114.0],
-        ],
-        [
-            [290.0, 0.0, 114.0],
-            [290.0, 165.0, 114.0],
-            [240.0, 165.0, 272.0],
-            [240.0, 0.0, 272.0],
-        ],
-        [
-            [130.0, 0.0, 65.0],
-            [130.0, 165.0, 65.0],
-            [290.0, 165.0, 114.0],
-            [290.0, 0.0, 114.0],
-        ],
-        [
-            [82.0, 0.0, 225.0],
-            [82.0, 165.0, 225.0],
-            [130.0, 165.0, 65.0],
-            [130.0, 0.0, 65.0],
-        ],
-        [
-            [240.0, 0.0, 272.0],
-            [240.0, 165.0, 272.0],
-            [82.0, 165.0, 225.0],
-            [82.0, 0.0, 225.0],
-        ],
-    ];
-    let tall_block = [
-        [
-            [423.0, 330.0, 247.0],
-            [265.0, 330.0, 296.0],
-            [314.0, 330.0, 456.0],
-            [472.0, 330.0, 406.0],
-        ],
-        [
-            [423.0, 0.0, 247.0],
-            [423.0, 330.0, 247.0],
-            [472.0, 330.0, 406.0],
-            [472.0, 0.0, 406.0],
-        ],
-        [
-            [472.0, 0.0, 406.0],
-            [472.0, 330.0, 406.0],
-            [314.0, 330.0, 456.0],
-            [314.0, 0.0, 456.0],
-        ],
-        [
-            [314.0, 0.0, 456.0],
-            [314.0, 330.0, 456.0],
-            [265.0, 330.0, 296.0],
-            [265.0, 0.0, 296.0],
-        ],
-        [
-            [265.0, 0.0, 296.0],
-            [265.0, 330.0, 296.0],
-            [423.0, 330.0, 247.0],
-            [423.0, 0.0, 247.0],
-        ],
-    ];
     let short_centre = Vec3::new(0.186, 0.0825, 0.1685);
     let tall_centre = Vec3::new(0.3685, 0.165, 0.3515);
     let surfaces = vec![
         surface(
             "floor",
-            oriented(&floor, room_centre, true),
+            oriented(&CORNELL_MM_FLOOR, room_centre, true),
             WHITE,
             [0.0; 3],
             CORNELL_WALL,
         ),
         surface(
             "ceiling",
-            oriented(&ceiling, room_centre, true),
+            oriented(&CORNELL_MM_CEILING, room_centre, true),
             WHITE,
             [0.0; 3],
             CORNELL_WALL,
         ),
         surface(
             "back_wall",
-            oriented(&back, room_centre, true),
+            oriented(&CORNELL_MM_BACK, room_centre, true),
             WHITE,
             [0.0; 3],
             CORNELL_WALL,
         ),
         surface(
             "right_wall_green",
-            oriented(&right_green, room_centre, true),
+            oriented(&CORNELL_MM_RIGHT_GREEN, room_centre, true),
             GREEN,
             [0.0; 3],
             CORNELL_WALL,
         ),
         surface(
             "left_wall_red",
-            oriented(&left_red, room_centre, true),
+            oriented(&CORNELL_MM_LEFT_RED, room_centre, true),
             RED,
             [0.0; 3],
             CORNELL_WALL,
         ),
         surface(
             "light",
-            oriented(&light, Vec3::new(0.278, 0.0, 0.2795), true),
+            oriented(&CORNELL_MM_LIGHT, Vec3::new(0.278, 0.0, 0.2795), true),
             [0.78; 3],
             [17.0, 12.0, 4.0],
             CORNELL_LIGHT,
         ),
         surface(
             "short_block",
-            oriented(&short_block, short_centre, false),
+            oriented(&CORNELL_MM_SHORT_BLOCK, short_centre, false),
             WHITE,
             [0.0; 3],
             CORNELL_BLOCK,
         ),
         surface(
             "tall_block",
-            oriented(&tall_block, tall_centre, false),
+            oriented(&CORNELL_MM_TALL_BLOCK, tall_centre, false),
             WHITE,
             [0.0; 3],
             CORNELL_TALL_BLOCK,
@@ -448,6 +453,41 @@ fn chair(p: &mut Parts, ids: &[usize; 4], o: Vec3) {
     }
 }
 
+/// A classroom's light sources in a room `w` x `h` x `d`: fluorescent
+/// fittings under the ceiling and daylight windows along the +x wall.
+fn fittings(p: &mut Parts, w: f32, d: f32, h: f32) {
+    // Fluorescent fittings under the ceiling: a grid of 4 x 3 boxes.
+    let lights = p.part(
+        "ceiling_lights",
+        [0.8; 3],
+        [25.0, 24.0, 22.0],
+        ([2, 1], [1, 2]),
+    );
+    for i in 0..4 {
+        for j in 0..3 {
+            let (x, z) = ((i as f32 + 0.5) * w / 4.0, (j as f32 + 0.5) * d / 3.0);
+            p.solid(
+                lights,
+                Vec3::new(x - 0.6, h - 0.12, z - 0.15),
+                Vec3::new(x + 0.6, h - 0.02, z + 0.15),
+            );
+        }
+    }
+    // Windows along the +x wall: daylight panes 1 cm in front of the wall.
+    let windows = p.part("windows", [0.1; 3], [6.0, 7.0, 9.0], ([2, 2], [2, 2]));
+    for k in 0..6 {
+        let z = 1.0 + k as f32 * (d - 2.0) / 6.0;
+        let (z0, z1, y0, y1) = (z + 0.1, z + (d - 2.0) / 6.0 - 0.1, 0.9, 2.6);
+        let x = w - 0.01;
+        p.surfaces[windows].polygons.push(vec![
+            Vec3::new(x, y0, z0),
+            Vec3::new(x, y0, z1),
+            Vec3::new(x, y1, z1),
+            Vec3::new(x, y1, z0),
+        ]);
+    }
+}
+
 /// A classroom (DESIGN.md section 4, C1-C3): `rows` x `cols` seats (desk and
 /// chair), a teacher's desk and chair, a blackboard, cabinets, ceiling lights
 /// and windows. The counts per part are chosen so the scene's polygons,
@@ -505,36 +545,7 @@ fn classroom(rows: u32, cols: u32) -> String {
             Vec3::new(x + 0.8 * (w - 1.0) / count as f32, 1.2, d - 0.02),
         );
     }
-    // Fluorescent fittings under the ceiling: a grid of 4 x 3 boxes.
-    let lights = p.part(
-        "ceiling_lights",
-        [0.8; 3],
-        [25.0, 24.0, 22.0],
-        ([2, 1], [1, 2]),
-    );
-    for i in 0..4 {
-        for j in 0..3 {
-            let (x, z) = ((i as f32 + 0.5) * w / 4.0, (j as f32 + 0.5) * d / 3.0);
-            p.solid(
-                lights,
-                Vec3::new(x - 0.6, h - 0.12, z - 0.15),
-                Vec3::new(x + 0.6, h - 0.02, z + 0.15),
-            );
-        }
-    }
-    // Windows along the +x wall: daylight panes 1 cm in front of the wall.
-    let windows = p.part("windows", [0.1; 3], [6.0, 7.0, 9.0], ([2, 2], [2, 2]));
-    for k in 0..6 {
-        let z = 1.0 + k as f32 * (d - 2.0) / 6.0;
-        let (z0, z1, y0, y1) = (z + 0.1, z + (d - 2.0) / 6.0 - 0.1, 0.9, 2.6);
-        let x = w - 0.01;
-        p.surfaces[windows].polygons.push(vec![
-            Vec3::new(x, y0, z0),
-            Vec3::new(x, y0, z1),
-            Vec3::new(x, y1, z1),
-            Vec3::new(x, y1, z0),
-        ]);
-    }
+    fittings(&mut p, w, d, h);
     // From the back corner, looking at the blackboard.
     let camera = (
         Vec3::new(w * 0.5, 2.2, d - 0.6),

@@ -269,23 +269,9 @@ impl Loader<'_> {
         })
     }
 
-    fn primitive(
-        &mut self,
-        prim: &gltf::Primitive,
-        world: DMat4,
-        node: usize,
-        name: &str,
-        subdivision: Option<Subdivision>,
-    ) -> Result<(), SceneError> {
-        if prim.mode() != gltf::mesh::Mode::Triangles {
-            self.scene.warnings.push(format!(
-                "node '{name}': primitive mode {:?} skipped (only triangles are rendered)",
-                prim.mode()
-            ));
-            return Ok(());
-        }
-        // The gltf crate's readers assume the spec's accessor types (and hit
-        // `unreachable!` otherwise): check them first.
+    /// The gltf crate's readers assume the spec's accessor types (and hit
+    /// `unreachable!` otherwise): checks them first.
+    fn check_accessors(&self, prim: &gltf::Primitive, name: &str) -> Result<(), SceneError> {
         use gltf::accessor::{DataType, Dimensions};
         let bad_type = |what: &str, acc: &gltf::Accessor, want: &str| SceneError::Parse {
             path: self.path.clone(),
@@ -310,6 +296,96 @@ impl Loader<'_> {
                 return Err(bad_type("index", &acc, "SCALAR of unsigned integers"));
             }
         }
+        Ok(())
+    }
+
+    /// The primitive's triangles (wound for the node's transform), degenerate
+    /// ones skipped with a warning.
+    fn triangles(
+        &mut self,
+        positions: &[Vec3],
+        indices: &[u32],
+        flip: bool,
+        name: &str,
+    ) -> Result<Vec<[Vec3; 3]>, SceneError> {
+        let mut tris = Vec::with_capacity(indices.len() / 3);
+        let mut degenerate = 0usize;
+        for (k, t) in indices.chunks_exact(3).enumerate() {
+            let get = |i: u32| positions.get(i as usize).copied();
+            let (Some(a), Some(b), Some(c)) = (get(t[0]), get(t[1]), get(t[2])) else {
+                return Err(SceneError::Parse {
+                    path: self.path.clone(),
+                    message: format!(
+                        "node '{name}': triangle {k} indexes past the end of its positions"
+                    ),
+                });
+            };
+            let tri = if flip { [a, c, b] } else { [a, b, c] };
+            let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+            let scale = (tri[1] - tri[0])
+                .length_squared()
+                .max((tri[2] - tri[0]).length_squared());
+            if n.length() <= 1e-7 * scale || scale == 0.0 {
+                degenerate += 1;
+                continue;
+            }
+            tris.push(tri);
+        }
+        if degenerate > 0 {
+            self.scene.warnings.push(format!(
+                "node '{name}': {degenerate} degenerate triangle(s) skipped"
+            ));
+        }
+        Ok(tris)
+    }
+
+    /// Adds the polygons of `tris` (pairs merged into quads where they make
+    /// one), both sides of a double-sided material.
+    fn add_polygons(
+        &mut self,
+        tris: &[[Vec3; 3]],
+        mat: &Material,
+        node: usize,
+        subdivision: Option<Subdivision>,
+    ) {
+        for verts in merge_quads(tris) {
+            let normal = polygon_normal(&verts);
+            let poly = Polygon {
+                vertices: verts,
+                normal,
+                reflectance: mat.reflectance,
+                emission: mat.emission,
+                node,
+                subdivision,
+            };
+            if mat.double_sided {
+                let mut back = poly.clone();
+                back.vertices.reverse();
+                back.normal = -normal;
+                self.scene.polygons.push(poly);
+                self.scene.polygons.push(back);
+            } else {
+                self.scene.polygons.push(poly);
+            }
+        }
+    }
+
+    fn primitive(
+        &mut self,
+        prim: &gltf::Primitive,
+        world: DMat4,
+        node: usize,
+        name: &str,
+        subdivision: Option<Subdivision>,
+    ) -> Result<(), SceneError> {
+        if prim.mode() != gltf::mesh::Mode::Triangles {
+            self.scene.warnings.push(format!(
+                "node '{name}': primitive mode {:?} skipped (only triangles are rendered)",
+                prim.mode()
+            ));
+            return Ok(());
+        }
+        self.check_accessors(prim, name)?;
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| d.0.as_slice()));
         let Some(positions) = reader.read_positions() else {
             if let Some(acc) = prim.get(&gltf::Semantic::Positions) {
@@ -348,54 +424,8 @@ impl Loader<'_> {
         // A mirroring transform flips the winding (glTF spec, 3.7.4).
         let flip = world.determinant() < 0.0;
         let mat = self.material(prim, name)?;
-        let mut tris = Vec::with_capacity(indices.len() / 3);
-        let mut degenerate = 0usize;
-        for (k, t) in indices.chunks_exact(3).enumerate() {
-            let get = |i: u32| positions.get(i as usize).copied();
-            let (Some(a), Some(b), Some(c)) = (get(t[0]), get(t[1]), get(t[2])) else {
-                return Err(SceneError::Parse {
-                    path: self.path.clone(),
-                    message: format!(
-                        "node '{name}': triangle {k} indexes past the end of its positions"
-                    ),
-                });
-            };
-            let tri = if flip { [a, c, b] } else { [a, b, c] };
-            let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-            let scale = (tri[1] - tri[0])
-                .length_squared()
-                .max((tri[2] - tri[0]).length_squared());
-            if n.length() <= 1e-7 * scale || scale == 0.0 {
-                degenerate += 1;
-                continue;
-            }
-            tris.push(tri);
-        }
-        if degenerate > 0 {
-            self.scene.warnings.push(format!(
-                "node '{name}': {degenerate} degenerate triangle(s) skipped"
-            ));
-        }
-        for verts in merge_quads(&tris) {
-            let normal = polygon_normal(&verts);
-            let poly = Polygon {
-                vertices: verts,
-                normal,
-                reflectance: mat.reflectance,
-                emission: mat.emission,
-                node,
-                subdivision,
-            };
-            if mat.double_sided {
-                let mut back = poly.clone();
-                back.vertices.reverse();
-                back.normal = -normal;
-                self.scene.polygons.push(poly);
-                self.scene.polygons.push(back);
-            } else {
-                self.scene.polygons.push(poly);
-            }
-        }
+        let tris = self.triangles(&positions, &indices, flip, name)?;
+        self.add_polygons(&tris, &mat, node, subdivision);
         Ok(())
     }
 }

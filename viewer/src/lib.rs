@@ -3,6 +3,7 @@
 //! logic (pause, step, resume, restart) is tested without a window.
 
 pub mod app;
+pub mod frames;
 pub mod solve;
 pub mod view;
 
