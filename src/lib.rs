@@ -12,7 +12,10 @@
 //! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
 //!   MPI implementation (the only module that calls MPI); [`launch`]: starting
 //!   the ranks a launcher started;
-//! - [`render`]: one render from scene to image and report, on one or many ranks;
+//! - [`render`]: one render from scene to image and report, on one or many
+//!   ranks: options, the row cache, tiers and exchanges (no GPU), the GPU
+//!   form-factor source, the shooting loop, trace, passes, driver and the one
+//!   write path;
 //! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
 //! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
 //! - [`bake`]: the solution as glTF with vertex colours.

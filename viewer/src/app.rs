@@ -612,6 +612,8 @@ impl Viewer {
                 *r = outcome;
             }
             ctx2.send_viewport_cmd(egui::ViewportCommand::Close);
+            // The command takes effect at the next frame: ask for it now.
+            ctx2.request_repaint();
         });
         ctx.request_repaint();
     }
