@@ -6,7 +6,7 @@ use super::options::{fingerprint, RenderError, RenderOptions};
 use super::passes::refined_mesh;
 use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
-use super::trace::Trace;
+use super::trace::{gather_whole, Trace};
 use crate::checkpoint::Header;
 use crate::gpu::{render_view, Gpu, ViewSettings};
 use crate::hemisphere::{Resolution, TileLayout};
@@ -204,18 +204,14 @@ pub fn render_on(
         received: solved.trace.traffic.received + before.received,
     };
     let layout = source.layout();
-    let Some(gathered) = gather_to_root(comm, opts, &mut solver, &solved.stats, &source, excluded)
+    let Some(gathered) = gather_to_root(comm, opts, &solver, &solved.stats, &source, excluded)
     else {
         return Ok(None);
     };
-    drop(source);
-    phase_timings(
-        &mut timings,
-        &gathered.phases,
-        &solved.stats,
-        solver.shots(),
-    );
-    let parallel = gathered.parallel(layout, opts, &mesh, solver.shots());
+    drop((solver, source));
+    let shots = gathered.whole.shots();
+    phase_timings(&mut timings, &gathered.phases, &solved.stats, shots);
+    let (solver, parallel) = gathered.parallel(layout, opts, &mesh);
     let interrupted = solved.stats.interrupted;
     let (image, mut report) = finish(gpu, scene, &mesh, opts, &solver, timings, parallel, solved)?;
     report.refinement = refinement;
@@ -243,8 +239,10 @@ fn log_mesh(scene: &Scene, mesh: &Mesh) {
     );
 }
 
-/// What rank 0 holds after the gather, besides the whole solution.
-struct Gathered {
+/// What rank 0 holds after the gather.
+struct Gathered<'m> {
+    /// The whole solution.
+    whole: Solver<'m>,
     /// Rank 0's phase times.
     phases: PhaseTimes,
     /// Every rank's statistics.
@@ -253,58 +251,47 @@ struct Gathered {
     busy: Vec<Vec<f64>>,
 }
 
-impl Gathered {
-    /// The report's `parallel` section from what was gathered.
+impl<'m> Gathered<'m> {
+    /// The whole solution, and the report's `parallel` section from what
+    /// was gathered.
     fn parallel(
         self,
         layout: TileLayout,
         opts: &RenderOptions,
         mesh: &Mesh,
-        shots: u64,
-    ) -> Parallel {
-        Parallel::new(
+    ) -> (Solver<'m>, Parallel) {
+        let parallel = Parallel::new(
             self.per_rank.len(),
             layout,
             opts.exchange,
             opts.resolution,
             mesh.elements.len(),
-            shots,
+            self.whole.shots(),
             self.per_rank,
             LoadBalance::from_busy(&self.busy),
-        )
+        );
+        (self.whole, parallel)
     }
 }
 
-/// Gathers the solution and every rank's statistics to rank 0, where
-/// `solver` then holds the whole solution; `None` on the other ranks.
-fn gather_to_root(
+/// Gathers the solution and every rank's statistics to rank 0; `None` on
+/// the other ranks.
+fn gather_to_root<'m>(
     comm: &dyn Collectives,
     opts: &RenderOptions,
-    solver: &mut Solver,
+    solver: &Solver<'m>,
     stats: &LoopStats,
     source: &GpuFormFactors,
     excluded: Traffic,
-) -> Option<Gathered> {
-    let shots = solver.shots();
-    let (b, u) = solver.local_state();
-    let gathered_b = comm.gather_f64(&b);
-    let gathered_u = comm.gather_f64(&u);
+) -> Option<Gathered<'m>> {
     // With overshooting the unshot fraction sums elements' |unshot|.
-    let gathered_e = if opts.overshoot {
-        comm.gather_f64(&solver.local_element_unshot())
-    } else {
-        None
-    };
+    let whole = gather_whole(comm, solver, opts.overshoot);
     let mine = pack_rank_stats(&source.timings, stats, comm.traffic(), excluded);
     let all_stats = comm.gather_f64(&mine);
     let busy = comm.gather_f64(&source.busy);
-    let (gathered_b, gathered_u, all_stats, busy) = (gathered_b?, gathered_u?, all_stats?, busy?);
-    solver.assemble(&gathered_b, &gathered_u);
-    if let Some(e) = &gathered_e {
-        solver.assemble_element_unshot(e);
-    }
-    solver.set_shots(shots);
+    let (whole, all_stats, busy) = (whole?, all_stats?, busy?);
     Some(Gathered {
+        whole,
         phases: source.timings,
         per_rank: all_stats
             .iter()
