@@ -43,7 +43,7 @@ pub fn render(
     load_time: Duration,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Rendered, RenderError> {
-    let single = Single::default();
+    let single = Single;
     // With one rank this process is rank 0, which always gets the result.
     render_on(gpu, scene, opts, &single, load_time, progress)?
         .ok_or_else(|| RenderError::Settings("no result on rank 0".into()))

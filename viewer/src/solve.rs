@@ -183,7 +183,7 @@ fn solve(
     wake: &impl Fn(),
 ) -> Result<Option<Settings>, String> {
     let opts = &settings.options;
-    let single = Single::default();
+    let single = Single;
     let (mesh, _, _) =
         refined_mesh(gpu, scene, opts, &single, &mut |_| {}).map_err(|e| e.to_string())?;
     let mesh = Arc::new(mesh);
