@@ -37,6 +37,9 @@ pub struct Header {
     pub seconds: f64,
     /// The convergence trace so far.
     pub trace: Vec<TracePoint>,
+    /// Power shot and power delivered so far (`Solver::energy_record`).
+    #[serde(default)]
+    pub energy: [f64; 2],
 }
 
 /// A saved solve.

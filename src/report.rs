@@ -25,6 +25,9 @@ pub struct Report {
     pub converged: bool,
     /// Total emitted power (sum over RGB), W.
     pub emitted_power: f64,
+    /// Where the emitted power went: absorbed, unshot, escaped, and the
+    /// balance (absorbed + unshot) / emitted, 1 in a closed scene.
+    pub energy: crate::solver::Energy,
     /// Wall-clock seconds per phase (rank 0's; every rank's are in `parallel`).
     pub timings: Timings,
     /// Ranks, their grid and tiles, the exchange, per-rank phases and traffic, load balance.

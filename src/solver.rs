@@ -165,6 +165,27 @@ pub struct SolverState {
     pub retention: [f64; 2],
 }
 
+/// Where a solution's emitted power has gone, W (sum over RGB). Every shot
+/// takes its power from the unshot store and delivers it to the elements
+/// it reaches, which reflect part of it back into the store and absorb the
+/// rest; what no element receives has left the scene. So emitted =
+/// absorbed + unshot + escaped; in a closed scene nothing escapes, and
+/// `balance` = (absorbed + unshot) / emitted is 1.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Energy {
+    /// Power emitted.
+    pub emitted: f64,
+    /// Power absorbed by the elements.
+    pub absorbed: f64,
+    /// Power still unshot (signed: overshooting can leave it negative).
+    pub unshot: f64,
+    /// Power shot that reached no element: it left the scene (or, in a
+    /// closed scene, was lost or created by the form factors).
+    pub escaped: f64,
+    /// (absorbed + unshot) / emitted: 1 in a closed scene.
+    pub balance: f64,
+}
+
 /// A saved state that does not fit the mesh it is restored on.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("the state is for {} patches and {} elements, the mesh has {} and {}", state[0], state[1], mesh[0], mesh[1])]
@@ -201,6 +222,9 @@ pub struct Solver<'m> {
     shots: u64,
     /// Shot power so far, and landed power so far (see [`Solver::note_retention`]).
     retention: [f64; 2],
+    /// Power shot and power delivered to elements so far, signed, sum over
+    /// RGB (see [`Solver::note_energy`]).
+    energy: [f64; 2],
     /// Whether shooters overshoot by the ambient term (see the module docs).
     overshoot: bool,
     /// Area-weighted mean reflectance (the ambient term's rho_avg).
@@ -265,6 +289,7 @@ impl<'m> Solver<'m> {
             emitted_power,
             shots: 0,
             retention: [0.0; 2],
+            energy: [0.0; 2],
             overshoot: false,
             mean_reflectance: mean_reflectance(mesh),
             total_area: mesh.total_area(),
@@ -658,9 +683,57 @@ impl<'m> Solver<'m> {
         }
     }
 
-    /// Takes over `other`'s retention record (for a solver assembled from ranks).
+    /// Takes over `other`'s retention and energy records (for a solver
+    /// assembled from ranks).
     pub fn copy_retention(&mut self, other: &Solver) {
         self.retention = other.retention;
+        self.energy = other.energy;
+    }
+
+    /// Records that a shot of `shot` W (signed, sum over RGB) delivered
+    /// `delivered` W to the elements it reached (sum over ranks): the rest
+    /// left the scene. In a closed scene the two are equal.
+    pub fn note_energy(&mut self, shot: f64, delivered: f64) {
+        self.energy[0] += shot;
+        self.energy[1] += delivered;
+    }
+
+    /// Power shot and power delivered so far (see [`Solver::note_energy`]).
+    pub fn energy_record(&self) -> [f64; 2] {
+        self.energy
+    }
+
+    /// Continues an energy record (a checkpoint's).
+    pub fn set_energy_record(&mut self, record: [f64; 2]) {
+        self.energy = record;
+    }
+
+    /// The signed unshot power of this solver's patches, W, sum over RGB
+    /// (the whole solution's on one rank or once assembled).
+    pub fn net_unshot_power(&self) -> f64 {
+        self.own_patches()
+            .map(|i| power(&self.unshot[i], self.mesh.patches[i].area))
+            .sum()
+    }
+
+    /// Where the emitted power has gone so far (the whole solution's, on one
+    /// rank or once assembled).
+    pub fn energy(&self) -> Energy {
+        let emitted = self.emitted_power;
+        let unshot = self.net_unshot_power();
+        let escaped = self.energy[0] - self.energy[1];
+        let absorbed = emitted - unshot - escaped;
+        Energy {
+            emitted,
+            absorbed,
+            unshot,
+            escaped,
+            balance: if emitted > 0.0 {
+                (absorbed + unshot) / emitted
+            } else {
+                1.0
+            },
+        }
     }
 
     /// The ambient term (Cohen et al. 1988), for an open scene: the unshot

@@ -91,6 +91,7 @@ fn start_solver<'m>(
         solver
             .restore(&c.state)
             .map_err(|e| RenderError::Checkpoint(e.to_string()))?;
+        solver.set_energy_record(c.header.energy);
         trace.resume(c.header.trace.clone(), c.state.shots);
         so_far = c.header.seconds;
         if comm.rank() == 0 {
@@ -186,6 +187,7 @@ pub fn render_on(
         refinement: refinement.clone(),
         seconds: 0.0,
         trace: Vec::new(),
+        energy: [0.0; 2],
     };
     let solved = final_solve(
         scene,
@@ -457,6 +459,7 @@ pub fn build_report(
         unshot_fraction,
         converged: unshot_fraction <= opts.stop.threshold,
         emitted_power: solver.emitted_power(),
+        energy: solver.energy(),
         timings,
         parallel,
         surfaces: report::surfaces(mesh, &scene.nodes, &solver.display_radiosity(opts.ambient)),

@@ -81,6 +81,7 @@ impl LoopHooks for SolveHooks<'_, '_> {
                     .saturating_sub(self.trace.spent)
                     .as_secs_f64();
                 header.trace = self.trace.points.clone();
+                header.energy = whole.energy_record();
                 let c = Checkpoint {
                     header,
                     state: whole.state(),

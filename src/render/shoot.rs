@@ -88,12 +88,15 @@ struct Vote {
     flags: Flags,
     /// Its signed unshot power per channel.
     net: NetUnshot,
+    /// The power the last shot delivered to its elements, over the emitted
+    /// power, signed fixed point.
+    delivered: i64,
 }
 
 impl Vote {
     /// f64 slots a vote takes in the all-gather. Every integer is below
     /// 2^53, so it travels exactly.
-    const LEN: usize = 17;
+    const LEN: usize = 18;
 
     fn pack(&self) -> [f64; Self::LEN] {
         let mut v = [0.0; Self::LEN];
@@ -117,6 +120,7 @@ impl Vote {
         v[11] = self.pending_bytes as f64;
         v[12] = self.flags.bits() as f64;
         v[14..17].copy_from_slice(&self.net.map(|x| x as f64));
+        v[17] = self.delivered as f64;
         v
     }
 
@@ -136,6 +140,7 @@ impl Vote {
             pending_bytes: v[11] as u64,
             flags: Flags::from_bits(v[12] as u32),
             net: [v[14] as i64, v[15] as i64, v[16] as i64],
+            delivered: v[17] as i64,
         }
     }
 }
@@ -169,6 +174,8 @@ pub struct ShotLoop<'m> {
     floor: f64,
     /// What the last shot landed on this rank's elements, fixed point.
     landed: u64,
+    /// What the last shot delivered to this rank's elements, fixed point.
+    delivered: i64,
     /// The power the last shot shot, until its landing is summed.
     last_power: Option<f64>,
     ff: Vec<Transfer>,
@@ -186,6 +193,7 @@ impl<'m> ShotLoop<'m> {
             stop,
             floor,
             landed: 0,
+            delivered: 0,
             last_power: None,
             ff: Vec::new(),
             stats: LoopStats {
@@ -210,6 +218,8 @@ impl<'m> ShotLoop<'m> {
             // point, so the sum is exact and the same on every rank).
             let landed = votes.iter().map(|v| v.landed).sum::<u64>() as f64 / UNSHOT_ONE;
             solver.note_retention(power, landed);
+            let delivered = votes.iter().map(|v| v.delivered).sum::<i64>() as f64 / UNSHOT_ONE;
+            solver.note_energy(power, delivered * solver.emitted_power());
         }
         let unshot_fraction = votes.iter().map(|v| v.unshot).sum::<u64>() as f64 / UNSHOT_ONE;
         // Between shots the state decides everything that follows: the
@@ -257,6 +267,7 @@ impl<'m> ShotLoop<'m> {
             unshot: solver.local_unshot_fixed(),
             candidate: solver.local_candidate(),
             landed: self.landed,
+            delivered: self.delivered,
             pending_bytes: source.pending_bytes(),
             flags: hooks.flags(),
             // Only overshooting needs the ambient term during the loop.
@@ -327,6 +338,7 @@ impl<'m> ShotLoop<'m> {
             .filter(|t| solver.owns(self.mesh.elements[t.element as usize].patch))
             .map(|t| (t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64)
             .sum();
+        self.delivered = self.delivered_here(solver, best);
         self.last_power = Some(shot.shot_power);
         self.stats.update += dt;
         self.stats.patch_power[best.patch as usize] += shot.power;
@@ -334,6 +346,28 @@ impl<'m> ShotLoop<'m> {
             *b += dt.as_secs_f64();
         }
         Ok(shot)
+    }
+}
+
+impl ShotLoop<'_> {
+    /// The power the last shot delivered to this rank's elements, over the
+    /// emitted power, in [`UNSHOT_ONE`] fixed point: each element's share
+    /// rounded on its own, so the sum over ranks does not depend on how
+    /// elements are split between them.
+    fn delivered_here(&self, solver: &Solver, best: &Candidate) -> i64 {
+        let emitted = solver.emitted_power();
+        if emitted <= 0.0 {
+            return 0;
+        }
+        let area = self.mesh.patches[best.patch as usize].area;
+        self.ff
+            .iter()
+            .filter(|t| solver.owns(self.mesh.elements[t.element as usize].patch))
+            .map(|t| {
+                let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
+                (w / emitted * UNSHOT_ONE).round() as i64
+            })
+            .sum()
     }
 }
 
@@ -377,6 +411,7 @@ mod tests {
                     save: false,
                 },
                 net: [-(1 << 45), 3, 0],
+                delivered: -(1 << 51) + 9,
             },
             Vote {
                 flags: Flags {

@@ -16,6 +16,7 @@ pub fn builtin_names() -> Vec<&'static str> {
         "classroom-c1",
         "classroom-c2",
         "classroom-c3",
+        "family-KIND-SEED",
     ]
 }
 
@@ -31,6 +32,7 @@ pub fn builtin_gltf(name: &str) -> Option<String> {
         "classroom-c1" => Some(classroom(6, 6)),
         "classroom-c2" => Some(classroom(6, 9)),
         "classroom-c3" => Some(classroom(9, 10)),
+        _ if name.starts_with("family-") => super::family::family_gltf(name),
         _ => {
             let n: u32 = name.strip_prefix("cubes-")?.parse().ok()?;
             (1..=40).contains(&n).then(|| cubes(n))
@@ -39,7 +41,7 @@ pub fn builtin_gltf(name: &str) -> Option<String> {
 }
 
 /// Six faces of an axis-aligned box, each facing outwards (or inwards).
-fn box_faces(lo: Vec3, hi: Vec3, outward: bool) -> Vec<Vec<Vec3>> {
+pub(super) fn box_faces(lo: Vec3, hi: Vec3, outward: bool) -> Vec<Vec<Vec3>> {
     let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
     let (a, b) = (lo, hi);
     // Counter-clockwise seen from outside.

@@ -5,6 +5,7 @@
 //! Loading ([`load`]) follows the glTF conventions of DESIGN.md section 6.
 
 mod builtin;
+pub mod family;
 mod gltf_load;
 mod gltf_write;
 
