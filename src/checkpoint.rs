@@ -37,9 +37,10 @@ pub struct Header {
     pub seconds: f64,
     /// The convergence trace so far.
     pub trace: Vec<TracePoint>,
-    /// Power shot and power delivered so far (`Solver::energy_record`).
+    /// Power shot, delivered and absorbed by back faces so far
+    /// (`Solver::energy_record`).
     #[serde(default)]
-    pub energy: [f64; 2],
+    pub energy: [f64; 3],
 }
 
 /// A saved solve.

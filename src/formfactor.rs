@@ -79,6 +79,10 @@ pub struct Row {
     /// penumbra), which one point at its centre cannot see: the shooter
     /// refinement criterion (`crate::refine`). [`SHARE_ONE`] fixed point.
     pub partial: u64,
+    /// Per column, the share of that shooter element's light (delta form
+    /// factors of its hemisphere's cells, over every rank) that meets the
+    /// back of a one-sided surface: light the black back face absorbs.
+    pub blocked: Vec<f64>,
 }
 
 impl Row {
@@ -150,6 +154,30 @@ impl Row {
         self.near_hidden += other.near_hidden;
         self.partial += other.partial;
         self.total += other.total;
+    }
+
+    /// Each column's sum over this row's receivers, every value rounded to
+    /// [`SHARE_ONE`] fixed point on its own (so sums over ranks are exact).
+    pub fn column_totals(&self) -> Vec<u64> {
+        let m = self.columns.max(1);
+        let mut out = vec![0u64; m];
+        for v in self.values.chunks_exact(m) {
+            for (o, x) in out.iter_mut().zip(v) {
+                *o += to_share(*x);
+            }
+        }
+        out
+    }
+
+    /// Scales column k's values by `scales[k]` (the row normalised to what
+    /// its hemisphere saw; the decision statistics stay as measured).
+    pub fn scale_columns(&mut self, scales: &[f64]) {
+        let m = self.columns.max(1);
+        for v in self.values.chunks_exact_mut(m) {
+            for (x, s) in v.iter_mut().zip(scales) {
+                *x *= s;
+            }
+        }
     }
 
     /// Bytes this row holds.

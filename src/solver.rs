@@ -168,21 +168,25 @@ pub struct SolverState {
 /// Where a solution's emitted power has gone, W (sum over RGB). Every shot
 /// takes its power from the unshot store and delivers it to the elements
 /// it reaches, which reflect part of it back into the store and absorb the
-/// rest; what no element receives has left the scene. So emitted =
-/// absorbed + unshot + escaped; in a closed scene nothing escapes, and
-/// `balance` = (absorbed + unshot) / emitted is 1.
+/// rest; what meets the back of a one-sided surface is absorbed there
+/// (glTF's one-sided surfaces are black behind, as in a path tracer); what
+/// reaches nothing has left the scene. So emitted = absorbed + back_faces +
+/// unshot + escaped; in a closed scene nothing escapes, and `balance` =
+/// (absorbed + back_faces + unshot) / emitted is 1.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Energy {
     /// Power emitted.
     pub emitted: f64,
     /// Power absorbed by the elements.
     pub absorbed: f64,
+    /// Power absorbed by the backs of one-sided surfaces.
+    pub back_faces: f64,
     /// Power still unshot (signed: overshooting can leave it negative).
     pub unshot: f64,
     /// Power shot that reached no element: it left the scene (or, in a
     /// closed scene, was lost or created by the form factors).
     pub escaped: f64,
-    /// (absorbed + unshot) / emitted: 1 in a closed scene.
+    /// (absorbed + back_faces + unshot) / emitted: 1 in a closed scene.
     pub balance: f64,
 }
 
@@ -222,9 +226,9 @@ pub struct Solver<'m> {
     shots: u64,
     /// Shot power so far, and landed power so far (see [`Solver::note_retention`]).
     retention: [f64; 2],
-    /// Power shot and power delivered to elements so far, signed, sum over
-    /// RGB (see [`Solver::note_energy`]).
-    energy: [f64; 2],
+    /// Power shot, power delivered to elements, and power absorbed by back
+    /// faces so far, signed, sum over RGB (see [`Solver::note_energy`]).
+    energy: [f64; 3],
     /// Whether shooters overshoot by the ambient term (see the module docs).
     overshoot: bool,
     /// Area-weighted mean reflectance (the ambient term's rho_avg).
@@ -289,7 +293,7 @@ impl<'m> Solver<'m> {
             emitted_power,
             shots: 0,
             retention: [0.0; 2],
-            energy: [0.0; 2],
+            energy: [0.0; 3],
             overshoot: false,
             mean_reflectance: mean_reflectance(mesh),
             total_area: mesh.total_area(),
@@ -691,20 +695,23 @@ impl<'m> Solver<'m> {
     }
 
     /// Records that a shot of `shot` W (signed, sum over RGB) delivered
-    /// `delivered` W to the elements it reached (sum over ranks): the rest
-    /// left the scene. In a closed scene the two are equal.
-    pub fn note_energy(&mut self, shot: f64, delivered: f64) {
+    /// `delivered` W to the elements it reached (sum over ranks) and `back` W
+    /// to the black backs of one-sided surfaces: the rest left the scene. In
+    /// a closed scene nothing does.
+    pub fn note_energy(&mut self, shot: f64, delivered: f64, back: f64) {
         self.energy[0] += shot;
         self.energy[1] += delivered;
+        self.energy[2] += back;
     }
 
-    /// Power shot and power delivered so far (see [`Solver::note_energy`]).
-    pub fn energy_record(&self) -> [f64; 2] {
+    /// Power shot, delivered and absorbed by back faces so far (see
+    /// [`Solver::note_energy`]).
+    pub fn energy_record(&self) -> [f64; 3] {
         self.energy
     }
 
     /// Continues an energy record (a checkpoint's).
-    pub fn set_energy_record(&mut self, record: [f64; 2]) {
+    pub fn set_energy_record(&mut self, record: [f64; 3]) {
         self.energy = record;
     }
 
@@ -721,15 +728,17 @@ impl<'m> Solver<'m> {
     pub fn energy(&self) -> Energy {
         let emitted = self.emitted_power;
         let unshot = self.net_unshot_power();
-        let escaped = self.energy[0] - self.energy[1];
-        let absorbed = emitted - unshot - escaped;
+        let back_faces = self.energy[2];
+        let escaped = self.energy[0] - self.energy[1] - back_faces;
+        let absorbed = emitted - unshot - escaped - back_faces;
         Energy {
             emitted,
             absorbed,
+            back_faces,
             unshot,
             escaped,
             balance: if emitted > 0.0 {
-                (absorbed + unshot) / emitted
+                (absorbed + back_faces + unshot) / emitted
             } else {
                 1.0
             },

@@ -187,7 +187,7 @@ pub fn render_on(
         refinement: refinement.clone(),
         seconds: 0.0,
         trace: Vec::new(),
-        energy: [0.0; 2],
+        energy: [0.0; 3],
     };
     let solved = final_solve(
         scene,

@@ -219,7 +219,9 @@ impl<'m> ShotLoop<'m> {
             let landed = votes.iter().map(|v| v.landed).sum::<u64>() as f64 / UNSHOT_ONE;
             solver.note_retention(power, landed);
             let delivered = votes.iter().map(|v| v.delivered).sum::<i64>() as f64 / UNSHOT_ONE;
-            solver.note_energy(power, delivered * solver.emitted_power());
+            // The source's back-face share is the same on every rank.
+            let back = power * source.last_blocked();
+            solver.note_energy(power, delivered * solver.emitted_power(), back);
         }
         let unshot_fraction = votes.iter().map(|v| v.unshot).sum::<u64>() as f64 / UNSHOT_ONE;
         // Between shots the state decides everything that follows: the

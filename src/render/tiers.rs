@@ -80,6 +80,11 @@ pub struct TierCells {
     /// What one cell adds to the element it shows, per row: its delta form
     /// factor in fixed point (hemisphere) or one visible cell (hybrid).
     pub weights: Vec<u64>,
+    /// Each row's delta form factor in [`crate::formfactor::SHARE_ONE`]
+    /// fixed point, per cell: what a cell adds to the share of the
+    /// hemisphere that sees something (exact to sum over any split of the
+    /// cells between ranks).
+    pub shares: Vec<u64>,
     /// Cells (row-major indices) of each rank's tiles (hemisphere exchange;
     /// empty in one process).
     pub cells_of: Vec<Vec<u32>>,
@@ -111,14 +116,46 @@ impl TierCells {
                 }
             }
         }
+        let shares = res
+            .delta_form_factors()
+            .iter()
+            .map(|f| (f * crate::formfactor::SHARE_ONE).round() as u64)
+            .collect();
         Self {
             resolution: res,
             layout,
             weights,
+            shares,
             cell_counts: cells_of.iter().map(Vec::len).collect(),
             cells_of,
             full: vec![EMPTY; res.cells()],
         }
+    }
+
+    /// What a drawing of the tiles of grid position `own` shows (`items`:
+    /// the whole hemisphere, other positions' cells EMPTY): the shares of
+    /// the hemisphere that show an element and a back face (SHARE_ONE fixed
+    /// point), and how many of `own`'s cells show nothing (light leaving
+    /// the scene). Summed over the positions, the whole hemisphere's.
+    pub fn view_shares(&self, items: &[u32], own: (u32, u32)) -> [u64; 3] {
+        let cols = self.resolution.cols as usize;
+        let whole = self.layout.ranks() == 1;
+        let mut out = [0u64; 3];
+        for (row, cells) in items.chunks_exact(cols).enumerate() {
+            let w = self.shares[row];
+            for (t, &id) in cells.iter().enumerate() {
+                match id {
+                    crate::hemisphere::EMPTY => {
+                        if whole || self.layout.owner(row as u32, t as u32) == own {
+                            out[2] += 1;
+                        }
+                    }
+                    crate::hemisphere::BLOCKED => out[1] += w,
+                    _ => out[0] += w,
+                }
+            }
+        }
+        out
     }
 
     /// The rank-grid position (x, y) of rank `rank`.

@@ -58,7 +58,13 @@ impl Gen {
         [0; 3].map(|_| self.uniform(0.2, 0.85))
     }
 
-    fn node(&mut self, name: &str, polygons: Vec<Vec<Vec3>>, reflectance: [f32; 3], emission: [f32; 3]) {
+    fn node(
+        &mut self,
+        name: &str,
+        polygons: Vec<Vec<Vec3>>,
+        reflectance: [f32; 3],
+        emission: [f32; 3],
+    ) {
         self.surfaces.push(GltfSurface {
             name: name.into(),
             polygons,
@@ -91,13 +97,26 @@ impl Gen {
         let size = Vec3::new(self.uniform(4.0, 7.0), 3.0, self.uniform(4.0, 7.0));
         let camera = self.room(size, 1.0);
         for k in 0..6 {
-            let d = Vec3::new(self.uniform(0.3, 1.2), self.uniform(0.3, 1.4), self.uniform(0.3, 1.2));
+            let d = Vec3::new(
+                self.uniform(0.3, 1.2),
+                self.uniform(0.3, 1.4),
+                self.uniform(0.3, 1.2),
+            );
             let x = self.uniform(0.2, size.x - d.x - 0.2);
             let z = self.uniform(0.2, size.z - d.z - 0.2);
-            let y = if on_floor { 0.0 } else { self.uniform(0.2, 1.2) };
+            let y = if on_floor {
+                0.0
+            } else {
+                self.uniform(0.2, 1.2)
+            };
             let lo = Vec3::new(x, y, z);
             let c = self.colour();
-            self.node(&format!("box_{k}"), box_faces(lo, lo + d, true), c, [0.0; 3]);
+            self.node(
+                &format!("box_{k}"),
+                box_faces(lo, lo + d, true),
+                c,
+                [0.0; 3],
+            );
         }
         camera
     }
@@ -124,7 +143,12 @@ impl Gen {
                     let lo = Vec3::new(x0 + d.x, 0.0, z0);
                     let n = Vec3::new(0.3, self.uniform(0.2, 0.5), 0.4);
                     let c = self.colour();
-                    self.node(&format!("side_{pile}"), box_faces(lo, lo + n, true), c, [0.0; 3]);
+                    self.node(
+                        &format!("side_{pile}"),
+                        box_faces(lo, lo + n, true),
+                        c,
+                        [0.0; 3],
+                    );
                 }
                 y += d.y;
             }
@@ -152,8 +176,18 @@ impl Gen {
         let p = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
         // Floor and ceiling as two rectangles each (facing up and down).
         let floor = vec![
-            vec![p(0.0, 0.0, 0.0), p(0.0, 0.0, b), p(a, 0.0, b), p(a, 0.0, 0.0)],
-            vec![p(0.0, 0.0, b), p(0.0, 0.0, b + d), p(c, 0.0, b + d), p(c, 0.0, b)],
+            vec![
+                p(0.0, 0.0, 0.0),
+                p(0.0, 0.0, b),
+                p(a, 0.0, b),
+                p(a, 0.0, 0.0),
+            ],
+            vec![
+                p(0.0, 0.0, b),
+                p(0.0, 0.0, b + d),
+                p(c, 0.0, b + d),
+                p(c, 0.0, b),
+            ],
         ];
         let ceiling = floor
             .iter()
@@ -261,12 +295,7 @@ impl Gen {
         let (co, ci) = (self.colour(), self.colour());
         self.node("room_outside", outer, co, [0.0; 3]);
         self.node("room_inside", inner, ci, [0.0; 3]);
-        (
-            Vec3::new(5.0, 1.6, 8.7),
-            Quat::IDENTITY,
-            1.1,
-            1.4,
-        )
+        (Vec3::new(5.0, 1.6, 8.7), Quat::IDENTITY, 1.1, 1.4)
     }
 
     /// A room of many small objects, on the floor and floating.
@@ -278,7 +307,11 @@ impl Gen {
             let d = Vec3::splat(self.uniform(0.08, 0.3));
             let x = self.uniform(0.2, size.x - 0.5);
             let z = self.uniform(0.2, size.z - 0.5);
-            let y = if k % 2 == 0 { 0.0 } else { self.uniform(0.3, 2.0) };
+            let y = if k % 2 == 0 {
+                0.0
+            } else {
+                self.uniform(0.3, 2.0)
+            };
             let lo = Vec3::new(x, y, z);
             polygons.extend(box_faces(lo, lo + d, true));
         }
