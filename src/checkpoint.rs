@@ -190,6 +190,7 @@ mod tests {
                 refinement: Refinement::default(),
                 seconds: 1.5,
                 trace: Vec::new(),
+                energy: [3.0, 2.5, 1.0 / 7.0],
             },
             state: SolverState {
                 radiosity: vec![[0.1, f64::MIN_POSITIVE, 3.0], [1.0 / 3.0, 2.0, -0.0]],

@@ -1,0 +1,71 @@
+//! Energy is conserved: in a closed scene the light absorbed (by elements
+//! and by the black backs of one-sided surfaces) plus the light still unshot
+//! is the light emitted, for both form-factor methods and any rank count.
+//! A physical invariant no setting can be tuned to. The scenes are the
+//! generated family's closed rooms (`scene::family`), meshed by the defaults.
+
+use crate::common::gpu;
+use radiosity::hemisphere::Resolution;
+use radiosity::parallel::ThreadComm;
+use radiosity::render::{render_on, FormFactorMethod, RenderOptions};
+use radiosity::solver::Energy;
+use std::time::Duration;
+
+/// The report's energy and unshot fraction on `ranks` ranks (threads).
+fn energy(scene: &str, method: FormFactorMethod, ranks: usize) -> (Energy, f64) {
+    let scene = radiosity::scene::open(scene).expect("a family scene");
+    let mut opts = RenderOptions {
+        form_factor: method,
+        resolution: Resolution {
+            rows: 64,
+            cols: 256,
+        },
+        width: 0,
+        ..RenderOptions::default()
+    };
+    // The balance counts what is still unshot, so it holds at any shot:
+    // stop early to keep the suite quick.
+    opts.stop.threshold = 0.02;
+    let results = ThreadComm::run(ranks, |comm| {
+        render_on(gpu(), &scene, &opts, comm, Duration::ZERO, &mut |_| {})
+            .expect("render")
+            .map(|r| (r.report.energy, r.report.unshot_fraction))
+    });
+    results
+        .into_iter()
+        .flatten()
+        .next()
+        .expect("rank 0's report")
+}
+
+#[test]
+fn closed_family_scenes_conserve_energy_with_both_methods_on_one_and_two_ranks() {
+    for scene in ["family-floor-1", "family-stacked-2", "family-l-room-3"] {
+        for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
+            let (one, u1) = energy(scene, method, 1);
+            let (two, u2) = energy(scene, method, 2);
+            for (e, ranks) in [(one, 1), (two, 2)] {
+                assert!(
+                    (e.balance - 1.0).abs() < 1e-3,
+                    "{scene} {method:?} on {ranks} ranks: (absorbed + back faces + unshot) / emitted = {:.5} ({e:?})",
+                    e.balance
+                );
+                assert!(e.absorbed > 0.9 * e.emitted, "{scene}: {e:?}");
+            }
+            // The same numbers whatever the rank count.
+            assert_eq!(one, two, "{scene} {method:?}: 1 and 2 ranks differ");
+            assert_eq!(u1, u2);
+        }
+    }
+}
+
+/// The balance is a real check: an open scene (the Cornell box, open at the
+/// front) does lose light, and the report says how much.
+#[test]
+fn an_open_scene_reports_the_light_that_escapes() {
+    let (e, _) = energy("cornell", FormFactorMethod::Hybrid, 1);
+    let escaped = e.escaped / e.emitted;
+    assert!(escaped > 0.05 && escaped < 0.6, "{e:?}");
+    let sum = e.absorbed + e.back_faces + e.unshot + e.escaped;
+    assert!((sum / e.emitted - 1.0).abs() < 1e-9, "{e:?}");
+}
