@@ -27,17 +27,23 @@ fn wait_for(shared: &Mutex<Snapshot>, what: &str, cond: impl Fn(&Snapshot) -> bo
     }
 }
 
-#[test]
-fn pause_step_resume_restart_quit() {
+/// A device, the Cornell box and options for quick solves of it.
+fn cornell_at_32x128() -> (Gpu, radiosity::scene::Scene, RenderOptions) {
     let gpu = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
     let scene = radiosity::scene::open("cornell").expect("built-in scene");
-    let mut options = RenderOptions {
+    let options = RenderOptions {
         resolution: Resolution {
             rows: 32,
             cols: 128,
         },
         ..RenderOptions::default()
     };
+    (gpu, scene, options)
+}
+
+#[test]
+fn pause_step_resume_restart_quit() {
+    let (gpu, scene, mut options) = cornell_at_32x128();
     options.stop.threshold = 0.02;
     let shared = Arc::new(Mutex::new(Snapshot::default()));
     let (tx, rx) = std::sync::mpsc::channel();
@@ -154,19 +160,11 @@ fn pause_step_resume_restart_quit() {
 /// same convergence trace.
 #[test]
 fn the_viewer_and_the_renderer_give_the_same_numbers() {
-    let gpu = Gpu::new().unwrap_or_else(|e| panic!("{e}"));
-    let scene = radiosity::scene::open("cornell").expect("built-in scene");
-    let mut options = RenderOptions {
-        resolution: Resolution {
-            rows: 32,
-            cols: 128,
-        },
-        width: 0,
-        // Both on: the ambient term and overshooting are where the two
-        // drivers once differed.
-        overshoot: true,
-        ..RenderOptions::default()
-    };
+    let (gpu, scene, mut options) = cornell_at_32x128();
+    options.width = 0;
+    // The ambient term and overshooting are where the two drivers once
+    // differed: both on.
+    options.overshoot = true;
     options.stop.threshold = 0.01;
     let rendered = radiosity::render::render(&gpu, &scene, &options, Duration::ZERO, &mut |_| {})
         .expect("render");
