@@ -285,7 +285,7 @@ fn run_curve(
 
 /// Writes the scene as JSON for the path tracer: per node, world-space
 /// triangles, reflectance, emitted radiance, area.
-fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
+pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
     let mut nodes: Vec<serde_json::Value> = Vec::new();
     for (i, name) in scene.nodes.iter().enumerate() {
         let polys: Vec<_> = scene.polygons.iter().filter(|p| p.node == i).collect();

@@ -41,7 +41,12 @@ enum Command {
         name: String,
         /// Output .gltf path.
         #[arg(long)]
-        out: PathBuf,
+        out: Option<PathBuf>,
+        /// Also write the scene (a built-in or a glTF file, as the renderer
+        /// loads it) as per-node triangles, reflectance, emission and area:
+        /// the JSON `scripts/reference.py` reads.
+        #[arg(long)]
+        nodes: Option<PathBuf>,
     },
     /// Time shots on the built-in scenes and print a table (see README "Performance").
     Bench(bench::BenchArgs),
@@ -340,7 +345,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
-        Command::Scene { name, out } => write_scene(&name, &out),
+        Command::Scene { name, out, nodes } => write_scene(&name, out.as_deref(), nodes.as_deref()),
         Command::Bench(args) => bench::run(args),
         Command::BenchReport(args) => bench::report(args),
         Command::Accuracy { args, solve } => accuracy::run(args, solve),
@@ -481,15 +486,24 @@ fn fuzz_flags(seed: u64, flag_cases: u64, bugs: &mut Vec<String>) -> (u64, u64) 
     (accepted, refused)
 }
 
-fn write_scene(name: &str, out: &Path) -> Result<()> {
-    let text = scene::builtin_gltf(name).with_context(|| {
-        format!(
-            "no built-in scene '{name}' (built-ins: {})",
-            scene::builtin_names().join(", ")
-        )
-    })?;
-    output::write_atomic(out, text.as_bytes())?;
-    eprintln!("wrote {}", out.display());
+fn write_scene(name: &str, out: Option<&Path>, nodes: Option<&Path>) -> Result<()> {
+    if let Some(out) = out {
+        let text = scene::builtin_gltf(name).with_context(|| {
+            format!(
+                "no built-in scene '{name}' (built-ins: {})",
+                scene::builtin_names().join(", ")
+            )
+        })?;
+        output::write_atomic(out, text.as_bytes())?;
+        eprintln!("wrote {}", out.display());
+    }
+    if let Some(path) = nodes {
+        accuracy::export_for_pathtracer(&scene::open(name)?, path)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if out.is_none() && nodes.is_none() {
+        anyhow::bail!("nothing to write: give --out and/or --nodes");
+    }
     Ok(())
 }
 
