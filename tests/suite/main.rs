@@ -13,6 +13,7 @@ mod fuzz;
 mod mpi;
 mod overshoot;
 mod projections;
+mod reference;
 mod refine;
 mod shaders;
 mod traps;

@@ -1,0 +1,98 @@
+//! Per node against independent references: path-traced radiosities with
+//! next-event estimation (`scripts/reference.py`, Mitsuba 3), cached in
+//! `docs/references/` with their standard errors (at most 0.1 % per node)
+//! and the command that made them. The suite never runs the path tracer.
+//! Default settings, on scenes of the generated family no default was
+//! chosen on, and the Cornell box.
+
+use crate::common::gpu;
+use radiosity::render::{render, RenderOptions};
+use std::time::Duration;
+
+/// A cached reference's nodes: (name, radiosity summed over RGB, relative
+/// standard error).
+fn reference(scene: &str) -> Vec<(String, f64, f64)> {
+    let path = format!(
+        "{}/docs/references/{scene}.json",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let doc: serde_json::Value = serde_json::from_str(&text).expect("reference JSON");
+    assert!(
+        doc["command"].as_str().is_some(),
+        "{path} says how it was made"
+    );
+    doc["surfaces"]
+        .as_array()
+        .expect("surfaces")
+        .iter()
+        .map(|s| {
+            let b: f64 = s["radiosity"]
+                .as_array()
+                .expect("rgb")
+                .iter()
+                .filter_map(|x| x.as_f64())
+                .sum();
+            let se = s["relative_standard_error"]
+                .as_f64()
+                .expect("standard error");
+            (s["node"].as_str().expect("node").to_string(), b, se)
+        })
+        .collect()
+}
+
+#[test]
+fn default_renders_are_within_one_percent_mean_and_three_worst_of_path_traced_references() {
+    for scene in [
+        "cornell",
+        "family-l-room-1",
+        "family-slab-1",
+        "family-boxes-1",
+        "family-corridor-1",
+    ] {
+        let reference = reference(scene);
+        let s = radiosity::scene::open(scene).expect("scene");
+        let opts = RenderOptions {
+            width: 0,
+            ..RenderOptions::default()
+        };
+        let r = render(gpu(), &s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+        let (mut weighted, mut area, mut worst) = (0.0, 0.0, (0.0f64, String::new()));
+        for surface in &r.report.surfaces {
+            // The emitters' radiosity is their emission: nothing to score.
+            if surface.node == "light" {
+                continue;
+            }
+            let (_, b_ref, se) = reference
+                .iter()
+                .find(|(n, ..)| *n == surface.node)
+                .unwrap_or_else(|| panic!("{scene}: no reference for {}", surface.node));
+            assert!(*se <= 1.5e-3, "{scene} {}: reference SE {se}", surface.node);
+            let b: f64 = surface.radiosity.iter().sum();
+            let e = (b / b_ref - 1.0).abs();
+            weighted += e * surface.area;
+            area += surface.area;
+            if e > worst.0 {
+                worst = (e, surface.node.clone());
+            }
+        }
+        let mean = weighted / area;
+        eprintln!(
+            "{scene}: mean {:.2} %, worst {:.2} % ({})",
+            100.0 * mean,
+            100.0 * worst.0,
+            worst.1
+        );
+        assert!(
+            mean <= 0.01,
+            "{scene}: mean node error {:.2} %",
+            100.0 * mean
+        );
+        assert!(
+            worst.0 <= 0.03,
+            "{scene}: node {} is {:.2} % off",
+            worst.1,
+            100.0 * worst.0
+        );
+    }
+}
