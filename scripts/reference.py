@@ -50,6 +50,27 @@ def main():
         doc = json.load(f)
     nodes = [n for n in doc["nodes"] if n["triangles"]]
 
+    # Faces that coincide back to back (a wall given as two one-sided faces,
+    # as double-sided exports give them) would tie in a ray tracer, which then
+    # hits either: half the rays would meet a black back face. Each face is
+    # moved a hair (1e-5 of the scene's size) along its normal, so the face
+    # that faces a ray is always the nearer one, as in the renderer (where a
+    # back face sits a hair behind a coincident front face).
+    lo = [min(v[k] for n in nodes for t in n["triangles"] for v in t) for k in range(3)]
+    hi = [max(v[k] for n in nodes for t in n["triangles"] for v in t) for k in range(3)]
+    eps = 1e-5 * math.sqrt(sum((hi[k] - lo[k]) ** 2 for k in range(3)))
+
+    def lifted(t):
+        a, b, c = t
+        u = [b[k] - a[k] for k in range(3)]
+        v = [c[k] - a[k] for k in range(3)]
+        n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+        ln = math.sqrt(sum(x * x for x in n)) or 1.0
+        return [[p[k] + eps * n[k] / ln for k in range(3)] for p in t]
+
+    for node in nodes:
+        node["triangles"] = [lifted(t) for t in node["triangles"]]
+
     tmp = tempfile.mkdtemp(prefix="reference-")
     d = {"type": "scene"}
     for i, node in enumerate(nodes):
