@@ -4,11 +4,12 @@
 //! Error is scored per glTF node against a reference: the area-weighted mean
 //! over nodes of the relative error of the node's mean radiosity (mean over
 //! RGB channels), and the worst node's. References are closed forms for the
-//! analytic case and, for the other scenes, a long fine run of this renderer
-//! (hybrid form factors, 256 x 1024, patches of 1/40 of the scene's extent
-//! with 2 x 2 elements, unshot 1e-5), cached as
-//! `reference-<scene>.json` beside the charts; the path tracer's converged
-//! values check it independently.
+//! analytic case and, for the other scenes, the independent path-traced
+//! references in `docs/references/<scene>.json` (next-event estimation,
+//! `scripts/reference.py`, with their standard errors and commands). Only
+//! with `--self-reference` is a scene without one scored against a long fine
+//! run of this renderer (hybrid, 256 x 1024, patches of 1/40 of the scene's
+//! extent, unshot 1e-5), which cannot show the method's own bias.
 
 use crate::SolveArgs;
 use anyhow::{bail, Context, Result};
@@ -44,9 +45,16 @@ pub struct AccuracyArgs {
     /// Where the cached references are (computed there when missing).
     #[arg(long, default_value = "docs/bench/accuracy")]
     references: PathBuf,
-    /// Recompute the references even when cached.
+    /// Recompute the references even when cached (`--self-reference` ones).
     #[arg(long)]
     recompute_reference: bool,
+    /// The independent, path-traced references (`scripts/reference.py`).
+    #[arg(long, default_value = "docs/references")]
+    independent: PathBuf,
+    /// Score scenes without an independent reference against a long run of
+    /// this renderer (cached beside the charts) instead of refusing them.
+    #[arg(long)]
+    self_reference: bool,
     /// Each charted run stops at this unshot fraction (overrides --threshold).
     #[arg(long, default_value_t = 1e-4)]
     run_threshold: f64,
@@ -209,6 +217,27 @@ fn reference(
     base: &RenderOptions,
     args: &AccuracyArgs,
 ) -> Result<Vec<Surface>> {
+    let independent = args.independent.join(format!("{}.json", stem(&scene.name)));
+    if let Ok(text) = std::fs::read_to_string(&independent) {
+        let r: Reference = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a reference", independent.display()))?;
+        eprintln!(
+            "accuracy: {} against {} ({})",
+            scene.name,
+            independent.display(),
+            r.how
+        );
+        return Ok(r.surfaces);
+    }
+    if !args.self_reference {
+        bail!(
+            "no independent reference for {} in {}: make one with `radiosity scene {} --nodes nodes.json && python3 scripts/reference.py nodes.json --target 1e-3 > {}` (README \"An independent yardstick\"), or pass --self-reference to score against a long run of this renderer",
+            scene.name,
+            args.independent.display(),
+            scene.name,
+            independent.display()
+        );
+    }
     let path = args
         .references
         .join(format!("reference-{}.json", stem(&scene.name)));
