@@ -28,8 +28,8 @@ pub mod write;
 pub use driver::{build_report, render, render_on, single_process, Rendered};
 pub use hooks::Progress;
 pub use options::{
-    mesh_settings, CheckpointPlan, FormFactorMethod, Projection, RenderError, RenderOptions,
-    DEFAULT_COARSE_BELOW, DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
+    CheckpointPlan, FormFactorMethod, Projection, RenderError, RenderOptions, DEFAULT_COARSE_BELOW,
+    DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
 };
 pub use passes::refined_mesh;
 pub use shoot::{shoot_until, AfterShot, Flags, LoopHooks, LoopStats, ShotLoop, Step, Stopped};

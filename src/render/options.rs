@@ -165,11 +165,6 @@ impl RenderOptions {
     }
 }
 
-/// The mesh settings a render uses (see [`RenderOptions::mesh_settings`]).
-pub fn mesh_settings(opts: &RenderOptions) -> MeshSettings {
-    opts.mesh_settings()
-}
-
 /// Why a render failed.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {

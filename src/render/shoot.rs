@@ -331,16 +331,7 @@ impl<'m> ShotLoop<'m> {
         let t = Instant::now();
         let shot = solver.shoot_candidate(best, region, &self.ff);
         let dt = t.elapsed();
-        // This rank's elements' share of what landed, told at the next collective.
-        // Each element's F is rounded on its own, so the sum does not depend
-        // on how elements are split between ranks.
-        self.landed = self
-            .ff
-            .iter()
-            .filter(|t| solver.owns(self.mesh.elements[t.element as usize].patch))
-            .map(|t| (t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64)
-            .sum();
-        self.delivered = self.delivered_here(solver, best);
+        (self.landed, self.delivered) = self.landed_here(solver, best);
         self.last_power = Some(shot.shot_power);
         self.stats.update += dt;
         self.stats.patch_power[best.patch as usize] += shot.power;
@@ -349,27 +340,27 @@ impl<'m> ShotLoop<'m> {
         }
         Ok(shot)
     }
-}
 
-impl ShotLoop<'_> {
-    /// The power the last shot delivered to this rank's elements, over the
-    /// emitted power, in [`UNSHOT_ONE`] fixed point: each element's share
-    /// rounded on its own, so the sum over ranks does not depend on how
-    /// elements are split between them.
-    fn delivered_here(&self, solver: &Solver, best: &Candidate) -> i64 {
+    /// What the last shot landed on this rank's elements (the sum of their
+    /// form factors) and the power it delivered to them over the emitted
+    /// power, both in [`UNSHOT_ONE`] fixed point, told at the next
+    /// collective. Each element's share is rounded on its own, so the sums
+    /// over ranks do not depend on how elements are split between them.
+    fn landed_here(&self, solver: &Solver, best: &Candidate) -> (u64, i64) {
         let emitted = solver.emitted_power();
-        if emitted <= 0.0 {
-            return 0;
-        }
         let area = self.mesh.patches[best.patch as usize].area;
-        self.ff
-            .iter()
-            .filter(|t| solver.owns(self.mesh.elements[t.element as usize].patch))
-            .map(|t| {
+        let (mut landed, mut delivered) = (0u64, 0i64);
+        for t in &self.ff {
+            if !solver.owns(self.mesh.elements[t.element as usize].patch) {
+                continue;
+            }
+            landed += (t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64;
+            if emitted > 0.0 {
                 let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
-                (w / emitted * UNSHOT_ONE).round() as i64
-            })
-            .sum()
+                delivered += (w / emitted * UNSHOT_ONE).round() as i64;
+            }
+        }
+        (landed, delivered)
     }
 }
 
