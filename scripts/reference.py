@@ -17,7 +17,15 @@ node's relative standard error of B (sum over RGB) is at most --target, or
 Prints one JSON document: {"how", "variant", "seconds", "surfaces": [{"node",
 "area", "radiosity", "standard_error"}]}.
 
+With --image OUT.exr it renders the camera image instead (the camera that
+the node JSON carries, the renderer's own): Mitsuba's path integrator (next-
+event estimation at every vertex, MIS), a box filter over each pixel like the
+renderer's supersampling, in --passes independent passes whose spread gives
+each 4x4 block's standard error; OUT.exr gets the mean, OUT.json (beside it)
+the command, the passes and the block errors.
+
 Usage: reference.py NODES.json [--target 1e-3] [--batch 65536] [--max-seconds 600]
+       reference.py NODES.json --image OUT.exr --width 128 --height 128 --spp 4096 [--passes 8]
 Install: pip install mitsuba
 """
 
@@ -39,6 +47,11 @@ def main():
     ap.add_argument("--batch", type=int, default=1 << 16, help="points per node per batch")
     ap.add_argument("--max-seconds", type=float, default=600.0)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--image", help="render the camera image to this EXR instead")
+    ap.add_argument("--width", type=int, default=128)
+    ap.add_argument("--height", type=int, help="default: width over the camera's aspect ratio, as the renderer")
+    ap.add_argument("--spp", type=int, default=4096, help="samples per pixel, all passes together")
+    ap.add_argument("--passes", type=int, default=8)
     args = ap.parse_args()
     try:
         import drjit as dr
@@ -88,6 +101,8 @@ def main():
             shape["emitter"] = {"type": "area",
                                 "radiance": {"type": "rgb", "value": node["emission"]}}
         d[f"n{i}"] = shape
+    if args.image:
+        return render_image(mi, dr, d, doc["camera"], args)
     scene = mi.load_dict(d)
     integrator = mi.load_dict({"type": "path", "max_depth": -1})
 
@@ -188,6 +203,50 @@ def main():
         "how": f"Mitsuba 3 {mi.variant()}, next-event estimation + cosine sampling (MIS, power heuristic) at uniform points per node, path integrator beyond (scripts/reference.py --target {args.target})",
         "variant": mi.variant(), "seconds": time.perf_counter() - start,
         "converged": all(done), "surfaces": result}, indent=1))
+
+
+def render_image(mi, dr, d, cam, args):
+    """The camera image by path tracing, with per-block standard errors."""
+    import numpy as np
+    if args.height is None:
+        args.height = max(1, round(args.width / (cam.get("aspect") or 1.0)))
+    p, f, u = cam["position"], cam["forward"], cam["up"]
+    target = [p[k] + f[k] for k in range(3)]
+    d["sensor"] = {
+        "type": "perspective", "fov_axis": "y", "fov": cam["yfov_degrees"],
+        "near_clip": 1e-4, "far_clip": 1e6,
+        "to_world": mi.ScalarTransform4f().look_at(origin=p, target=target, up=u),
+        "film": {"type": "hdrfilm", "width": args.width, "height": args.height,
+                 "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": {"type": "independent", "sample_count": max(args.spp // args.passes, 1)},
+    }
+    d["integrator"] = {"type": "path", "max_depth": -1}
+    scene = mi.load_dict(d)
+    start = time.perf_counter()
+    passes = []
+    for k in range(args.passes):
+        img = np.array(mi.render(scene, seed=args.seed * 7919 + k), dtype=np.float64)[:, :, :3]
+        passes.append(img)
+        print(f"reference image: pass {k + 1}/{args.passes}, {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    stack = np.stack(passes)
+    mean = stack.mean(axis=0)
+    h, w = args.height // 4 * 4, args.width // 4 * 4
+    blocks = stack[:, :h, :w, :].reshape(args.passes, h // 4, 4, w // 4, 4, 3).mean(axis=(2, 4))
+    bmean = blocks.mean(axis=0)
+    bse = blocks.std(axis=0, ddof=1) / math.sqrt(args.passes)
+    rel = (bse.sum(axis=2) / np.maximum(bmean.sum(axis=2), 1e-30))
+    mi.Bitmap(mean.astype(np.float32)).write(args.image)
+    meta = {
+        "how": f"Mitsuba 3 {mi.variant()} path integrator (next-event estimation, MIS), box filter, "
+               f"{args.spp} samples per pixel in {args.passes} passes",
+        "command": "scripts/reference.py " + " ".join(sys.argv[1:]),
+        "size": [args.width, args.height],
+        "seconds": time.perf_counter() - start,
+        "block_relative_standard_error": {"median": float(np.median(rel)), "max": float(rel.max())},
+    }
+    with open(os.path.splitext(args.image)[0] + ".json", "w") as out:
+        json.dump(meta, out, indent=1)
+    print(json.dumps(meta), file=sys.stderr)
 
 
 if __name__ == "__main__":

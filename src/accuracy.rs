@@ -339,7 +339,20 @@ pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
             "area": polys.iter().map(|p| p.area() as f64).sum::<f64>(),
         }));
     }
-    output::write_json(path, &serde_json::json!({ "nodes": nodes }))?;
+    // The camera the render uses (the file's first, or the default), for
+    // path-traced images.
+    let cam = scene.camera.unwrap_or_else(|| scene.default_camera());
+    let camera = serde_json::json!({
+        "position": cam.position.to_array(),
+        "forward": (cam.rotation * -glam::Vec3::Z).to_array(),
+        "up": (cam.rotation * glam::Vec3::Y).to_array(),
+        "yfov_degrees": cam.yfov.to_degrees(),
+        "aspect": cam.aspect,
+    });
+    output::write_json(
+        path,
+        &serde_json::json!({ "nodes": nodes, "camera": camera }),
+    )?;
     Ok(())
 }
 

@@ -6,6 +6,8 @@
 //! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
 //! - [`settings`]: the enums a render is told and the report records;
+//! - [`raytrace`], [`direct`]: exact visibility on the CPU and the camera
+//!   image's direct light (pure maths);
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
 //! - [`refine`]: which polygons a coarse solution says to subdivide (pure maths);
 //! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
@@ -16,6 +18,7 @@
 //!   ranks: options, the row cache, tiers and exchanges (no GPU), the GPU
 //!   form-factor source, the shooting loop, trace, passes, driver and the one
 //!   write path;
+//! - [`compare`]: image error against a reference (SMAPE over blocks);
 //! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
 //! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
 //! - [`bake`]: the solution as glTF with vertex colours.
@@ -23,6 +26,8 @@
 pub mod bake;
 pub mod checkpoint;
 pub mod comm;
+pub mod compare;
+pub mod direct;
 pub mod formfactor;
 pub mod fuzz;
 pub mod gpu;
@@ -31,6 +36,7 @@ pub mod launch;
 pub mod mesh;
 pub mod output;
 pub mod parallel;
+pub mod raytrace;
 pub mod refine;
 pub mod render;
 pub mod report;

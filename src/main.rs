@@ -48,6 +48,14 @@ enum Command {
         #[arg(long)]
         nodes: Option<PathBuf>,
     },
+    /// Score an EXR image against a reference EXR of the same size: the SMAPE
+    /// over interior 4x4 blocks (README "An independent yardstick").
+    Compare {
+        /// The image to score.
+        image: PathBuf,
+        /// The reference (e.g. `scripts/reference.py --image`).
+        reference: PathBuf,
+    },
     /// Time shots on the built-in scenes and print a table (see README "Performance").
     Bench(bench::BenchArgs),
     /// Turn render reports (e.g. from scripts/bench-mpi.sh) into a CSV and charts.
@@ -224,6 +232,11 @@ struct RenderArgs {
     /// Shading of the image: smooth (interpolated) or flat (one value per element).
     #[arg(long, value_enum, default_value = "smooth")]
     shading: Shading,
+    /// Shadow rays per emitter per image sample for the image's direct
+    /// light, traced with exact visibility (contact shadows, sharp shadow
+    /// edges); 0 interpolates the direct light from the solution like the rest.
+    #[arg(long, default_value_t = radiosity::render::image::DEFAULT_SHADOW_RAYS, value_parser = clap::value_parser!(u32).range(0..=4096))]
+    shadow_rays: u32,
     /// Draw the element edges over the image.
     #[arg(long)]
     wireframe: bool,
@@ -346,6 +359,7 @@ fn main() {
     let result = match cli.command {
         Command::Render(args) => run_render(args),
         Command::Scene { name, out, nodes } => write_scene(&name, out.as_deref(), nodes.as_deref()),
+        Command::Compare { image, reference } => compare_images(&image, &reference),
         Command::Bench(args) => bench::run(args),
         Command::BenchReport(args) => bench::report(args),
         Command::Accuracy { args, solve } => accuracy::run(args, solve),
@@ -416,7 +430,7 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
 }
 
 /// Flags the fuzzer passes, with odd values.
-const FUZZ_FLAGS: [&str; 20] = [
+const FUZZ_FLAGS: [&str; 21] = [
     "--resolution",
     "--threshold",
     "--max-shots",
@@ -431,6 +445,7 @@ const FUZZ_FLAGS: [&str; 20] = [
     "--exchange",
     "--form-factor",
     "--shading",
+    "--shadow-rays",
     "--exposure",
     "--checkpoint-every",
     "--max-patches-per-edge",
@@ -484,6 +499,25 @@ fn fuzz_flags(seed: u64, flag_cases: u64, bugs: &mut Vec<String>) -> (u64, u64) 
         }
     }
     (accepted, refused)
+}
+
+fn compare_images(image: &Path, reference: &Path) -> Result<()> {
+    let read = |p: &Path| output::read_exr(p).with_context(|| format!("reading {}", p.display()));
+    let (a, b) = (read(image)?, read(reference)?);
+    if (a.0, a.1) != (b.0, b.1) {
+        anyhow::bail!(
+            "{} is {}x{} but {} is {}x{}",
+            image.display(),
+            a.0,
+            a.1,
+            reference.display(),
+            b.0,
+            b.1
+        );
+    }
+    let s = radiosity::compare::smape(&a.2, &b.2, a.0 as usize, a.1 as usize);
+    println!("SMAPE {:.2} % (interior 4x4 blocks)", s * 100.0);
+    Ok(())
 }
 
 fn write_scene(name: &str, out: Option<&Path>, nodes: Option<&Path>) -> Result<()> {
@@ -592,6 +626,7 @@ fn render_options(
     opts.width = args.width;
     opts.height = args.height;
     opts.shading = args.shading;
+    opts.shadow_rays = args.shadow_rays;
     opts.ambient = !args.no_ambient;
     opts.wireframe = args.wireframe;
     opts.tile = args.tile;

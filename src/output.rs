@@ -87,6 +87,22 @@ pub fn encode_exr(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<Vec<u8
     Ok(buf.into_inner())
 }
 
+/// Reads the first RGB(A) layer of an OpenEXR file: width, height and linear
+/// RGB pixels, top row first.
+pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>), EncodeError> {
+    use exr::prelude::*;
+    let image = read_first_rgba_layer_from_file(
+        path,
+        |size, _| (size.0, vec![[0.0f32; 3]; size.0 * size.1]),
+        |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            px[pos.1 * *w + pos.0] = [r, g, b];
+        },
+    )?;
+    let (w, pixels) = image.layer_data.channel_data.pixels;
+    let h = pixels.len() / w.max(1);
+    Ok((w as u32, h as u32, pixels))
+}
+
 fn check_size(width: u32, height: u32, pixels: &[[f32; 3]]) -> Result<(), EncodeError> {
     if pixels.len() as u64 != width as u64 * height as u64 {
         return Err(EncodeError::Size {

@@ -100,6 +100,9 @@ pub struct Settings {
     pub image_size: [u32; 2],
     /// Smooth or flat.
     pub shading: crate::gpu::Shading,
+    /// Shadow rays per emitter per image sample of the traced direct light
+    /// (0: the direct light interpolated from the solution).
+    pub shadow_rays: u32,
     /// Whether the ambient term (the unshot light's estimate) is in the
     /// image and in the reported radiosities.
     pub ambient: bool,

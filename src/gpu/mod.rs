@@ -10,7 +10,7 @@ mod target;
 mod view;
 
 pub use hemisphere::{HemisphereRasterizer, RasterStats};
-pub use view::{render_view, Shading, ViewRenderer, ViewSettings};
+pub use view::{render_view, view_depth_range, Shading, ViewRenderer, ViewSettings};
 
 use std::time::Duration;
 

@@ -94,6 +94,18 @@ pub fn render_view(
     ViewRenderer::new(device).render(device, queue, mesh, radiance, camera, settings)
 }
 
+/// The near and far planes the view uses for `mesh` seen from `camera`
+/// (ray casts that must see what the rasteriser sees use the same).
+pub fn view_depth_range(mesh: &Mesh, camera: &Camera) -> (f32, f32) {
+    let far = mesh
+        .vertices
+        .iter()
+        .map(|v| (*v - camera.position).length())
+        .fold(1e-3f32, f32::max)
+        * 1.5;
+    (camera.znear.max(far * 1e-5), far)
+}
+
 /// A buffer that grows as needed and is otherwise reused.
 struct Grown {
     buffer: Option<wgpu::Buffer>,
@@ -247,13 +259,7 @@ impl ViewRenderer {
             )));
         }
         let verts = vertices(mesh, radiance, settings.shading);
-        let far = mesh
-            .vertices
-            .iter()
-            .map(|v| (*v - camera.position).length())
-            .fold(1e-3f32, f32::max)
-            * 1.5;
-        let near = camera.znear.max(far * 1e-5);
+        let (near, far) = view_depth_range(mesh, camera);
         let aspect = settings.width as f32 / settings.height as f32;
         let view = Mat4::from_rotation_translation(camera.rotation, camera.position).inverse();
         let view_proj = Mat4::perspective_rh(camera.yfov, aspect, near, far) * view;

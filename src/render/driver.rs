@@ -8,10 +8,11 @@ use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Trace};
 use crate::checkpoint::Header;
-use crate::gpu::{render_view, Gpu, ViewSettings};
+use crate::gpu::{Gpu, ViewSettings};
 use crate::hemisphere::{Resolution, TileLayout};
 use crate::mesh::Mesh;
 use crate::parallel::{Collectives, Exchange, Single, Traffic};
+use crate::render::image::camera_image;
 use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
 };
@@ -381,7 +382,16 @@ fn finish(
             wireframe: opts.wireframe,
         };
         let radiance = solver.display_radiance(opts.ambient);
-        let pixels = render_view(&gpu.device, &gpu.queue, mesh, &radiance, &camera, &view)?;
+        let pixels = camera_image(
+            &gpu.device,
+            &gpu.queue,
+            scene,
+            mesh,
+            &radiance,
+            &camera,
+            &view,
+            opts.shadow_rays,
+        )?;
         Some((opts.width, height, pixels))
     } else {
         None
@@ -439,6 +449,7 @@ pub fn build_report(
                 .then_some(opts.tessellation_tolerance),
             image_size,
             shading: opts.shading,
+            shadow_rays: opts.shadow_rays,
             ambient: opts.ambient,
             overshoot: opts.overshoot,
             coarse: opts

@@ -11,12 +11,14 @@
 //! - [`shoot`]: the shooting loop and the one collective before each shot;
 //! - [`trace`], [`hooks`]: the convergence trace, progress and checkpoints;
 //! - [`passes`]: refinement by need (coarse solves that choose the mesh);
+//! - [`image`]: the camera image (interpolated solution, traced direct light);
 //! - [`driver`]: the render itself, the gather to rank 0 and the report.
 
 pub mod cache;
 pub mod driver;
 pub mod exchange;
 pub mod hooks;
+pub mod image;
 pub mod options;
 pub mod passes;
 pub mod shoot;

@@ -50,6 +50,9 @@ pub struct RenderOptions {
     pub height: Option<u32>,
     /// Smooth or flat shading.
     pub shading: Shading,
+    /// Shadow rays per emitter per image sample for the image's traced
+    /// direct light (0: the direct light interpolated from the solution).
+    pub shadow_rays: u32,
     /// Add the ambient term to the image and the reported radiosities.
     pub ambient: bool,
     /// Keep form-factor rows of patches that have shot, so a patch that
@@ -104,6 +107,7 @@ impl Default for RenderOptions {
             width: 512,
             height: None,
             shading: Shading::Smooth,
+            shadow_rays: crate::render::image::DEFAULT_SHADOW_RAYS,
             ambient: true,
             cache_rows: true,
             split_shots: true,

@@ -1,0 +1,336 @@
+//! Exact visibility on the CPU: a bounding volume hierarchy over the scene's
+//! polygons (fanned into triangles), answering nearest-hit and any-hit
+//! (shadow) queries. The camera image's direct light uses it
+//! ([`crate::direct`]); nothing here knows about radiosity. Pure maths.
+
+use crate::scene::Polygon;
+use glam::Vec3;
+
+/// A triangle, stored for the Moller-Trumbore test.
+#[derive(Clone, Copy, Debug)]
+struct Tri {
+    v0: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    polygon: u32,
+}
+
+/// A node of the hierarchy: a leaf holds `count` triangles from `first`; an
+/// inner node (count 0) has its children at `first` and `first + 1`.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    lo: Vec3,
+    hi: Vec3,
+    first: u32,
+    count: u32,
+}
+
+/// The nearest surface along a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the (unit or not) direction, in its units.
+    pub t: f32,
+    /// Index of the scene polygon hit.
+    pub polygon: u32,
+}
+
+/// A bounding volume hierarchy over a scene's polygons.
+#[derive(Clone, Debug, Default)]
+pub struct Bvh {
+    nodes: Vec<Node>,
+    tris: Vec<Tri>,
+}
+
+/// Triangles per leaf, at most.
+const LEAF: usize = 4;
+
+impl Bvh {
+    /// Builds the hierarchy over `polygons` (median splits along the longest
+    /// axis of the centroids: deterministic, and good enough for shadow rays).
+    pub fn new(polygons: &[Polygon]) -> Self {
+        let mut tris = Vec::new();
+        for (i, p) in polygons.iter().enumerate() {
+            for k in 1..p.vertices.len().saturating_sub(1) {
+                let (a, b, c) = (p.vertices[0], p.vertices[k], p.vertices[k + 1]);
+                tris.push(Tri {
+                    v0: a,
+                    e1: b - a,
+                    e2: c - a,
+                    polygon: i as u32,
+                });
+            }
+        }
+        let mut bvh = Bvh {
+            nodes: Vec::with_capacity(2 * tris.len() / LEAF + 1),
+            tris,
+        };
+        if !bvh.tris.is_empty() {
+            bvh.nodes.push(Node {
+                lo: Vec3::ZERO,
+                hi: Vec3::ZERO,
+                first: 0,
+                count: 0,
+            });
+            bvh.split(0, 0, bvh.tris.len());
+        }
+        bvh
+    }
+
+    fn bounds(tris: &[Tri]) -> (Vec3, Vec3) {
+        tris.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), t| {
+                let (b, c) = (t.v0 + t.e1, t.v0 + t.e2);
+                (lo.min(t.v0).min(b).min(c), hi.max(t.v0).max(b).max(c))
+            },
+        )
+    }
+
+    /// Makes node `at` cover triangles `start..end`, splitting as needed.
+    fn split(&mut self, at: usize, start: usize, end: usize) {
+        let (lo, hi) = Self::bounds(&self.tris[start..end]);
+        self.nodes[at].lo = lo;
+        self.nodes[at].hi = hi;
+        if end - start <= LEAF {
+            self.nodes[at].first = start as u32;
+            self.nodes[at].count = (end - start) as u32;
+            return;
+        }
+        let centre = |t: &Tri| t.v0 + (t.e1 + t.e2) / 3.0;
+        let (clo, chi) = self.tris[start..end].iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(l, h), t| (l.min(centre(t)), h.max(centre(t))),
+        );
+        let ext = chi - clo;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        let mid = (start + end) / 2;
+        self.tris[start..end].select_nth_unstable_by(mid - start, |a, b| {
+            centre(a)[axis].total_cmp(&centre(b)[axis])
+        });
+        let first = self.nodes.len();
+        let blank = Node {
+            lo,
+            hi,
+            first: 0,
+            count: 0,
+        };
+        self.nodes.extend([blank, blank]);
+        self.nodes[at].first = first as u32;
+        self.nodes[at].count = 0;
+        self.split(first, start, mid);
+        self.split(first + 1, mid, end);
+    }
+
+    /// Number of triangles held.
+    pub fn triangles(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// The nearest hit along `origin + t dir` with `t` in (`t_min`, `t_max`).
+    pub fn nearest(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut far = t_max;
+        self.walk(origin, dir, t_min, t_max, |tri, t_min| {
+            if let Some(t) = intersect(tri, origin, dir, t_min, far) {
+                far = t;
+                best = Some(Hit {
+                    t,
+                    polygon: tri.polygon,
+                });
+            }
+            (false, far)
+        });
+        best
+    }
+
+    /// Whether anything but the polygons in `skip` lies on the segment
+    /// `origin + t dir`, `t` in (`t_min`, `t_max`).
+    pub fn occluded(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        skip: [u32; 2],
+    ) -> bool {
+        let mut hit = false;
+        self.walk(origin, dir, t_min, t_max, |tri, t_min| {
+            if !skip.contains(&tri.polygon) && intersect(tri, origin, dir, t_min, t_max).is_some() {
+                hit = true;
+            }
+            (hit, t_max)
+        });
+        hit
+    }
+
+    /// Visits the triangles of every leaf the ray's box test passes, nearest
+    /// child first; `visit` returns (stop, the current far limit).
+    fn walk(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        mut visit: impl FnMut(&Tri, f32) -> (bool, f32),
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let inv = dir.recip();
+        let mut far = t_max;
+        let mut stack = [0u32; 64];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = &self.nodes[stack[top] as usize];
+            if slab(node, origin, inv, t_min, far).is_none() {
+                continue;
+            }
+            if node.count > 0 {
+                let (a, b) = (node.first as usize, (node.first + node.count) as usize);
+                for tri in &self.tris[a..b] {
+                    let (stop, f) = visit(tri, t_min);
+                    far = f;
+                    if stop {
+                        return;
+                    }
+                }
+                continue;
+            }
+            let (l, r) = (node.first, node.first + 1);
+            let dl = slab(&self.nodes[l as usize], origin, inv, t_min, far);
+            let dr = slab(&self.nodes[r as usize], origin, inv, t_min, far);
+            // Push the farther child first so the nearer is visited first.
+            let order = match (dl, dr) {
+                (Some(a), Some(b)) if a <= b => [Some(r), Some(l)],
+                (Some(_), Some(_)) => [Some(l), Some(r)],
+                (Some(_), None) => [None, Some(l)],
+                (None, Some(_)) => [None, Some(r)],
+                (None, None) => [None, None],
+            };
+            for child in order.into_iter().flatten() {
+                if top < stack.len() {
+                    stack[top] = child;
+                    top += 1;
+                }
+            }
+        }
+    }
+}
+
+/// The entry distance of a ray into a node's box, if it meets it in (t_min, t_max).
+fn slab(node: &Node, origin: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
+    let a = (node.lo - origin) * inv;
+    let b = (node.hi - origin) * inv;
+    // NaN (0 * inf for a ray in a box face's plane) must not reject the box.
+    let near = a.min(b).max_element().max(t_min);
+    let far = a.max(b).min_element().min(t_max);
+    if near <= far || near.is_nan() || far.is_nan() {
+        Some(near)
+    } else {
+        None
+    }
+}
+
+/// Moller-Trumbore, with the edges widened by a hair so a ray through a
+/// shared edge of two triangles of one polygon cannot slip between them.
+fn intersect(tri: &Tri, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
+    const WIDE: f32 = 1e-6;
+    let p = dir.cross(tri.e2);
+    let det = tri.e1.dot(p);
+    if det.abs() < 1e-20 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = origin - tri.v0;
+    let u = s.dot(p) * inv;
+    if !(-WIDE..=1.0 + WIDE).contains(&u) {
+        return None;
+    }
+    let q = s.cross(tri.e1);
+    let v = dir.dot(q) * inv;
+    if v < -WIDE || u + v > 1.0 + WIDE {
+        return None;
+    }
+    let t = tri.e2.dot(q) * inv;
+    (t > t_min && t < t_max).then_some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad(centre: Vec3, half: f32, normal_z: bool) -> Polygon {
+        let (a, b) = if normal_z {
+            (Vec3::X * half, Vec3::Y * half)
+        } else {
+            (Vec3::Y * half, Vec3::X * half)
+        };
+        Polygon {
+            vertices: vec![
+                centre - a - b,
+                centre + a - b,
+                centre + a + b,
+                centre - a + b,
+            ],
+            normal: if normal_z { Vec3::Z } else { -Vec3::Z },
+            reflectance: [0.5; 3],
+            emission: [0.0; 3],
+            node: 0,
+            subdivision: None,
+        }
+    }
+
+    #[test]
+    fn nearest_hit_matches_a_brute_force_scan() {
+        // A stack of squares at random heights and offsets: the hierarchy's
+        // nearest hit is the one a scan of every polygon finds.
+        let mut rng = crate::fuzz::Rng(7);
+        let mut unit = || (rng.next_u64() >> 11) as f32 / (1u64 << 53) as f32;
+        let polys: Vec<Polygon> = (0..200)
+            .map(|_| {
+                let c = Vec3::new(unit() * 4.0 - 2.0, unit() * 4.0 - 2.0, unit() * 10.0);
+                quad(c, 0.2 + unit() * 0.5, unit() < 0.5)
+            })
+            .collect();
+        let bvh = Bvh::new(&polys);
+        assert_eq!(bvh.triangles(), 400);
+        for _ in 0..2000 {
+            let o = Vec3::new(unit() * 4.0 - 2.0, unit() * 4.0 - 2.0, -1.0);
+            let d = Vec3::new(unit() - 0.5, unit() - 0.5, 2.0);
+            let got = bvh.nearest(o, d, 0.0, f32::INFINITY);
+            let single = |i: usize| Bvh::new(std::slice::from_ref(&polys[i]));
+            let want = (0..polys.len())
+                .filter_map(|i| {
+                    single(i)
+                        .nearest(o, d, 0.0, f32::INFINITY)
+                        .map(|h| (h.t, i))
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            assert_eq!(got.map(|h| h.polygon as usize), want.map(|w| w.1));
+            let far = want.map_or(1e3, |w| w.0 * 0.999);
+            assert_eq!(bvh.occluded(o, d, 0.0, far, [u32::MAX; 2]), false);
+            if let Some((t, _)) = want {
+                assert!(bvh.occluded(o, d, 0.0, t * 1.001, [u32::MAX; 2]));
+            }
+        }
+    }
+
+    #[test]
+    fn a_ray_along_a_shared_edge_does_not_slip_through() {
+        let polys = vec![quad(Vec3::ZERO, 1.0, true)];
+        let bvh = Bvh::new(&polys);
+        // Through the diagonal shared by the quad's two triangles.
+        for k in 0..100 {
+            let s = -0.99 + 1.98 * k as f32 / 99.0;
+            let hit = bvh.nearest(Vec3::new(s, s, 1.0), -Vec3::Z, 0.0, 10.0);
+            assert_eq!(hit.map(|h| h.polygon), Some(0), "at {s}");
+        }
+    }
+}

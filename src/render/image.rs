@@ -1,0 +1,65 @@
+//! The camera image of a solution: the solution's radiance interpolated over
+//! the mesh, with its direct part (by default) replaced per pixel by direct
+//! light traced with exact visibility ([`crate::direct`]). Each element's
+//! mean direct irradiance, traced the same way, is taken out of its
+//! radiance before interpolation, so what is interpolated is the rest
+//! (emission, interreflection, the ambient term) and an element's pixels
+//! still average to the solution's value.
+
+use crate::direct::DirectLight;
+use crate::gpu::{view_depth_range, GpuError, ViewRenderer, ViewSettings};
+use crate::mesh::Mesh;
+use crate::scene::{Camera, Scene};
+
+/// Default shadow rays per emitter per image sample (`--shadow-rays`).
+pub const DEFAULT_SHADOW_RAYS: u32 = 16;
+
+/// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2, the solution's
+/// display radiance) from `camera`; with `shadow_rays` > 0 the direct light
+/// is traced per sample with about that many shadow rays per emitter
+/// (rounded to a square), otherwise interpolated like the rest.
+pub fn camera_image(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    scene: &Scene,
+    mesh: &Mesh,
+    radiance: &[[f32; 3]],
+    camera: &Camera,
+    view: &ViewSettings,
+    shadow_rays: u32,
+) -> Result<Vec<[f32; 3]>, GpuError> {
+    let mut renderer = ViewRenderer::new(device);
+    if shadow_rays == 0 {
+        return renderer.render(device, queue, mesh, radiance, camera, view);
+    }
+    let strata = (shadow_rays as f64).sqrt().ceil() as u32;
+    let light = DirectLight::new(scene, strata);
+    let (near, far) = view_depth_range(mesh, camera);
+    let (direct, seen) = light.image(
+        camera,
+        [view.width, view.height],
+        view.supersample,
+        near,
+        far,
+    );
+    let element_direct = light.element_irradiance(mesh, &seen);
+    let rest: Vec<[f32; 3]> = mesh
+        .elements
+        .iter()
+        .zip(radiance)
+        .zip(&element_direct)
+        .map(|((e, r), d)| {
+            let rho = mesh.polygons[e.polygon as usize].reflectance;
+            [0, 1, 2].map(|c| r[c] - (rho[c] * d[c] / std::f64::consts::PI) as f32)
+        })
+        .collect();
+    let mut pixels = renderer.render(device, queue, mesh, &rest, camera, view)?;
+    for (p, d) in pixels.iter_mut().zip(&direct) {
+        for c in 0..3 {
+            // The rest of an element whose direct light the solution
+            // underestimated can dip below 0 where the traced light is small.
+            p[c] = (p[c] + d[c]).max(0.0);
+        }
+    }
+    Ok(pixels)
+}
