@@ -35,10 +35,38 @@ pub struct DirectLight {
     emitters: Vec<Emitter>,
     normals: Vec<Vec3>,
     reflectance: Vec<[f32; 3]>,
-    /// Shadow rays per emitter per point: `strata` x `strata`.
+    /// Shadow rays per emitter per point (per image sample): `strata` x `strata`.
     strata: u32,
     /// Offset of ray ends off their surfaces, m.
     eps: f32,
+}
+
+/// Points per element along each axis for its mean direct irradiance: the
+/// element means are taken out of the interpolated rest, so their noise
+/// would show as blotches.
+pub const ELEMENT_POINTS: u32 = 4;
+
+/// Shadow rays per emitter per element point, along each axis.
+pub const ELEMENT_RAYS: u32 = 2;
+
+/// Which cells of a `grid` x `grid` stratification of an emitter's (u, v)
+/// square get a shadow ray: the `side` x `side` block from `first`.
+#[derive(Clone, Copy, Debug)]
+struct Strata {
+    grid: u32,
+    first: [u32; 2],
+    side: u32,
+}
+
+impl Strata {
+    /// Every cell of a `side` x `side` grid.
+    fn whole(side: u32) -> Self {
+        Strata {
+            grid: side,
+            first: [0, 0],
+            side,
+        }
+    }
 }
 
 /// A point of a triangle or convex quad from (u, v) in the unit square, and
@@ -98,8 +126,15 @@ impl DirectLight {
     }
 
     /// Direct irradiance (W/m^2 per channel) at `x` on polygon `polygon`
-    /// (its front side), from every emitter but `polygon` itself.
+    /// (its front side), from every emitter but `polygon` itself, with
+    /// `strata` x `strata` shadow rays per emitter.
     pub fn irradiance(&self, x: Vec3, polygon: u32, rng: &mut Rng) -> [f64; 3] {
+        self.irradiance_in(x, polygon, rng, Strata::whole(self.strata))
+    }
+
+    /// [`DirectLight::irradiance`] with shadow rays to the cells `strata`
+    /// says of each emitter's (u, v) square.
+    fn irradiance_in(&self, x: Vec3, polygon: u32, rng: &mut Rng, strata: Strata) -> [f64; 3] {
         let n = self.normals[polygon as usize];
         let origin = x + n * self.eps;
         let mut out = [0.0; 3];
@@ -111,7 +146,7 @@ impl DirectLight {
             if f <= 0.0 {
                 continue;
             }
-            let seen = self.seen_share(e, origin, n, polygon, rng);
+            let seen = self.seen_share(e, origin, n, polygon, rng, strata);
             for c in 0..3 {
                 out[c] += e.exitance[c] * f * seen;
             }
@@ -122,12 +157,22 @@ impl DirectLight {
     /// The share of emitter `e`'s unoccluded form factor that `origin` sees:
     /// its shadow rays' visibility weighted by cos cos / r^2 and the
     /// sampling density.
-    fn seen_share(&self, e: &Emitter, origin: Vec3, n: Vec3, polygon: u32, rng: &mut Rng) -> f64 {
-        let s = self.strata;
+    fn seen_share(
+        &self,
+        e: &Emitter,
+        origin: Vec3,
+        n: Vec3,
+        polygon: u32,
+        rng: &mut Rng,
+        strata: Strata,
+    ) -> f64 {
         let (mut all, mut seen) = (0.0f64, 0.0f64);
-        for i in 0..s * s {
-            let u = ((i % s) as f32 + unit(rng)) / s as f32;
-            let v = ((i / s) as f32 + unit(rng)) / s as f32;
+        let g = strata.grid as f32;
+        for i in 0..strata.side * strata.side {
+            let cx = strata.first[0] + i % strata.side;
+            let cy = strata.first[1] + i / strata.side;
+            let u = (cx as f32 + unit(rng)) / g;
+            let v = (cy as f32 + unit(rng)) / g;
             let (y, jac) = point_in(&e.corners, u, v);
             let d = y + e.normal * self.eps - origin;
             let r2 = d.length_squared();
@@ -148,8 +193,9 @@ impl DirectLight {
         }
     }
 
-    /// Each element's mean direct irradiance over its area (4 jittered
-    /// points, one per quarter), for the elements whose polygon `wanted`
+    /// Each element's mean direct irradiance over its area (jittered
+    /// points on an [`ELEMENT_POINTS`]-square grid, [`ELEMENT_RAYS`] squared
+    /// shadow rays from each), for the elements whose polygon `wanted`
     /// says; others get 0.
     pub fn element_irradiance(&self, mesh: &Mesh, wanted: &[bool]) -> Vec<[f64; 3]> {
         let work = |j: usize, out: &mut [f64; 3]| {
@@ -164,11 +210,18 @@ impl DirectLight {
             };
             let mut rng = Rng(0x5eed_0000_0000 ^ j as u64);
             let (mut sum, mut weight) = ([0.0; 3], 0.0);
-            for q in 0..4 {
-                let u = ((q % 2) as f32 + unit(&mut rng)) / 2.0;
-                let v = ((q / 2) as f32 + unit(&mut rng)) / 2.0;
+            let (side, rays) = (ELEMENT_POINTS, ELEMENT_RAYS);
+            for q in 0..side * side {
+                let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
+                let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;
                 let (x, jac) = point_in(corners, u, v);
-                let d = self.irradiance(x, e.polygon, &mut rng);
+                // The points share one stratification of each emitter.
+                let strata = Strata {
+                    grid: side * rays,
+                    first: [q % side * rays, q / side * rays],
+                    side: rays,
+                };
+                let d = self.irradiance_in(x, e.polygon, &mut rng, strata);
                 for c in 0..3 {
                     sum[c] += d[c] * jac as f64;
                 }
@@ -202,6 +255,13 @@ impl DirectLight {
         let work = |p: usize, out: &mut ([f32; 3], u32)| {
             let (px, py) = ((p as u32 % width) * ss, (p as u32 / width) * ss);
             let mut rng = Rng(0xd1ec_7000_0000 ^ p as u64);
+            // The pixel's samples share one (ss * strata)^2 stratification of
+            // each emitter, each sample a block of it in shuffled order, so a
+            // pixel's shadow rays cover the emitter evenly.
+            let mut order: Vec<u32> = (0..ss * ss).collect();
+            for k in (1..order.len()).rev() {
+                order.swap(k, rng.below(k + 1));
+            }
             let mut sum = [0.0f64; 3];
             for k in 0..ss * ss {
                 let (sx, sy) = ((px + k % ss) as f32 + 0.5, (py + k / ss) as f32 + 0.5);
@@ -215,7 +275,13 @@ impl DirectLight {
                     continue;
                 };
                 let x = camera.position + dir * hit.t;
-                let e = self.irradiance(x, hit.polygon, &mut rng);
+                let block = order[k as usize];
+                let strata = Strata {
+                    grid: ss * self.strata,
+                    first: [block % ss * self.strata, block / ss * self.strata],
+                    side: self.strata,
+                };
+                let e = self.irradiance_in(x, hit.polygon, &mut rng, strata);
                 let rho = self.reflectance[hit.polygon as usize];
                 for c in 0..3 {
                     sum[c] += rho[c] as f64 * e[c] / std::f64::consts::PI;

@@ -26,7 +26,8 @@ pub const MAX_SHOOTER_COLUMNS: usize = 16;
 
 /// The groups of a shooter's `columns` elements that get a hemisphere each
 /// when its shot is split: up to four runs of consecutive elements (for a
-/// quad patch, rows of its element grid), with the area-weighted centre of each.
+/// quad patch, rows of its element grid), with the area-weighted centre of
+/// each (moved out of any closed solid it lies in).
 pub fn split_groups(
     mesh: &Mesh,
     shooter: u32,
@@ -39,9 +40,12 @@ pub fn split_groups(
         .map(|start| {
             let range = start..(start + per).min(columns);
             let first = sp.elements.start as usize;
-            let centre =
-                crate::mesh::area_centroid(&mesh.elements[first + range.start..first + range.end])
-                    .unwrap_or(sp.centre);
+            // Outside every solid (see `Mesh::open_centre`).
+            let elements = &mesh.elements[first + range.start..first + range.end];
+            let centre = mesh
+                .open_centre(sp.polygon, elements.iter())
+                .or_else(|| crate::mesh::area_centroid(elements))
+                .unwrap_or(sp.centre);
             (range, centre)
         })
         .collect()

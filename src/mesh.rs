@@ -129,6 +129,10 @@ pub struct Mesh {
     pub solids: Vec<Solid>,
     /// Per polygon, the solid it bounds, if any (an index into `solids`).
     pub solid_of: Vec<Option<u32>>,
+    /// The scene's polygons for exact ray queries ([`Mesh::enclosed`]).
+    pub occluders: crate::raytrace::Bvh,
+    /// How far a ray starts off its surface, m (1e-5 of the scene's size).
+    pub ray_offset: f32,
 }
 
 /// A glTF node whose polygons close a volume with their fronts facing out (a
@@ -299,7 +303,66 @@ impl Mesh {
             mesh.add_polygon(pi as u32, poly, size, settings, f);
         }
         (mesh.solids, mesh.solid_of) = find_solids(&scene.polygons);
+        mesh.occluders = crate::raytrace::Bvh::new(&scene.polygons);
+        mesh.ray_offset = 1e-5 * scene.extent().max(1e-6);
         mesh
+    }
+
+    /// Where a hemisphere for `elements` of polygon `polygon` can stand:
+    /// their area centroid if it lies outside every closed solid, else the
+    /// area-weighted centroid of their points (centres and corners, drawn a
+    /// tenth of the way in) that lie outside, or, if that too is inside one,
+    /// the nearest of those points. `None` when every point is inside.
+    pub fn open_centre<'a>(
+        &self,
+        polygon: u32,
+        elements: impl Iterator<Item = &'a Element> + Clone,
+    ) -> Option<Vec3> {
+        let centre = area_centroid(elements.clone())?;
+        if !self.enclosed(centre, polygon) {
+            return Some(centre);
+        }
+        let mut open = Vec::new();
+        let (mut sum, mut weight) = (glam::DVec3::ZERO, 0.0);
+        for e in elements {
+            let points = [
+                e.centre,
+                e.corners[0],
+                e.corners[1],
+                e.corners[2],
+                e.corners[3],
+            ];
+            for q in points.map(|c| c + (e.centre - c) * 0.1) {
+                if !self.enclosed(q, polygon) {
+                    open.push(q);
+                    sum += q.as_dvec3() * e.area;
+                    weight += e.area;
+                }
+            }
+        }
+        if open.is_empty() {
+            return None;
+        }
+        let centre = (sum / weight).as_vec3();
+        if !self.enclosed(centre, polygon) {
+            return Some(centre);
+        }
+        open.into_iter().min_by(|a, b| {
+            a.distance_squared(centre)
+                .total_cmp(&b.distance_squared(centre))
+        })
+    }
+
+    /// Whether the point `p` of polygon `polygon` lies inside a closed
+    /// solid (under a box resting on the floor, say, or inside a box that
+    /// touches this one): a ray from it along the polygon's normal meets a
+    /// back face first. A hemisphere there would see only back faces.
+    pub fn enclosed(&self, p: Vec3, polygon: u32) -> bool {
+        let n = self.polygons[polygon as usize].normal;
+        let origin = p + n * self.ray_offset;
+        self.occluders
+            .nearest(origin, n, 0.0, f32::INFINITY)
+            .is_some_and(|hit| self.polygons[hit.polygon as usize].normal.dot(n) > 0.0)
     }
 
     /// Total emitted power (exitance times area, summed over patches and RGB), W.

@@ -441,17 +441,26 @@ impl<'m> Solver<'m> {
 
     /// Where patch `patch`'s hemisphere goes: the patch's centre, unless some
     /// of its elements have no radiosity at all (hidden, e.g. under an object
-    /// resting on the patch's polygon): then the area-weighted centre of the
-    /// others, since a hemisphere at a hidden point would see nothing.
+    /// resting on the patch's polygon) or the centre lies inside a closed
+    /// solid (under a box that covers part of the patch): then
+    /// [`Mesh::open_centre`](crate::mesh::Mesh::open_centre) of its lit
+    /// elements. A hemisphere at a hidden point sees nothing but back
+    /// faces, and the patch's light would be lost on them.
     fn shooting_centre(&self, patch: u32) -> glam::Vec3 {
-        let p = &self.mesh.patches[patch as usize];
-        if p.elements.clone().all(|j| self.lit(j)) {
-            p.centre
-        } else {
-            let lit_elements = p.elements.clone().filter(|&j| self.lit(j));
-            crate::mesh::area_centroid(lit_elements.map(|j| &self.mesh.elements[j as usize]))
-                .unwrap_or(p.centre)
+        let mesh = self.mesh;
+        let p = &mesh.patches[patch as usize];
+        let all_lit = p.elements.clone().all(|j| self.lit(j));
+        if all_lit && !mesh.enclosed(p.centre, p.polygon) {
+            return p.centre;
         }
+        let lit = p
+            .elements
+            .clone()
+            .filter(|&j| self.lit(j))
+            .map(|j| &mesh.elements[j as usize]);
+        mesh.open_centre(p.polygon, lit.clone())
+            .or_else(|| crate::mesh::area_centroid(lit))
+            .unwrap_or(p.centre)
     }
 
     /// The overshoot of a patch of reflectance `rho` whose lit share is `lit`,

@@ -255,9 +255,10 @@ impl Proxies {
 }
 
 /// Whether polygon `k` (`poly`) can show in the shooter's hemisphere: the
-/// shooter never sees its own polygon, polygons wholly below its plane, or
-/// the hidden back faces of solids it is outside of. The one cull both
-/// projections use.
+/// shooter never sees its own polygon, polygons wholly below its plane,
+/// polygons whose plane passes through the shooter (edge-on: no solid
+/// angle), or the hidden back faces of solids it is outside of. The one
+/// cull both projections use.
 pub(super) fn in_view(
     k: usize,
     poly: &PolygonProxies,
@@ -267,7 +268,19 @@ pub(super) fn in_view(
 ) -> bool {
     k as u32 != shooter.polygon
         && (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius > 0.0
+        && !edge_on(poly, shooter)
         && !hidden_back_face(poly, corners, outside, shooter)
+}
+
+/// Whether `poly`'s plane passes through the shooter's centre (to a
+/// millionth of their distance and size): the polygon is seen edge-on and
+/// covers no solid angle, but a cell ray from a point in its plane can meet
+/// it at t = 0. Without this, the bottom face of a box resting on the
+/// shooter's face (coplanar with it) covered the shooter's hemisphere, and
+/// the light went to the box's back faces.
+fn edge_on(poly: &PolygonProxies, shooter: &ShooterFrame) -> bool {
+    let offset = (shooter.centre - poly.centre).dot(poly.normal).abs();
+    offset <= 1e-6 * ((shooter.centre - poly.centre).length() + poly.radius)
 }
 
 /// Whether `poly` is a back face of a solid that the shooter is outside of

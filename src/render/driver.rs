@@ -378,7 +378,11 @@ fn finish(
             width: opts.width,
             height,
             shading: opts.shading,
-            supersample: 2,
+            supersample: crate::render::image::supersample_for(
+                opts.width,
+                height,
+                gpu.device.limits().max_texture_dimension_2d,
+            ),
             wireframe: opts.wireframe,
         };
         let radiance = solver.display_radiance(opts.ambient);

@@ -12,7 +12,18 @@ use crate::mesh::Mesh;
 use crate::scene::{Camera, Scene};
 
 /// Default shadow rays per emitter per image sample (`--shadow-rays`).
-pub const DEFAULT_SHADOW_RAYS: u32 = 16;
+pub const DEFAULT_SHADOW_RAYS: u32 = 1;
+
+/// Image samples per pixel along each axis (box-filtered), where the
+/// device allows the supersampled target.
+pub const SUPERSAMPLE: u32 = 4;
+
+/// [`SUPERSAMPLE`], or less where a `width` x `height` image that many
+/// times over would exceed the device's `max_dim` texture size.
+pub fn supersample_for(width: u32, height: u32, max_dim: u32) -> u32 {
+    let biggest = width.max(height).max(1);
+    (max_dim / biggest).clamp(1, SUPERSAMPLE)
+}
 
 /// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2, the solution's
 /// display radiance) from `camera`; with `shadow_rays` > 0 the direct light
