@@ -1,5 +1,8 @@
 // Camera view of the solution: radiance per vertex, interpolated (smooth) or
-// constant per element (flat). Back faces of one-sided surfaces are black.
+// constant per element (flat). Back faces of one-sided surfaces are black,
+// drawn first and a hair farther (vs_back), so where a front face coincides
+// with a back face (a wall given as two one-sided faces) the side facing the
+// camera shows, decided by orientation rather than by depth order.
 
 struct Camera {
     view_proj: mat4x4<f32>,
@@ -27,6 +30,13 @@ fn transform(in: VsIn) -> VsOut {
 @vertex
 fn vs(in: VsIn) -> VsOut {
     return transform(in);
+}
+
+@vertex
+fn vs_back(in: VsIn) -> VsOut {
+    var out = transform(in);
+    out.pos.z = out.pos.z + 2.0e-6 * out.pos.w;
+    return out;
 }
 
 @fragment

@@ -271,9 +271,18 @@ impl DirectLight {
                     -1.0,
                 );
                 let dir = camera.rotation * dir;
-                let Some(hit) = self.bvh.nearest(camera.position, dir, near, far) else {
+                // Coinciding faces: the one facing the camera shows (as in
+                // the rasterised view), and a back face is black.
+                let Some(hit) = self
+                    .bvh
+                    .nearest_facing(camera.position, dir, near, far, 1e-5)
+                else {
                     continue;
                 };
+                out.1 = hit.polygon + 1;
+                if dir.dot(self.normals[hit.polygon as usize]) >= 0.0 {
+                    continue;
+                }
                 let x = camera.position + dir * hit.t;
                 let block = order[k as usize];
                 let strata = Strata {
@@ -286,7 +295,6 @@ impl DirectLight {
                 for c in 0..3 {
                     sum[c] += rho[c] as f64 * e[c] / std::f64::consts::PI;
                 }
-                out.1 = hit.polygon + 1;
             }
             out.0 = sum.map(|s| (s / per_pixel) as f32);
         };

@@ -356,12 +356,15 @@ impl Mesh {
     /// Whether the point `p` of polygon `polygon` lies inside a closed
     /// solid (under a box resting on the floor, say, or inside a box that
     /// touches this one): a ray from it along the polygon's normal meets a
-    /// back face first. A hemisphere there would see only back faces.
+    /// back face first (a back face coinciding with a front face counts
+    /// first). A hemisphere there would see only back faces.
     pub fn enclosed(&self, p: Vec3, polygon: u32) -> bool {
         let n = self.polygons[polygon as usize].normal;
         let origin = p + n * self.ray_offset;
+        // A back face that coincides with a front face (the top of a box
+        // under the bottom of the box stacked on it) wins: the point is inside.
         self.occluders
-            .nearest(origin, n, 0.0, f32::INFINITY)
+            .nearest_facing(origin, n, 0.0, f32::INFINITY, -1e-5)
             .is_some_and(|hit| self.polygons[hit.polygon as usize].normal.dot(n) > 0.0)
     }
 

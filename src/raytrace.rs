@@ -134,19 +134,42 @@ impl Bvh {
 
     /// The nearest hit along `origin + t dir` with `t` in (`t_min`, `t_max`).
     pub fn nearest(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
+        self.nearest_facing(origin, dir, t_min, t_max, 0.0)
+    }
+
+    /// [`Bvh::nearest`], where a back face (the ray meets the side its
+    /// polygon's normal points away from) counts as `1 + behind` times
+    /// farther than it is: with `behind` > 0 a front face coinciding with a
+    /// back face (a wall given as two one-sided faces) wins whatever the
+    /// rounding; with `behind` < 0 the back face does.
+    pub fn nearest_facing(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        behind: f32,
+    ) -> Option<Hit> {
+        let mut best: Option<(f32, Hit)> = None;
         let mut far = t_max;
         self.walk(origin, dir, t_min, t_max, |tri, t_min| {
             if let Some(t) = intersect(tri, origin, dir, t_min, far) {
-                far = t;
-                best = Some(Hit {
-                    t,
-                    polygon: tri.polygon,
-                });
+                let back = dir.dot(tri.e1.cross(tri.e2)) > 0.0;
+                let key = if back { t * (1.0 + behind) } else { t };
+                if best.is_none_or(|(k, _)| key < k) {
+                    best = Some((
+                        key,
+                        Hit {
+                            t,
+                            polygon: tri.polygon,
+                        },
+                    ));
+                    far = key;
+                }
             }
             (false, far)
         });
-        best
+        best.map(|(_, h)| h)
     }
 
     /// Whether anything but the polygons in `skip` lies on the segment

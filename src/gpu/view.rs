@@ -148,10 +148,12 @@ impl Grown {
 /// The camera view's pipelines, uniform, vertex buffers and target, made
 /// once and reused for every image (the viewer draws one per change).
 pub struct ViewRenderer {
+    back_pipeline: wgpu::RenderPipeline,
     pipeline: wgpu::RenderPipeline,
     wire_pipeline: wgpu::RenderPipeline,
     uniform: wgpu::Buffer,
     group: wgpu::BindGroup,
+    back_group: wgpu::BindGroup,
     wire_group: wgpu::BindGroup,
     vertices: Grown,
     lines: Grown,
@@ -165,7 +167,7 @@ impl ViewRenderer {
             label: Some("view.wgsl"),
             source: wgpu::ShaderSource::Wgsl(SHADER.into()),
         });
-        let make_pipeline = |topology, vs: &str, fs: &str| {
+        let make_pipeline = |topology, vs: &str, fs: &str, cull_mode| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("view"),
                 layout: None,
@@ -182,7 +184,7 @@ impl ViewRenderer {
                 primitive: wgpu::PrimitiveState {
                     topology,
                     front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: None,
+                    cull_mode,
                     ..Default::default()
                 },
                 depth_stencil: Some(wgpu::DepthStencilState {
@@ -207,9 +209,17 @@ impl ViewRenderer {
                 cache: None,
             })
         };
-        let pipeline = make_pipeline(wgpu::PrimitiveTopology::TriangleList, "vs", "fs");
+        let triangles = wgpu::PrimitiveTopology::TriangleList;
+        // Back faces first, a hair farther; then front faces (see view.wgsl).
+        let back_pipeline = make_pipeline(triangles, "vs_back", "fs", Some(wgpu::Face::Front));
+        let pipeline = make_pipeline(triangles, "vs", "fs", Some(wgpu::Face::Back));
         // Element edges, pulled a hair towards the camera in the shader so they win the depth test.
-        let wire_pipeline = make_pipeline(wgpu::PrimitiveTopology::LineList, "vs_line", "fs_line");
+        let wire_pipeline = make_pipeline(
+            wgpu::PrimitiveTopology::LineList,
+            "vs_line",
+            "fs_line",
+            None,
+        );
         let uniform = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera"),
             size: 64,
@@ -227,11 +237,14 @@ impl ViewRenderer {
             })
         };
         let (group, wire_group) = (group_for(&pipeline), group_for(&wire_pipeline));
+        let back_group = group_for(&back_pipeline);
         Self {
+            back_pipeline,
             pipeline,
             wire_pipeline,
             uniform,
             group,
+            back_group,
             wire_group,
             vertices: Grown::new(wgpu::BufferUsages::VERTEX, "view vertices"),
             lines: Grown::new(wgpu::BufferUsages::VERTEX, "wireframe"),
@@ -305,10 +318,15 @@ impl ViewRenderer {
         let mut enc = device.create_command_encoder(&Default::default());
         {
             let mut pass = target.begin_pass(&mut enc, wgpu::Color::BLACK);
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.group, &[]);
             pass.set_vertex_buffer(0, vbuf.slice(..));
-            pass.draw(0..verts.len() as u32, 0..1);
+            for (pipeline, group) in [
+                (&self.back_pipeline, &self.back_group),
+                (&self.pipeline, &self.group),
+            ] {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, group, &[]);
+                pass.draw(0..verts.len() as u32, 0..1);
+            }
             if let Some(buffer) = &lbuf {
                 pass.set_pipeline(&self.wire_pipeline);
                 pass.set_bind_group(0, &self.wire_group, &[]);

@@ -387,8 +387,7 @@ fn finish(
         };
         let radiance = solver.display_radiance(opts.ambient);
         let pixels = camera_image(
-            &gpu.device,
-            &gpu.queue,
+            gpu,
             scene,
             mesh,
             &radiance,

@@ -7,7 +7,7 @@
 //! still average to the solution's value.
 
 use crate::direct::DirectLight;
-use crate::gpu::{view_depth_range, GpuError, ViewRenderer, ViewSettings};
+use crate::gpu::{view_depth_range, Gpu, GpuError, ViewRenderer, ViewSettings};
 use crate::mesh::Mesh;
 use crate::scene::{Camera, Scene};
 
@@ -30,8 +30,7 @@ pub fn supersample_for(width: u32, height: u32, max_dim: u32) -> u32 {
 /// is traced per sample with about that many shadow rays per emitter
 /// (rounded to a square), otherwise interpolated like the rest.
 pub fn camera_image(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
+    gpu: &Gpu,
     scene: &Scene,
     mesh: &Mesh,
     radiance: &[[f32; 3]],
@@ -39,6 +38,7 @@ pub fn camera_image(
     view: &ViewSettings,
     shadow_rays: u32,
 ) -> Result<Vec<[f32; 3]>, GpuError> {
+    let (device, queue) = (&gpu.device, &gpu.queue);
     let mut renderer = ViewRenderer::new(device);
     if shadow_rays == 0 {
         return renderer.render(device, queue, mesh, radiance, camera, view);

@@ -10,6 +10,7 @@ mod determinism;
 mod energy;
 mod furnace;
 mod fuzz;
+mod image;
 mod mpi;
 mod overshoot;
 mod projections;

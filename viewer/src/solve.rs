@@ -364,13 +364,25 @@ fn save<W: Fn()>(
         width: w,
         height: h,
         shading: req.shading,
-        supersample: 2,
+        supersample: radiosity::render::image::supersample_for(
+            w,
+            h,
+            gpu.device.limits().max_texture_dimension_2d,
+        ),
         wireframe: req.wireframe,
     };
     let radiance = solver.display_radiance(opts.ambient);
-    let pixels =
-        radiosity::gpu::render_view(&gpu.device, &gpu.queue, mesh, &radiance, &camera, &view)
-            .map_err(|e| e.to_string())?;
+    // The renderer's own image path: traced direct light, the rest interpolated.
+    let pixels = radiosity::render::image::camera_image(
+        gpu,
+        scene,
+        mesh,
+        &radiance,
+        &camera,
+        &view,
+        opts.shadow_rays,
+    )
+    .map_err(|e| e.to_string())?;
     let seconds = pub_.solve_time.as_secs_f64();
     let timings = radiosity::report::Timings {
         solve: seconds,

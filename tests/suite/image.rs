@@ -1,0 +1,60 @@
+//! The camera image against path-traced images: Mitsuba 3's path
+//! integrator (next-event estimation at every vertex), box-filtered like the
+//! renderer's supersampling, cached in `docs/references/images/` with each
+//! 4x4 block's standard error and the command that made it
+//! (`scripts/reference.py --image`). Default settings; the score is the SMAPE
+//! over interior 4x4 blocks (`radiosity::compare::smape`).
+
+use crate::common::gpu;
+use radiosity::render::{render, RenderOptions};
+use std::time::Duration;
+
+/// The SMAPE of `scene`'s default image at the reference's size, with
+/// `shadow_rays` per sample (0: the direct light interpolated).
+fn score(scene: &str, shadow_rays: u32) -> f64 {
+    let dir = format!("{}/docs/references/images", env!("CARGO_MANIFEST_DIR"));
+    let meta: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(format!("{dir}/{scene}.json")).expect("reference metadata"),
+    )
+    .expect("reference JSON");
+    assert!(
+        meta["command"].as_str().is_some(),
+        "{scene}: says how it was made"
+    );
+    let (w, h, reference) =
+        radiosity::output::read_exr(std::path::Path::new(&format!("{dir}/{scene}.exr")))
+            .expect("reference EXR");
+    let s = radiosity::scene::open(scene).expect("scene");
+    let opts = RenderOptions {
+        width: w,
+        height: Some(h),
+        shadow_rays,
+        ..RenderOptions::default()
+    };
+    let r = render(gpu(), &s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+    let (iw, ih, pixels) = r.image.expect("an image");
+    assert_eq!((iw, ih), (w, h));
+    radiosity::compare::smape(&pixels, &reference, w as usize, h as usize)
+}
+
+#[test]
+fn default_images_are_within_two_and_a_half_percent_of_path_traced_images() {
+    for scene in ["cornell", "family-boxes-1", "family-slab-1"] {
+        let s = score(scene, radiosity::render::image::DEFAULT_SHADOW_RAYS);
+        assert!(s <= 0.025, "{scene}: SMAPE {:.2} % > 2.5 %", s * 100.0);
+    }
+}
+
+/// Traced direct light is what gives the contact shadows and the sharp
+/// shadow edges: without it the same solution scores much worse.
+#[test]
+fn traced_direct_light_beats_interpolating_it() {
+    let traced = score("cornell", radiosity::render::image::DEFAULT_SHADOW_RAYS);
+    let interpolated = score("cornell", 0);
+    assert!(
+        traced < 0.8 * interpolated,
+        "traced {:.2} % vs interpolated {:.2} %",
+        traced * 100.0,
+        interpolated * 100.0
+    );
+}
