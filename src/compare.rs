@@ -59,8 +59,8 @@ mod tests {
     fn the_border_ring_is_left_out() {
         let a = vec![[1.0f32; 3]; 16 * 16];
         let mut b = a.clone();
-        for x in 0..16 {
-            b[x] = [9.0; 3];
+        for p in b.iter_mut().take(16) {
+            *p = [9.0; 3];
         }
         assert_eq!(smape(&a, &b, 16, 16), 0.0);
     }

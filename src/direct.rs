@@ -147,8 +147,8 @@ impl DirectLight {
                 continue;
             }
             let seen = self.seen_share(e, origin, n, polygon, rng, strata);
-            for c in 0..3 {
-                out[c] += e.exitance[c] * f * seen;
+            for (o, x) in out.iter_mut().zip(&e.exitance) {
+                *o += x * f * seen;
             }
         }
         out

@@ -338,7 +338,7 @@ mod tests {
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             assert_eq!(got.map(|h| h.polygon as usize), want.map(|w| w.1));
             let far = want.map_or(1e3, |w| w.0 * 0.999);
-            assert_eq!(bvh.occluded(o, d, 0.0, far, [u32::MAX; 2]), false);
+            assert!(!bvh.occluded(o, d, 0.0, far, [u32::MAX; 2]));
             if let Some((t, _)) = want {
                 assert!(bvh.occluded(o, d, 0.0, t * 1.001, [u32::MAX; 2]));
             }
