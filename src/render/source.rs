@@ -11,7 +11,7 @@ use crate::formfactor::{self, Row};
 use crate::gpu::{Gpu, GpuError, HemisphereRasterizer};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, FIXED_ONE};
 use crate::mesh::{Mesh, ShooterFrame};
-use crate::parallel::Collectives;
+use crate::parallel::{self, Collectives};
 use crate::settings::{FormFactorMethod, Projection};
 use crate::solver::{FormFactorSource, ShotRegion, Transfer};
 use std::time::{Duration, Instant};
@@ -76,6 +76,11 @@ impl Tier {
     }
 }
 
+/// Patches that subtend less than this many of the largest hemisphere cells
+/// and that no cell covered get their visibility by ray (see
+/// `GpuFormFactors::add_far_receivers`).
+pub const FAR_CELLS: f32 = 4.0;
+
 /// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
 /// exchanging them between ranks as DESIGN.md section 3 describes. Returns
 /// the form factors of this rank's elements only.
@@ -113,6 +118,10 @@ pub struct GpuFormFactors<'a> {
     cache: RowCache,
     /// Whether shots split where visibility varies across the shooter.
     split: bool,
+    /// Per patch, whether the last hemisphere's cells covered it.
+    seen: Vec<bool>,
+    /// Where the last unsplit hemisphere stood.
+    last_centre: glam::Vec3,
 }
 
 impl<'a> GpuFormFactors<'a> {
@@ -150,6 +159,8 @@ impl<'a> GpuFormFactors<'a> {
             penumbra: vec![[0, 0]; mesh.patches.len()],
             cache: RowCache::for_ranks(opts.cache_rows, n),
             split: opts.split_shots,
+            seen: vec![false; mesh.patches.len()],
+            last_centre: glam::Vec3::ZERO,
         })
     }
 
@@ -192,6 +203,7 @@ impl<'a> GpuFormFactors<'a> {
     ) -> Result<Duration, RenderError> {
         let frame = self.mesh.shooter_frame_at(shooter, centre);
         self.last_tier = tier;
+        self.last_centre = centre;
         let layout = self.tiers[tier].cells.layout;
         let mut exchange = Duration::ZERO;
         self.view = [0; 3];
@@ -221,6 +233,70 @@ impl<'a> GpuFormFactors<'a> {
         }
         self.acc.drain_fixed(&mut self.pairs);
         Ok(exchange)
+    }
+
+    /// Receivers too small to cover a hemisphere cell from the shooter (the
+    /// far end of a corridor): cell centres miss most of them, and a hybrid
+    /// row, which takes visibility from the cells, gave them nothing (the
+    /// corridor's far end was 30 % too dark). Each of this rank's patches
+    /// that no cell covered, in front of the shooter at `centre`, facing it
+    /// and subtending less than [`FAR_CELLS`] of the largest cells, gets its
+    /// elements' visibility from one ray each from `centre` (visible: one
+    /// visible of one covered cell). Deterministic and per rank, so the row
+    /// is the same on any rank count.
+    fn add_far_receivers(&mut self, shooter: u32, centre: glam::Vec3, tier: usize) {
+        let mesh = self.mesh;
+        let res = self.tiers[tier].cells.resolution;
+        // The largest cells are at the horizon: dtheta times dphi.
+        let cell = (2.0 * std::f32::consts::PI / res.cols as f32)
+            * (std::f32::consts::FRAC_PI_2 / res.rows as f32);
+        let sp = &mesh.patches[shooter as usize];
+        let n = mesh.polygons[sp.polygon as usize].normal;
+        let origin = centre + n * mesh.ray_offset;
+        self.seen.iter_mut().for_each(|s| *s = false);
+        for &(j, _) in &self.pairs {
+            self.seen[mesh.elements[j as usize].patch as usize] = true;
+        }
+        let before = self.pairs.len();
+        let (rank, ranks) = (self.comm.rank(), self.comm.size());
+        for k in parallel::owned_patches(rank, ranks, mesh.patches.len()) {
+            let p = &mesh.patches[k];
+            if k == shooter as usize || self.seen[k] {
+                continue;
+            }
+            let d = p.centre - centre;
+            let dist2 = d.length_squared();
+            let rn = mesh.polygons[p.polygon as usize].normal;
+            let cos_r = -rn.dot(d);
+            if n.dot(d) <= 0.0 || cos_r <= 0.0 {
+                continue;
+            }
+            if (p.area as f32) * cos_r / (dist2 * dist2.sqrt()) > FAR_CELLS * cell {
+                continue;
+            }
+            // One ray to the patch's centre first: most such patches are
+            // hidden, and a patch this small hidden at its centre is taken
+            // as hidden whole.
+            let to = p.centre + rn * mesh.ray_offset - origin;
+            let skip = [sp.polygon, p.polygon];
+            if mesh.occluders.occluded(origin, to, 0.0, 1.0, skip) {
+                continue;
+            }
+            for j in p.elements.clone() {
+                let e = &mesh.elements[j as usize];
+                let to = e.centre + rn * mesh.ray_offset - origin;
+                if n.dot(to) > 0.0
+                    && !mesh
+                        .occluders
+                        .occluded(origin, to, 0.0, 1.0, [sp.polygon, p.polygon])
+                {
+                    self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
+                }
+            }
+        }
+        if self.pairs.len() > before {
+            self.pairs.sort_unstable_by_key(|p| p.0);
+        }
     }
 
     /// Draws this rank's tiles `own` of the last tier's hemisphere.
@@ -277,6 +353,8 @@ impl<'a> GpuFormFactors<'a> {
         } else {
             1
         };
+        let centre = self.last_centre;
+        self.add_far_receivers(shooter, centre, tier);
         let mut row = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
         if let Some(p) = self.penumbra.get_mut(shooter as usize) {
             *p = [row.partial + row.near_hidden, row.total + row.near_hidden];
@@ -301,6 +379,7 @@ impl<'a> GpuFormFactors<'a> {
         };
         for (group, at) in formfactor::split_groups(self.mesh, shooter, columns) {
             exchange += self.hemisphere(shooter, at, tier)?;
+            self.add_far_receivers(shooter, at, tier);
             let mut part = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, group.clone());
             let mut parts = self.view.to_vec();
             parts.extend(part.column_totals());
