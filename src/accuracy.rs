@@ -193,11 +193,13 @@ fn squares(dir: &Path) -> Result<(Scene, Vec<Surface>)> {
             node: "emitter".into(),
             area: 1.0,
             radiosity: [pi; 3],
+            back: None,
         },
         Surface {
             node: "receiver".into(),
             area: 1.0,
             radiosity: [pi * 0.19982; 3],
+            back: None,
         },
     ];
     Ok((s, reference))

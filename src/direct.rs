@@ -353,6 +353,7 @@ mod tests {
             emission: [emission; 3],
             node: 0,
             subdivision: None,
+            back_side: false,
         }
     }
 

@@ -70,6 +70,8 @@ pub struct MeshPolygon {
     pub reflectance: [f64; 3],
     /// Emitted radiosity (exitance) E = pi * L_e per channel, W/m^2.
     pub exitance: [f64; 3],
+    /// The back side of a double-sided surface (see [`crate::scene::Polygon::back_side`]).
+    pub back_side: bool,
     /// Patches of this polygon.
     pub patches: Range<u32>,
     /// Elements of this polygon.
@@ -355,17 +357,26 @@ impl Mesh {
 
     /// Whether the point `p` of polygon `polygon` lies inside a closed
     /// solid (under a box resting on the floor, say, or inside a box that
-    /// touches this one): a ray from it along the polygon's normal meets a
-    /// back face first (a back face coinciding with a front face counts
-    /// first). A hemisphere there would see only back faces.
+    /// touches this one), so that a hemisphere there would see only back
+    /// faces: a ray from it along the polygon's normal meets a back face
+    /// first. Where a back face coincides with a front face (the top of a
+    /// box under the bottom of the box stacked on it) the back face counts
+    /// first. Faces are oriented as their surfaces are: the back-side copy
+    /// of a double-sided surface counts as the original seen from behind, so
+    /// a double-sided box is a solid too. (The inside of a room whose walls
+    /// are two one-sided faces back to back counts as inside a solid too:
+    /// one ray cannot tell it from stacked boxes; five rays and a vote were
+    /// tried and lost light on stacked boxes, see docs/accuracy.md.)
     pub fn enclosed(&self, p: Vec3, polygon: u32) -> bool {
         let n = self.polygons[polygon as usize].normal;
         let origin = p + n * self.ray_offset;
-        // A back face that coincides with a front face (the top of a box
-        // under the bottom of the box stacked on it) wins: the point is inside.
         self.occluders
             .nearest_facing(origin, n, 0.0, f32::INFINITY, -1e-5)
-            .is_some_and(|hit| self.polygons[hit.polygon as usize].normal.dot(n) > 0.0)
+            .is_some_and(|hit| {
+                let q = &self.polygons[hit.polygon as usize];
+                let facing = if q.back_side { -q.normal } else { q.normal };
+                facing.dot(n) > 0.0
+            })
     }
 
     /// Total emitted power (exitance times area, summed over patches and RGB), W.
@@ -439,6 +450,7 @@ impl Mesh {
             tangent,
             reflectance: refl,
             exitance,
+            back_side: poly.back_side,
             patches: first_patch..self.patches.len() as u32,
             elements: first_element..self.elements.len() as u32,
             patch_grid: if tri { [patch_grid[0]; 2] } else { patch_grid },
@@ -676,6 +688,7 @@ mod tests {
                     emission: [0.0; 3],
                     node,
                     subdivision: None,
+                    back_side: false,
                 });
             }
         }
@@ -721,6 +734,7 @@ mod tests {
             emission: [0.0; 3],
             node: 0,
             subdivision: sub,
+            back_side: false,
         }
     }
 

@@ -153,7 +153,9 @@ impl Bvh {
         let mut best: Option<(f32, Hit)> = None;
         let mut far = t_max;
         self.walk(origin, dir, t_min, t_max, |tri, t_min| {
-            if let Some(t) = intersect(tri, origin, dir, t_min, far) {
+            // A face a hair beyond the best key can still win on facing.
+            let reach = (far * (1.0 + behind.abs())).min(t_max);
+            if let Some(t) = intersect(tri, origin, dir, t_min, reach) {
                 let back = dir.dot(tri.e1.cross(tri.e2)) > 0.0;
                 let key = if back { t * (1.0 + behind) } else { t };
                 if best.is_none_or(|(k, _)| key < k) {
@@ -167,7 +169,7 @@ impl Bvh {
                     far = key;
                 }
             }
-            (false, far)
+            (false, (far * (1.0 + behind.abs())).min(t_max))
         });
         best.map(|(_, h)| h)
     }
@@ -307,6 +309,7 @@ mod tests {
             emission: [0.0; 3],
             node: 0,
             subdivision: None,
+            back_side: false,
         }
     }
 

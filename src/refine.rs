@@ -94,6 +94,7 @@ mod tests {
                     patches: [2, 2],
                     elements: [2, 2],
                 }),
+                back_side: false,
             }],
             nodes: vec!["n".into()],
             ..Default::default()

@@ -42,6 +42,7 @@ fn measured(gpu: &Gpu, poly: &[Vec3], res: Resolution, tessellated: bool) -> Res
                 patches: [1, 1],
                 elements: [4, 4],
             }),
+            back_side: false,
         }],
         ..Default::default()
     };

@@ -331,30 +331,51 @@ impl LoadBalance {
 pub struct Surface {
     /// Node name.
     pub node: String,
-    /// Area in m^2 (both sides of a double-sided surface).
+    /// Area in m^2 of its front side (of a one-sided surface: all of it).
+    pub area: f64,
+    /// Area-weighted mean radiosity of its front side, W/m^2 per channel.
+    pub radiosity: [f64; 3],
+    /// The back side of a double-sided surface, reported apart (absent for
+    /// one-sided surfaces).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub back: Option<Side>,
+}
+
+/// One side of a double-sided surface.
+#[derive(Clone, Copy, Debug, Serialize, serde::Deserialize, PartialEq)]
+pub struct Side {
+    /// Area in m^2.
     pub area: f64,
     /// Area-weighted mean radiosity, W/m^2 per channel.
     pub radiosity: [f64; 3],
 }
 
-/// Per-node areas and area-weighted mean radiosities.
+/// Per-node areas and area-weighted mean radiosities, the front and the
+/// back of double-sided surfaces apart.
 pub fn surfaces(mesh: &Mesh, nodes: &[String], radiosity: &[[f64; 3]]) -> Vec<Surface> {
-    let mut area = vec![0.0f64; nodes.len()];
-    let mut sum = vec![[0.0f64; 3]; nodes.len()];
+    // [front, back] per node.
+    let mut area = vec![[0.0f64; 2]; nodes.len()];
+    let mut sum = vec![[[0.0f64; 3]; 2]; nodes.len()];
     for (e, b) in mesh.elements.iter().zip(radiosity) {
-        let n = mesh.polygons[e.polygon as usize].node;
-        area[n] += e.area;
+        let poly = &mesh.polygons[e.polygon as usize];
+        let side = usize::from(poly.back_side);
+        area[poly.node][side] += e.area;
         for c in 0..3 {
-            sum[n][c] += b[c] * e.area;
+            sum[poly.node][side][c] += b[c] * e.area;
         }
     }
+    let mean = |s: [f64; 3], a: f64| s.map(|x| if a > 0.0 { x / a } else { 0.0 });
     nodes
         .iter()
         .enumerate()
         .map(|(i, name)| Surface {
             node: name.clone(),
-            area: area[i],
-            radiosity: sum[i].map(|s| if area[i] > 0.0 { s / area[i] } else { 0.0 }),
+            area: area[i][0],
+            radiosity: mean(sum[i][0], area[i][0]),
+            back: (area[i][1] > 0.0).then(|| Side {
+                area: area[i][1],
+                radiosity: mean(sum[i][1], area[i][1]),
+            }),
         })
         .collect()
 }

@@ -239,18 +239,35 @@ pub struct Solver<'m> {
 
 /// The area-weighted mean reflectance of a mesh, per channel.
 fn mean_reflectance(mesh: &Mesh) -> [f64; 3] {
-    let total_area = mesh.total_area();
+    let total_area = ambient_area(mesh);
     let mut out = [0.0; 3];
     if total_area <= 0.0 {
         return out;
     }
-    for e in &mesh.elements {
+    for e in mesh.elements.iter().filter(|e| takes_ambient(mesh, e)) {
         let rho = mesh.polygons[e.polygon as usize].reflectance;
         for c in 0..3 {
             out[c] += rho[c] * e.area;
         }
     }
     out.map(|x| x / total_area)
+}
+
+/// Whether element `e` gets the ambient term: every element but those of
+/// the back sides of double-sided surfaces (the copies the loader adds: the
+/// outside of a double-sided room sees no light, and counting it would
+/// spread the unshot light over twice the area).
+fn takes_ambient(mesh: &Mesh, e: &crate::mesh::Element) -> bool {
+    !mesh.polygons[e.polygon as usize].back_side
+}
+
+/// The area the ambient term is spread over (see [`takes_ambient`]).
+fn ambient_area(mesh: &Mesh) -> f64 {
+    mesh.elements
+        .iter()
+        .filter(|e| takes_ambient(mesh, e))
+        .map(|e| e.area)
+        .sum()
 }
 
 /// Power of a radiosity over an area, sum over RGB (signed).
@@ -296,7 +313,7 @@ impl<'m> Solver<'m> {
             energy: [0.0; 3],
             overshoot: false,
             mean_reflectance: mean_reflectance(mesh),
-            total_area: mesh.total_area(),
+            total_area: ambient_area(mesh),
         }
     }
 
@@ -797,6 +814,11 @@ impl<'m> Solver<'m> {
             .zip(&self.mesh.elements)
             .map(|(b, e)| {
                 let rho = self.mesh.polygons[e.polygon as usize].reflectance;
+                let amb = if takes_ambient(self.mesh, e) {
+                    amb
+                } else {
+                    [0.0; 3]
+                };
                 [
                     b[0] + rho[0] * amb[0],
                     b[1] + rho[1] * amb[1],

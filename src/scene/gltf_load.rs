@@ -357,11 +357,13 @@ impl Loader<'_> {
                 emission: mat.emission,
                 node,
                 subdivision,
+                back_side: false,
             };
             if mat.double_sided {
                 let mut back = poly.clone();
                 back.vertices.reverse();
                 back.normal = -normal;
+                back.back_side = true;
                 self.scene.polygons.push(poly);
                 self.scene.polygons.push(back);
             } else {

@@ -30,6 +30,9 @@ pub struct Polygon {
     pub node: usize,
     /// Subdivision fixed by the node's `extras.radiosity`, if any.
     pub subdivision: Option<Subdivision>,
+    /// Whether this is the back side of a double-sided surface (the
+    /// reversed copy the loader adds): reported apart from the front.
+    pub back_side: bool,
 }
 
 impl Polygon {

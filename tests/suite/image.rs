@@ -39,7 +39,12 @@ fn score(scene: &str, shadow_rays: u32) -> f64 {
 
 #[test]
 fn default_images_are_within_two_and_a_half_percent_of_path_traced_images() {
-    for scene in ["cornell", "family-boxes-1", "family-slab-1"] {
+    for scene in [
+        "cornell",
+        "family-boxes-1",
+        "family-slab-1",
+        "family-corridor-1",
+    ] {
         let s = score(scene, radiosity::render::image::DEFAULT_SHADOW_RAYS);
         assert!(s <= 0.025, "{scene}: SMAPE {:.2} % > 2.5 %", s * 100.0);
     }

@@ -7,6 +7,7 @@ mod bake;
 mod checkpoint;
 mod common;
 mod determinism;
+mod double_sided;
 mod energy;
 mod furnace;
 mod fuzz;

@@ -51,6 +51,7 @@ fn look_with(
                 patches: [1, 1],
                 elements: [elements, elements],
             }),
+            back_side: false,
         })
         .collect();
     let scene = Scene {
