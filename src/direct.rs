@@ -337,24 +337,11 @@ mod tests {
 
     fn square(centre: Vec3, half: f32, up: bool, emission: f32) -> Polygon {
         let (a, b) = if up {
-            (Vec3::X * half, Vec3::Z * -half)
+            (Vec3::X, -Vec3::Z)
         } else {
-            (Vec3::Z * -half, Vec3::X * half)
+            (-Vec3::Z, Vec3::X)
         };
-        Polygon {
-            vertices: vec![
-                centre - a - b,
-                centre + a - b,
-                centre + a + b,
-                centre - a + b,
-            ],
-            normal: if up { Vec3::Y } else { -Vec3::Y },
-            reflectance: [0.5; 3],
-            emission: [emission; 3],
-            node: 0,
-            subdivision: None,
-            back_side: false,
-        }
+        Polygon::square(centre, half, a, b, [0.5; 3], [emission; 3])
     }
 
     fn scene(polygons: Vec<Polygon>) -> Scene {

@@ -293,24 +293,11 @@ mod tests {
 
     fn quad(centre: Vec3, half: f32, normal_z: bool) -> Polygon {
         let (a, b) = if normal_z {
-            (Vec3::X * half, Vec3::Y * half)
+            (Vec3::X, Vec3::Y)
         } else {
-            (Vec3::Y * half, Vec3::X * half)
+            (Vec3::Y, Vec3::X)
         };
-        Polygon {
-            vertices: vec![
-                centre - a - b,
-                centre + a - b,
-                centre + a + b,
-                centre - a + b,
-            ],
-            normal: if normal_z { Vec3::Z } else { -Vec3::Z },
-            reflectance: [0.5; 3],
-            emission: [0.0; 3],
-            node: 0,
-            subdivision: None,
-            back_side: false,
-        }
+        Polygon::square(centre, half, a, b, [0.5; 3], [0.0; 3])
     }
 
     #[test]

@@ -8,11 +8,11 @@ use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Trace};
 use crate::checkpoint::Header;
-use crate::gpu::{Gpu, ViewSettings};
+use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
 use crate::mesh::Mesh;
 use crate::parallel::{Collectives, Exchange, Single, Traffic};
-use crate::render::image::camera_image;
+use crate::render::image::{solution_image, view_for};
 use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
 };
@@ -374,27 +374,8 @@ fn finish(
     let camera = scene.camera.unwrap_or_else(|| scene.default_camera());
     let height = opts.image_height(camera.aspect);
     let image = if opts.width > 0 {
-        let view = ViewSettings {
-            width: opts.width,
-            height,
-            shading: opts.shading,
-            supersample: crate::render::image::supersample_for(
-                opts.width,
-                height,
-                gpu.device.limits().max_texture_dimension_2d,
-            ),
-            wireframe: opts.wireframe,
-        };
-        let radiance = solver.display_radiance(opts.ambient);
-        let pixels = camera_image(
-            gpu,
-            scene,
-            mesh,
-            &radiance,
-            &camera,
-            &view,
-            opts.shadow_rays,
-        )?;
+        let view = view_for(gpu, [opts.width, height], opts.shading, opts.wireframe);
+        let pixels = solution_image(gpu, scene, solver, opts, &camera, &view)?;
         Some((opts.width, height, pixels))
     } else {
         None

@@ -7,9 +7,11 @@
 //! still average to the solution's value.
 
 use crate::direct::DirectLight;
-use crate::gpu::{view_depth_range, Gpu, GpuError, ViewRenderer, ViewSettings};
+use crate::gpu::{view_depth_range, Gpu, GpuError, Shading, ViewRenderer, ViewSettings};
 use crate::mesh::Mesh;
+use crate::render::options::RenderOptions;
 use crate::scene::{Camera, Scene};
+use crate::solver::Solver;
 
 /// Default shadow rays per emitter per image sample (`--shadow-rays`).
 pub const DEFAULT_SHADOW_RAYS: u32 = 1;
@@ -23,6 +25,44 @@ pub const SUPERSAMPLE: u32 = 4;
 pub fn supersample_for(width: u32, height: u32, max_dim: u32) -> u32 {
     let biggest = width.max(height).max(1);
     (max_dim / biggest).clamp(1, SUPERSAMPLE)
+}
+
+/// The image settings a render uses for a `size` image: its shading and
+/// wireframe, [`SUPERSAMPLE`] where the device allows.
+pub fn view_for(gpu: &Gpu, size: [u32; 2], shading: Shading, wireframe: bool) -> ViewSettings {
+    ViewSettings {
+        width: size[0],
+        height: size[1],
+        shading,
+        supersample: supersample_for(
+            size[0],
+            size[1],
+            gpu.device.limits().max_texture_dimension_2d,
+        ),
+        wireframe,
+    }
+}
+
+/// The camera image of `solver`'s solution (its display radiance, with the
+/// ambient term if `opts` says so, and `opts.shadow_rays`): see [`camera_image`].
+pub fn solution_image(
+    gpu: &Gpu,
+    scene: &Scene,
+    solver: &Solver,
+    opts: &RenderOptions,
+    camera: &Camera,
+    view: &ViewSettings,
+) -> Result<Vec<[f32; 3]>, GpuError> {
+    let radiance = solver.display_radiance(opts.ambient);
+    camera_image(
+        gpu,
+        scene,
+        solver.mesh(),
+        &radiance,
+        camera,
+        view,
+        opts.shadow_rays,
+    )
 }
 
 /// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2, the solution's

@@ -50,6 +50,33 @@ impl Polygon {
         self.vertices.iter().copied().sum::<Vec3>() / self.vertices.len() as f32
     }
 
+    /// A square of half-side `half` about `centre` spanned by the unit
+    /// vectors `a` and `b`, facing `a x b` (for tests and generated scenes).
+    pub fn square(
+        centre: Vec3,
+        half: f32,
+        a: Vec3,
+        b: Vec3,
+        reflectance: [f32; 3],
+        emission: [f32; 3],
+    ) -> Self {
+        let (a, b) = (a * half, b * half);
+        Polygon {
+            vertices: vec![
+                centre - a - b,
+                centre + a - b,
+                centre + a + b,
+                centre - a + b,
+            ],
+            normal: a.cross(b).normalize(),
+            reflectance,
+            emission,
+            node: 0,
+            subdivision: None,
+            back_side: false,
+        }
+    }
+
     /// Whether the polygon emits light.
     pub fn is_emitter(&self) -> bool {
         self.emission.iter().any(|&e| e > 0.0)

@@ -360,29 +360,10 @@ fn save<W: Fn()>(
     let (w, h) = (800, 600);
     let mut camera = req.camera;
     camera.aspect = Some(w as f32 / h as f32);
-    let view = radiosity::gpu::ViewSettings {
-        width: w,
-        height: h,
-        shading: req.shading,
-        supersample: radiosity::render::image::supersample_for(
-            w,
-            h,
-            gpu.device.limits().max_texture_dimension_2d,
-        ),
-        wireframe: req.wireframe,
-    };
-    let radiance = solver.display_radiance(opts.ambient);
+    let view = radiosity::render::image::view_for(gpu, [w, h], req.shading, req.wireframe);
     // The renderer's own image path: traced direct light, the rest interpolated.
-    let pixels = radiosity::render::image::camera_image(
-        gpu,
-        scene,
-        mesh,
-        &radiance,
-        &camera,
-        &view,
-        opts.shadow_rays,
-    )
-    .map_err(|e| e.to_string())?;
+    let pixels = radiosity::render::image::solution_image(gpu, scene, solver, opts, &camera, &view)
+        .map_err(|e| e.to_string())?;
     let seconds = pub_.solve_time.as_secs_f64();
     let timings = radiosity::report::Timings {
         solve: seconds,
