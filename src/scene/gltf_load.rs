@@ -8,6 +8,9 @@ use std::path::Path;
 /// a quad: the Cornell box's measured red wall is folded by 0.4 degrees.
 const COPLANAR_COS: f32 = 0.9999;
 
+/// What a reflectance of exactly 1 is clamped to (with a warning).
+pub const CLAMPED: f32 = 0.95;
+
 /// Loads a `.gltf` or `.glb` file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let name = path.display().to_string();
@@ -70,6 +73,9 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         path: name.to_string(),
         message: e.to_string(),
     };
+    let mut tolerated = Vec::new();
+    let rewritten = super::tolerate::tolerate(bytes, &mut tolerated);
+    let bytes = rewritten.as_deref().unwrap_or(bytes);
     check_primitive_indices(bytes, name)?;
     let gltf = gltf::Gltf::from_slice(bytes).map_err(parse_err)?;
     let base = base.map(|b| {
@@ -90,6 +96,7 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         camera_at: None,
     };
     loader.scene.name = name.to_string();
+    loader.scene.warnings = tolerated;
     let doc = &gltf.document;
     let roots: Vec<gltf::Node> = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(s) => s.nodes().collect(),
@@ -231,7 +238,12 @@ impl Loader<'_> {
     /// ranges: baseColorFactor and emissiveFactor in [0, 1], the emissive
     /// strength finite and >= 0. A reflectance above 1 would create energy
     /// (a room 7x too bright), so it is an error, not a clamp.
-    fn material(&self, prim: &gltf::Primitive, node: &str) -> Result<Material, SceneError> {
+    fn material(
+        &self,
+        prim: &gltf::Primitive,
+        node: &str,
+        clamped: &mut Vec<String>,
+    ) -> Result<Material, SceneError> {
         let m = prim.material();
         let what = m.name().map_or_else(
             || "the default material".to_string(),
@@ -262,8 +274,18 @@ impl Loader<'_> {
                 "{what}: KHR_materials_emissive_strength {strength} must be finite and >= 0"
             )));
         }
+        // Reflectance 1 (glTF's default when a material gives no factor)
+        // never converges: 0.95 instead, said once per material.
+        let reflectance = [base[0], base[1], base[2]].map(|x| if x >= 1.0 { CLAMPED } else { x });
+        if base[..3].iter().any(|&x| x >= 1.0) {
+            let w = format!(
+                "{what}: a reflectance of 1 (baseColorFactor {:?}) never converges: clamped to {CLAMPED}",
+                &base[..3]
+            );
+            clamped.push(w);
+        }
         Ok(Material {
-            reflectance: [base[0], base[1], base[2]],
+            reflectance,
             emission: [e[0] * strength, e[1] * strength, e[2] * strength],
             double_sided: m.double_sided(),
         })
@@ -425,7 +447,13 @@ impl Loader<'_> {
         };
         // A mirroring transform flips the winding (glTF spec, 3.7.4).
         let flip = world.determinant() < 0.0;
-        let mat = self.material(prim, name)?;
+        let mut clamped = Vec::new();
+        let mat = self.material(prim, name, &mut clamped)?;
+        for w in clamped {
+            if !self.scene.warnings.contains(&w) {
+                self.scene.warnings.push(w);
+            }
+        }
         let tris = self.triangles(&positions, &indices, flip, name)?;
         self.add_polygons(&tris, &mat, node, subdivision);
         Ok(())

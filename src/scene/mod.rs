@@ -8,6 +8,7 @@ mod builtin;
 pub mod family;
 mod gltf_load;
 mod gltf_write;
+pub mod tolerate;
 
 pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};

@@ -15,6 +15,7 @@ mod image;
 mod mpi;
 mod overshoot;
 mod projections;
+mod real_files;
 mod reference;
 mod refine;
 mod shaders;

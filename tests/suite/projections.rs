@@ -5,6 +5,7 @@
 //! pure hemisphere method, whose form factors are the cells each projection
 //! finds, is checked too (not on the small far receiver, which it aliases).
 
+use crate::analytic::RECEIVER_RHO;
 use crate::common::*;
 use radiosity::hemisphere::Resolution;
 use radiosity::render::{FormFactorMethod, Projection};
@@ -88,7 +89,7 @@ fn both_projections_match_the_closed_forms() {
             case.name,
             &[
                 surface("emitter", case.emitter.clone(), 0.0, 1.0),
-                surface("receiver", case.receiver.clone(), 1.0, 0.0),
+                surface("receiver", case.receiver.clone(), RECEIVER_RHO, 0.0),
             ],
         );
         let methods: &[FormFactorMethod] = if case.name == "small far receiver" {
@@ -121,7 +122,7 @@ fn both_projections_match_the_closed_forms() {
                 let r = solve_file(&path, &opts);
                 let e = node(&r, "emitter");
                 let f = node(&r, "receiver").radiosity[0] * node(&r, "receiver").area
-                    / (std::f64::consts::PI * e.area);
+                    / (std::f64::consts::PI * e.area * RECEIVER_RHO as f64);
                 let err = rel(f, case.expected);
                 eprintln!(
                     "{} {method:?} {projection:?} {rows}x{}: F = {f:.6} (expected {:.6}, {:+.3} %)",

@@ -1,0 +1,90 @@
+//! What real glTF files carry (issue 18): required extensions that change
+//! nothing diffuse, textures offered only as DDS, materials with no factor
+//! (reflectance 1). Tolerated with one warning each where that loses
+//! nothing the solution uses; anything else is still an error.
+
+use radiosity::scene::{load, load_slice, SceneError};
+
+/// The built-in Cornell box as glTF JSON, edited by `edit`.
+fn cornell_with(edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+    let text = radiosity::scene::builtin_gltf("cornell").expect("built-in");
+    let mut doc: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    edit(&mut doc);
+    serde_json::to_vec(&doc).expect("JSON")
+}
+
+#[test]
+fn sponza_as_shipped_loads_but_for_its_missing_light() {
+    // Missing normal and roughness images, DDS-only textures and the
+    // required AMD_split_roughnessMetallic used to stop the load; what is
+    // left is that the file has no emitter (it is lit by the sky and sun).
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/scenes/sponza/Sponza.gltf");
+    assert!(path.exists(), "{} is missing", path.display());
+    match load(&path) {
+        Err(SceneError::NoEmitter { .. }) => {}
+        Err(e) => panic!("Sponza: {e}"),
+        Ok(_) => panic!("Sponza has no emitter, yet loaded"),
+    }
+}
+
+#[test]
+fn ignorable_required_extensions_and_dds_textures_warn_once_each() {
+    let bytes = cornell_with(|d| {
+        d["extensionsUsed"] =
+            serde_json::json!(["AMD_split_roughnessMetallic", "MSFT_texture_dds"]);
+        d["extensionsRequired"] = serde_json::json!(["AMD_split_roughnessMetallic"]);
+        d["images"] = serde_json::json!([{"uri": "missing.dds"}]);
+        d["textures"] = serde_json::json!([{"extensions": {"MSFT_texture_dds": {"source": 0}}}]);
+    });
+    let scene = load_slice(&bytes, "tolerant").expect("loads");
+    let about = |s: &str| scene.warnings.iter().filter(|w| w.contains(s)).count();
+    assert_eq!(
+        about("AMD_split_roughnessMetallic"),
+        1,
+        "{:?}",
+        scene.warnings
+    );
+    assert_eq!(about("textures 0"), 1, "{:?}", scene.warnings);
+}
+
+#[test]
+fn an_unknown_required_extension_is_still_an_error() {
+    let bytes = cornell_with(|d| {
+        d["extensionsUsed"] = serde_json::json!(["EXT_changes_everything"]);
+        d["extensionsRequired"] = serde_json::json!(["EXT_changes_everything"]);
+    });
+    let err = load_slice(&bytes, "strict").expect_err("must not load");
+    assert!(err.to_string().contains("EXT_changes_everything"), "{err}");
+}
+
+#[test]
+fn a_reflectance_of_one_is_clamped_with_one_warning_naming_the_material() {
+    let bytes = cornell_with(|d| {
+        // glTF's default when a material gives no factor: reflectance 1.
+        let m = &mut d["materials"][0];
+        m["pbrMetallicRoughness"]
+            .as_object_mut()
+            .expect("pbr")
+            .remove("baseColorFactor");
+    });
+    let scene = load_slice(&bytes, "white").expect("loads");
+    let name = {
+        let doc: serde_json::Value = serde_json::from_slice(&bytes).expect("JSON");
+        doc["materials"][0]["name"]
+            .as_str()
+            .expect("named")
+            .to_string()
+    };
+    let warned: Vec<_> = scene
+        .warnings
+        .iter()
+        .filter(|w| w.contains("clamped") && w.contains(&name))
+        .collect();
+    assert_eq!(warned.len(), 1, "{:?}", scene.warnings);
+    assert!(scene
+        .polygons
+        .iter()
+        .all(|p| p.reflectance.iter().all(|&r| r <= 0.95)));
+    assert!(scene.polygons.iter().any(|p| p.reflectance == [0.95; 3]));
+}
