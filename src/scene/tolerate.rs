@@ -9,7 +9,7 @@ use serde_json::Value;
 
 /// Required extensions that change only specular or other non-diffuse
 /// response (or only offer other image formats): warned about and ignored.
-pub const IGNORABLE: [&str; 14] = [
+pub const IGNORABLE: [&str; 13] = [
     "AMD_split_roughnessMetallic",
     "KHR_materials_specular",
     "KHR_materials_ior",
@@ -23,7 +23,6 @@ pub const IGNORABLE: [&str; 14] = [
     "MSFT_texture_dds",
     "EXT_texture_webp",
     "EXT_texture_avif",
-    "KHR_mesh_quantization",
 ];
 
 /// Extensions that offer a texture's image in another format.
