@@ -407,7 +407,13 @@ impl Mesh {
         let tri = v.len() == 3;
         let cap_p = |len: f32| ((len / patch_size).ceil() as u32).clamp(1, s.max_patches_per_edge);
         // Precedence: a flag given for this run, then the node's extras, then the automatic rule.
-        let (lu, lv) = if tri {
+        let (lu, lv) = if tri && poly.parent.is_some() {
+            // A sliver cut off at a contact (`scene::contact`): sized by its
+            // area, or its n x n grid on the longest edge would make n^2
+            // tiny patches.
+            let m = (2.0 * poly.area()).sqrt();
+            (m, m)
+        } else if tri {
             let m = (v[1] - v[0])
                 .length()
                 .max((v[2] - v[1]).length())
@@ -626,7 +632,7 @@ fn centroid(c: &[Vec3; 4]) -> Vec3 {
 }
 
 /// Patch edge length for every polygon under the automatic rule (or the fixed size).
-fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
+pub fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
     let n = scene.polygons.len();
     if let Some(size) = s.patch_size {
         return vec![size; n];
@@ -641,13 +647,36 @@ fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
         s.near_field_ratio
     };
     let eps = 1e-5 * scene.extent();
-    let centres: Vec<Vec3> = scene.polygons.iter().map(Polygon::centre).collect();
-    let areas: Vec<f32> = scene.polygons.iter().map(Polygon::area).collect();
+    // Pieces of a polygon split at a contact (`scene::contact`) are sized
+    // as their whole: one entry per whole, with its centroid and area.
+    let mut whole_of = vec![0usize; n];
+    let mut wholes: Vec<(Vec3, f32, Vec3)> = Vec::new();
+    let mut index: std::collections::HashMap<u32, usize> = Default::default();
+    for (i, p) in scene.polygons.iter().enumerate() {
+        let a = p.area();
+        let k = match p.parent {
+            Some(parent) => *index.entry(parent).or_insert_with(|| {
+                wholes.push((Vec3::ZERO, 0.0, p.normal));
+                wholes.len() - 1
+            }),
+            None => {
+                wholes.push((Vec3::ZERO, 0.0, p.normal));
+                wholes.len() - 1
+            }
+        };
+        wholes[k].0 += p.centre() * a;
+        wholes[k].1 += a;
+        whole_of[i] = k;
+    }
+    let centres: Vec<Vec3> = wholes.iter().map(|w| w.0 / w.1.max(1e-30)).collect();
+    let areas: Vec<f32> = wholes.iter().map(|w| w.1).collect();
+    let normals: Vec<Vec3> = wholes.iter().map(|w| w.2).collect();
+    let n = wholes.len();
     let mut size = vec![f32::INFINITY; n];
     for i in 0..n {
-        let (ci, ni) = (centres[i], scene.polygons[i].normal);
+        let (ci, ni) = (centres[i], normals[i]);
         for j in (i + 1)..n {
-            let (cj, nj) = (centres[j], scene.polygons[j].normal);
+            let (cj, nj) = (centres[j], normals[j]);
             let d = cj - ci;
             let h = d.length();
             // Each must lie in front of the other: they exchange light.
@@ -664,7 +693,7 @@ fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
             size[j] = size[j].min(allow(areas[i] * cos_i * cos_j / (pi_h2 + areas[i])));
         }
     }
-    size
+    whole_of.iter().map(|&k| size[k]).collect()
 }
 
 #[cfg(test)]
@@ -689,6 +718,7 @@ mod tests {
                     node,
                     subdivision: None,
                     back_side: false,
+                    parent: None,
                 });
             }
         }
@@ -735,6 +765,7 @@ mod tests {
             node: 0,
             subdivision: sub,
             back_side: false,
+            parent: None,
         }
     }
 

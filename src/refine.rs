@@ -95,6 +95,7 @@ mod tests {
                     elements: [2, 2],
                 }),
                 back_side: false,
+                parent: None,
             }],
             nodes: vec!["n".into()],
             ..Default::default()

@@ -43,6 +43,7 @@ fn measured(gpu: &Gpu, poly: &[Vec3], res: Resolution, tessellated: bool) -> Res
                 elements: [4, 4],
             }),
             back_side: false,
+            parent: None,
         }],
         ..Default::default()
     };

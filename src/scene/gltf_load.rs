@@ -380,6 +380,7 @@ impl Loader<'_> {
                 node,
                 subdivision,
                 back_side: false,
+                parent: None,
             };
             if mat.double_sided {
                 let mut back = poly.clone();

@@ -5,6 +5,7 @@
 //! Loading ([`load`]) follows the glTF conventions of DESIGN.md section 6.
 
 mod builtin;
+pub mod contact;
 pub mod family;
 mod gltf_load;
 mod gltf_write;
@@ -34,6 +35,10 @@ pub struct Polygon {
     /// Whether this is the back side of a double-sided surface (the
     /// reversed copy the loader adds): reported apart from the front.
     pub back_side: bool,
+    /// The polygon this one was split from where others stand on it (see
+    /// [`contact`]), as an index into the list before the split; `None`
+    /// when it was not split. Subdivision sizes come from the whole.
+    pub parent: Option<u32>,
 }
 
 impl Polygon {
@@ -75,6 +80,7 @@ impl Polygon {
             node: 0,
             subdivision: None,
             back_side: false,
+            parent: None,
         }
     }
 
@@ -231,7 +237,26 @@ pub enum SceneError {
 }
 
 /// Loads a scene from a glTF/GLB path or a built-in scene name.
+///
+/// Polygons that others stand on are split along the contacts
+/// ([`contact::split_at_contacts`]); [`open_as_authored`] leaves them whole.
 pub fn open(name_or_path: &str) -> Result<Scene, SceneError> {
+    let mut scene = open_as_authored(name_or_path)?;
+    let extent = scene.extent();
+    let (polygons, split) = contact::split_at_contacts(std::mem::take(&mut scene.polygons), extent);
+    scene.polygons = polygons;
+    if split > 0 {
+        log::info!(
+            "{}: {split} polygons split where others stand on them",
+            scene.name
+        );
+    }
+    Ok(scene)
+}
+
+/// [`open`] without the contact split: the polygons as the file gives them
+/// (the paper's scene counts are of these).
+pub fn open_as_authored(name_or_path: &str) -> Result<Scene, SceneError> {
     let path = std::path::Path::new(name_or_path);
     if path.exists() {
         return load(path);

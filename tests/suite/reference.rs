@@ -50,6 +50,10 @@ fn default_renders_are_within_one_percent_mean_and_three_worst_of_path_traced_re
         "family-boxes-1",
         "family-corridor-1",
         "family-floor-1",
+        // Touching and stacked boxes, and a room whose floor runs under its
+        // walls: above 3 % worst before the contact split.
+        "family-stacked-1",
+        "family-opening-1",
     ] {
         let reference = reference(scene);
         let s = radiosity::scene::open(scene).expect("scene");

@@ -52,6 +52,7 @@ fn look_with(
                 elements: [elements, elements],
             }),
             back_side: false,
+            parent: None,
         })
         .collect();
     let scene = Scene {

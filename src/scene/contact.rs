@@ -1,0 +1,291 @@
+//! Polygons split where another polygon stands on them (a box on a floor, a
+//! box on a box, a wall on a floor that runs under it): along the line of
+//! each edge of a non-coplanar polygon that lies in a polygon's plane and
+//! crosses its inside. Without the split, an element straddling the line
+//! averages the light of both sides (the floor under a box is lit by the
+//! floor beside it, a room's floor by the hall outside its walls), and a
+//! hemisphere standing on it may stand inside the box. The split keeps
+//! every piece's node, material and side, so per-node results and the
+//! geometry are unchanged. Pure geometry.
+
+use super::Polygon;
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// At most this many cut lines per polygon (a floor under many objects
+/// keeps the first ones).
+const MAX_CUTS: usize = 24;
+
+/// At most this many pieces per polygon; a polygon that would give more
+/// stays whole.
+const MAX_PIECES: usize = 256;
+
+/// Splits `polygons` at their contact lines (see the module docs); returns
+/// the new list and how many polygons were split. `extent` is the scene's
+/// size (tolerances are a hundred-thousandth of it).
+pub fn split_at_contacts(polygons: Vec<Polygon>, extent: f32) -> (Vec<Polygon>, usize) {
+    let eps = 1e-5 * extent.max(1e-6);
+    let grid = EdgeGrid::new(&polygons, extent);
+    let mut out = Vec::with_capacity(polygons.len());
+    let mut split = 0;
+    for (i, p) in polygons.iter().enumerate() {
+        let cuts = grid.cuts(&polygons, i, eps);
+        if cuts.is_empty() {
+            out.push(p.clone());
+            continue;
+        }
+        // Each line cuts only the pieces its contact segment crosses, so a
+        // box on a big floor cuts out its footprint's neighbourhood, not
+        // strips across the whole floor.
+        let mut pieces = vec![p.vertices.clone()];
+        for (m, c, a, b) in cuts {
+            pieces = pieces
+                .into_iter()
+                .flat_map(|piece| {
+                    if overlaps(&piece, a, b, eps) {
+                        cut(&piece, m, c, eps)
+                    } else {
+                        vec![piece]
+                    }
+                })
+                .collect();
+        }
+        // A floor under many objects would become hundreds of strips, each
+        // with its own patches (the many-objects scene: 5x the patches and
+        // 10x the time): such a polygon stays whole.
+        if pieces.len() > MAX_PIECES {
+            out.push(p.clone());
+            continue;
+        }
+        if pieces.len() > 1 {
+            split += 1;
+        }
+        let whole = pieces.len() == 1;
+        for piece in pieces {
+            let parent = (!whole).then_some(i as u32);
+            push_convex(&mut out, p, piece, parent);
+        }
+    }
+    (out, split)
+}
+
+/// A convex piece of `p` as polygons of 3 or 4 vertices (a fan beyond).
+fn push_convex(out: &mut Vec<Polygon>, p: &Polygon, piece: Vec<Vec3>, parent: Option<u32>) {
+    let whole = p.area().max(1e-30);
+    let with = |vertices: Vec<Vec3>| {
+        let mut q = Polygon {
+            vertices,
+            parent,
+            ..p.clone()
+        };
+        // A fixed subdivision is the whole's: a piece gets its share of the
+        // patches (by the square root of its share of the area).
+        let k = (q.area() / whole).sqrt();
+        if let Some(sub) = q.subdivision.as_mut() {
+            sub.patches = sub.patches.map(|n| ((n as f32 * k).ceil() as u32).max(1));
+        }
+        q
+    };
+    if piece.len() <= 4 {
+        out.push(with(piece));
+        return;
+    }
+    // A fan of quads where they fit, then a triangle.
+    let mut k = 1;
+    while k + 1 < piece.len() {
+        if k + 2 < piece.len() {
+            out.push(with(vec![piece[0], piece[k], piece[k + 1], piece[k + 2]]));
+            k += 2;
+        } else {
+            out.push(with(vec![piece[0], piece[k], piece[k + 1]]));
+            k += 1;
+        }
+    }
+}
+
+/// `piece` cut by the line m . x = c in its plane: one or two convex pieces
+/// (none cut off that is thinner than `eps`).
+fn cut(piece: &[Vec3], m: Vec3, c: f32, eps: f32) -> Vec<Vec<Vec3>> {
+    let d: Vec<f32> = piece.iter().map(|v| m.dot(*v) - c).collect();
+    let above = d.iter().any(|&x| x > eps);
+    let below = d.iter().any(|&x| x < -eps);
+    if !(above && below) {
+        return vec![piece.to_vec()];
+    }
+    let mut parts = [Vec::new(), Vec::new()];
+    let n = piece.len();
+    for k in 0..n {
+        let (a, b) = (piece[k], piece[(k + 1) % n]);
+        let (da, db) = (d[k], d[(k + 1) % n]);
+        if da >= 0.0 {
+            parts[0].push(a);
+        }
+        if da <= 0.0 {
+            parts[1].push(a);
+        }
+        if (da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0) {
+            let x = a + (b - a) * (da / (da - db));
+            parts[0].push(x);
+            parts[1].push(x);
+        }
+    }
+    parts.into_iter().filter(|p| p.len() >= 3).collect()
+}
+
+/// Every polygon edge, bucketed by the grid cells its bounding box touches.
+struct EdgeGrid {
+    cell: f32,
+    edges: Vec<(Vec3, Vec3, u32)>,
+    cells: HashMap<[i32; 3], Vec<u32>>,
+}
+
+impl EdgeGrid {
+    fn new(polygons: &[Polygon], extent: f32) -> Self {
+        let cell = (extent / 64.0).max(1e-6);
+        let mut edges = Vec::new();
+        for (i, p) in polygons.iter().enumerate() {
+            let n = p.vertices.len();
+            for k in 0..n {
+                edges.push((p.vertices[k], p.vertices[(k + 1) % n], i as u32));
+            }
+        }
+        let mut cells: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
+        for (e, (a, b, _)) in edges.iter().enumerate() {
+            let (lo, hi) = (Self::key(a.min(*b), cell), Self::key(a.max(*b), cell));
+            // Long edges would touch many cells: such an edge is a cut
+            // candidate for polygons near any part of it, so keep them all
+            // (bounded, as a room's edges are few).
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        cells.entry([x, y, z]).or_default().push(e as u32);
+                    }
+                }
+            }
+        }
+        EdgeGrid { cell, edges, cells }
+    }
+
+    fn key(p: Vec3, cell: f32) -> [i32; 3] {
+        (p / cell).floor().as_ivec3().to_array()
+    }
+
+    /// The cut lines (in-plane normal m, offset c) of polygon `i`: edges of
+    /// other, non-coplanar polygons that lie in its plane and cross it.
+    fn cuts(&self, polygons: &[Polygon], i: usize, eps: f32) -> Vec<(Vec3, f32, Vec3, Vec3)> {
+        let p = &polygons[i];
+        let n = p.normal;
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for v in &p.vertices {
+            lo = lo.min(*v);
+            hi = hi.max(*v);
+        }
+        let (klo, khi) = (
+            Self::key(lo - eps, self.cell),
+            Self::key(hi + eps, self.cell),
+        );
+        let mut seen = std::collections::BTreeSet::new();
+        for x in klo[0]..=khi[0] {
+            for y in klo[1]..=khi[1] {
+                for z in klo[2]..=khi[2] {
+                    if let Some(list) = self.cells.get(&[x, y, z]) {
+                        seen.extend(list.iter().copied());
+                    }
+                }
+            }
+        }
+        let plane = n.dot(p.vertices[0]);
+        let mut out: Vec<(Vec3, f32, Vec3, Vec3)> = Vec::new();
+        for e in seen {
+            let (a, b, q) = self.edges[e as usize];
+            if q as usize == i
+                || (n.dot(a) - plane).abs() > eps
+                || (n.dot(b) - plane).abs() > eps
+                || polygons[q as usize].normal.dot(n).abs() > 0.99
+            {
+                continue;
+            }
+            let u = b - a;
+            if u.length() <= 10.0 * eps {
+                continue;
+            }
+            let m = n.cross(u).normalize();
+            let c = m.dot(a);
+            // The segment must overlap the polygon, and the line cross it.
+            if !overlaps(&p.vertices, a, b, eps) {
+                continue;
+            }
+            let d = p.vertices.iter().map(|v| m.dot(*v) - c);
+            let (above, below) = d.fold((false, false), |(x, y), t| (x || t > eps, y || t < -eps));
+            if above && below && out.len() < MAX_CUTS {
+                out.push((m, c, a, b));
+            }
+        }
+        out
+    }
+}
+
+/// Whether the segment a-b (in the convex polygon's plane) has a part of
+/// positive length inside the polygon.
+fn overlaps(poly: &[Vec3], a: Vec3, b: Vec3, eps: f32) -> bool {
+    // Clip the segment by each edge's inward half-plane.
+    let n = (poly[1] - poly[0])
+        .cross(poly[2] - poly[0])
+        .normalize_or_zero();
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    let k = poly.len();
+    for i in 0..k {
+        let (p, q) = (poly[i], poly[(i + 1) % k]);
+        let inward = n.cross(q - p).normalize_or_zero();
+        let (da, db) = (inward.dot(a - p), inward.dot(b - p));
+        if da < -eps && db < -eps {
+            return false;
+        }
+        if (da < 0.0) != (db < 0.0) {
+            let t = da / (da - db);
+            if da < 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
+        }
+    }
+    (t1 - t0) * (b - a).length() > 10.0 * eps
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_box_side_on_a_floor_splits_the_floor_along_its_line() {
+        let floor = Polygon::square(Vec3::ZERO, 2.0, Vec3::X, -Vec3::Z, [0.5; 3], [0.0; 3]);
+        // One side of a box standing on the floor: its bottom edge lies in
+        // the floor's plane, x in [-0.5, 0.5] at z = 0.5.
+        let side = Polygon {
+            vertices: vec![
+                Vec3::new(-0.5, 0.0, 0.5),
+                Vec3::new(0.5, 0.0, 0.5),
+                Vec3::new(0.5, 1.0, 0.5),
+                Vec3::new(-0.5, 1.0, 0.5),
+            ],
+            normal: Vec3::Z,
+            ..floor.clone()
+        };
+        let (out, split) = split_at_contacts(vec![floor.clone(), side], 4.0);
+        assert_eq!(split, 1);
+        // The full line z = 0.5 across the floor: two pieces, areas summing to 16.
+        let pieces: Vec<_> = out.iter().filter(|p| p.normal == Vec3::Y).collect();
+        assert_eq!(pieces.len(), 2);
+        let area: f32 = pieces.iter().map(|p| p.area()).sum();
+        assert!((area - floor.area()).abs() < 1e-4, "{area}");
+    }
+
+    #[test]
+    fn coplanar_neighbours_and_far_polygons_do_not_split() {
+        let a = Polygon::square(Vec3::ZERO, 1.0, Vec3::X, -Vec3::Z, [0.5; 3], [0.0; 3]);
+        let b = Polygon::square(Vec3::X * 2.0, 1.0, Vec3::X, -Vec3::Z, [0.5; 3], [0.0; 3]);
+        let (out, split) = split_at_contacts(vec![a, b], 4.0);
+        assert_eq!((out.len(), split), (2, 0));
+    }
+}
