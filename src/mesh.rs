@@ -693,7 +693,24 @@ pub fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
             size[j] = size[j].min(allow(areas[i] * cos_i * cos_j / (pi_h2 + areas[i])));
         }
     }
-    whole_of.iter().map(|&k| size[k]).collect()
+    // A whole's patch grid was capped at `max_patches_per_edge`: its pieces
+    // keep the capped size, or together they would hold many more patches.
+    let mut span = vec![(Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)); n];
+    for (p, &k) in scene.polygons.iter().zip(&whole_of) {
+        for v in &p.vertices {
+            span[k] = (span[k].0.min(*v), span[k].1.max(*v));
+        }
+    }
+    let cap = s.max_patches_per_edge.max(1) as f32;
+    scene
+        .polygons
+        .iter()
+        .zip(&whole_of)
+        .map(|(p, &k)| match p.parent {
+            Some(_) => size[k].max((span[k].1 - span[k].0).max_element() / cap),
+            None => size[k],
+        })
+        .collect()
 }
 
 #[cfg(test)]
