@@ -237,6 +237,10 @@ struct RenderArgs {
     /// edges); 0 interpolates the direct light from the solution like the rest.
     #[arg(long, default_value_t = radiosity::render::image::DEFAULT_SHADOW_RAYS, value_parser = clap::value_parser!(u32).range(0..=4096))]
     shadow_rays: u32,
+    /// The glTF camera to render from, by name (the camera's, else its
+    /// node's); default: the file's first perspective camera.
+    #[arg(long)]
+    camera: Option<String>,
     /// Draw the element edges over the image.
     #[arg(long)]
     wireframe: bool,
@@ -430,7 +434,7 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
 }
 
 /// Flags the fuzzer passes, with odd values.
-const FUZZ_FLAGS: [&str; 21] = [
+const FUZZ_FLAGS: [&str; 22] = [
     "--resolution",
     "--threshold",
     "--max-shots",
@@ -446,6 +450,7 @@ const FUZZ_FLAGS: [&str; 21] = [
     "--form-factor",
     "--shading",
     "--shadow-rays",
+    "--camera",
     "--exposure",
     "--checkpoint-every",
     "--max-patches-per-edge",
@@ -677,6 +682,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
     // them, with rank 0 reporting which rank failed and why.
     let t = Instant::now();
     let setup = scene::open(&args.scene)
+        .and_then(|mut s| {
+            if let Some(name) = &args.camera {
+                s.use_camera(name)?;
+            }
+            Ok(s)
+        })
         .map_err(anyhow::Error::from)
         .and_then(|s| Ok((s, Gpu::new()?)))
         .map_err(|e| format!("{e:#}"));

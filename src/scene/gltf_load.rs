@@ -93,7 +93,7 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         buffers: &buffers,
         scene: Scene::default(),
         origin: None,
-        camera_at: None,
+        camera_at: Vec::new(),
     };
     loader.scene.name = name.to_string();
     loader.scene.warnings = tolerated;
@@ -115,9 +115,10 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         loader.visit(&node, DMat4::IDENTITY, 0)?;
     }
     let origin = loader.origin.unwrap_or(DVec3::ZERO);
-    if let (Some(cam), Some(at)) = (loader.scene.camera.as_mut(), loader.camera_at) {
-        cam.position = (at - origin).as_vec3();
+    for ((_, cam), at) in loader.scene.cameras.iter_mut().zip(&loader.camera_at) {
+        cam.position = (*at - origin).as_vec3();
     }
+    loader.scene.camera = loader.scene.cameras.first().map(|c| c.1);
     let mut scene = loader.scene;
     scene.origin = origin.to_array();
     if scene.polygons.is_empty() {
@@ -144,8 +145,8 @@ struct Loader<'a> {
     /// The first vertex's world position: every position is stored relative
     /// to it (computed in f64, then f32).
     origin: Option<DVec3>,
-    /// The camera's world position (made relative at the end).
-    camera_at: Option<DVec3>,
+    /// The cameras' world positions (made relative at the end).
+    camera_at: Vec<DVec3>,
 }
 
 struct Material {
@@ -168,17 +169,19 @@ impl Loader<'_> {
         }
         let local = node.transform().matrix().map(|c| c.map(f64::from));
         let world = parent * DMat4::from_cols_array_2d(&local);
-        if let (Some(cam), None) = (node.camera(), self.scene.camera) {
+        if let Some(cam) = node.camera() {
             if let gltf::camera::Projection::Perspective(p) = cam.projection() {
                 let (_, rotation, position) = world.to_scale_rotation_translation();
-                self.camera_at = Some(position);
-                self.scene.camera = Some(Camera {
+                self.camera_at.push(position);
+                let camera = Camera {
                     position: position.as_vec3(),
                     rotation: rotation.normalize().as_quat(),
                     yfov: p.yfov(),
                     aspect: p.aspect_ratio(),
                     znear: p.znear(),
-                });
+                };
+                let label = cam.name().map_or_else(|| name.clone(), str::to_string);
+                self.scene.cameras.push((label, camera));
             }
         }
         if let Some(mesh) = node.mesh() {

@@ -127,8 +127,11 @@ pub struct Scene {
     pub node_transforms: Vec<[f64; 16]>,
     /// Every polygon, both sides of double-sided surfaces included.
     pub polygons: Vec<Polygon>,
-    /// The first perspective camera, if any.
+    /// The camera the image is made from: the first perspective camera, if
+    /// any (or the one [`Scene::use_camera`] picked).
     pub camera: Option<Camera>,
+    /// Every perspective camera, with its name (the camera's, else its node's).
+    pub cameras: Vec<(String, Camera)>,
     /// Non-fatal problems met while loading (e.g. degenerate triangles skipped).
     pub warnings: Vec<String>,
     /// World position (metres, f64) of the point all positions here are
@@ -153,6 +156,26 @@ impl Scene {
     pub fn extent(&self) -> f32 {
         let (lo, hi) = self.bounds();
         (hi - lo).length()
+    }
+
+    /// Makes the camera named `name` the view; the error lists the names.
+    pub fn use_camera(&mut self, name: &str) -> Result<(), SceneError> {
+        match self.cameras.iter().find(|(n, _)| n == name) {
+            Some((_, c)) => {
+                self.camera = Some(*c);
+                Ok(())
+            }
+            None => Err(SceneError::NoCamera {
+                path: self.name.clone(),
+                camera: name.to_string(),
+                names: self
+                    .cameras
+                    .iter()
+                    .map(|(n, _)| format!("'{n}'"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            }),
+        }
     }
 
     /// A camera that frames the whole scene from +Z, for scenes without one.
@@ -230,6 +253,16 @@ pub enum SceneError {
         node: String,
         /// What is wrong.
         message: String,
+    },
+    /// `--camera NAME` names no camera of the file.
+    #[error("scene '{path}' has no perspective camera '{camera}' (its cameras: {names})")]
+    NoCamera {
+        /// The scene path.
+        path: String,
+        /// The name asked for.
+        camera: String,
+        /// The cameras it has.
+        names: String,
     },
     /// A scene name that is neither a file nor a built-in scene.
     #[error("no scene file '{0}' and no built-in scene of that name (built-ins: {1})")]

@@ -88,3 +88,38 @@ fn a_reflectance_of_one_is_clamped_with_one_warning_naming_the_material() {
         .all(|p| p.reflectance.iter().all(|&r| r <= 0.95)));
     assert!(scene.polygons.iter().any(|p| p.reflectance == [0.95; 3]));
 }
+
+#[test]
+fn the_camera_is_picked_by_name_and_an_unknown_name_lists_the_cameras() {
+    let bytes = cornell_with(|d| {
+        let cameras = d["cameras"].as_array_mut().expect("cameras");
+        cameras.push(serde_json::json!({
+            "name": "overhead",
+            "type": "perspective",
+            "perspective": {"yfov": 0.5, "znear": 0.01}
+        }));
+        let index = cameras.len() - 1;
+        let nodes = d["nodes"].as_array_mut().expect("nodes");
+        nodes.push(
+            serde_json::json!({"name": "top", "camera": index, "translation": [0.0, 2.0, 0.0]}),
+        );
+        let node = nodes.len() - 1;
+        d["scenes"][0]["nodes"]
+            .as_array_mut()
+            .expect("scene nodes")
+            .push(serde_json::json!(node));
+    });
+    let mut scene = load_slice(&bytes, "two cameras").expect("loads");
+    assert_eq!(
+        scene.cameras.len(),
+        2,
+        "{:?}",
+        scene.cameras.iter().map(|c| &c.0).collect::<Vec<_>>()
+    );
+    let first = scene.camera.expect("a camera");
+    scene.use_camera("overhead").expect("picks it");
+    let picked = scene.camera.expect("a camera");
+    assert!((picked.yfov - 0.5).abs() < 1e-6 && picked.position != first.position);
+    let err = scene.use_camera("nope").expect_err("no such camera");
+    assert!(err.to_string().contains("'overhead'"), "{err}");
+}
