@@ -26,7 +26,7 @@ the command, the passes and the block errors.
 
 Usage: reference.py NODES.json [--target 1e-3] [--batch 65536] [--max-seconds 600]
        reference.py NODES.json --image OUT.exr --width 128 --height 128 --spp 4096 [--passes 8]
-Install: pip install mitsuba
+Install: pip install mitsuba (and numpy for --image)
 """
 
 import argparse

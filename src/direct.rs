@@ -30,8 +30,8 @@ struct Emitter {
 
 /// Direct irradiance from a scene's emitters at any surface point.
 #[derive(Clone, Debug)]
-pub struct DirectLight {
-    bvh: Bvh,
+pub struct DirectLight<'a> {
+    bvh: &'a Bvh,
     emitters: Vec<Emitter>,
     normals: Vec<Vec3>,
     reflectance: Vec<[f32; 3]>,
@@ -97,10 +97,11 @@ fn unit(rng: &mut Rng) -> f32 {
     (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32
 }
 
-impl DirectLight {
-    /// Gathers `scene`'s emitters and builds the ray-tracing hierarchy;
-    /// `strata` squared shadow rays go to each emitter from each point.
-    pub fn new(scene: &Scene, strata: u32) -> Self {
+impl<'a> DirectLight<'a> {
+    /// Gathers `scene`'s emitters; `bvh` holds the scene's polygons (the
+    /// mesh's [`Mesh::occluders`], built once); `strata` squared shadow rays
+    /// go to each emitter from each point.
+    pub fn new(scene: &Scene, bvh: &'a Bvh, strata: u32) -> Self {
         let emitters = scene
             .polygons
             .iter()
@@ -116,7 +117,7 @@ impl DirectLight {
             })
             .collect();
         DirectLight {
-            bvh: Bvh::new(&scene.polygons),
+            bvh,
             emitters,
             normals: scene.polygons.iter().map(|p| p.normal).collect(),
             reflectance: scene.polygons.iter().map(|p| p.reflectance).collect(),
@@ -362,7 +363,8 @@ mod tests {
             square(Vec3::ZERO, 2.0, true, 0.0),
             square(Vec3::Y, 0.5, false, 1.0),
         ]);
-        let d = DirectLight::new(&s, 4);
+        let bvh = Bvh::new(&s.polygons);
+        let d = DirectLight::new(&s, &bvh, 4);
         let e = d.irradiance(Vec3::ZERO, 0, &mut Rng(1));
         let (a, h) = (0.5f64, 1.0f64);
         let x = a / (a * a + h * h).sqrt();
@@ -380,7 +382,8 @@ mod tests {
             square(Vec3::Y * 2.0, 0.1, false, 1.0),
             square(Vec3::Y * 1.0, 0.3, false, 0.0),
         ]);
-        let d = DirectLight::new(&s, 8);
+        let bvh = Bvh::new(&s.polygons);
+        let d = DirectLight::new(&s, &bvh, 8);
         let mut rng = Rng(3);
         assert_eq!(d.irradiance(Vec3::ZERO, 0, &mut rng), [0.0; 3]);
         let far = Vec3::new(1.5, 0.0, 0.0);

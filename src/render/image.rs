@@ -84,7 +84,8 @@ pub fn camera_image(
         return renderer.render(device, queue, mesh, radiance, camera, view);
     }
     let strata = (shadow_rays as f64).sqrt().ceil() as u32;
-    let light = DirectLight::new(scene, strata);
+    // The mesh's hierarchy holds the same polygons (built once per mesh).
+    let light = DirectLight::new(scene, &mesh.occluders, strata);
     let (near, far) = view_depth_range(mesh, camera);
     let (direct, seen) = light.image(
         camera,
