@@ -8,6 +8,7 @@
 //! - [`settings`]: the enums a render is told and the report records;
 //! - [`raytrace`], [`direct`]: exact visibility on the CPU and the camera
 //!   image's direct light (pure maths);
+//! - [`interpolate`]: per-element values to vertex values for smooth shading;
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
 //! - [`refine`]: which polygons a coarse solution says to subdivide (pure maths);
 //! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
@@ -32,6 +33,7 @@ pub mod formfactor;
 pub mod fuzz;
 pub mod gpu;
 pub mod hemisphere;
+pub mod interpolate;
 pub mod launch;
 pub mod mesh;
 pub mod output;

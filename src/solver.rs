@@ -235,6 +235,13 @@ pub struct Solver<'m> {
     mean_reflectance: [f64; 3],
     /// The mesh's area.
     total_area: f64,
+    /// The solution's own direct part per element (W/m^2 per channel): what
+    /// it reflects of the emitters' first shots of their emission. The
+    /// camera image replaces it with direct light traced exactly.
+    direct: Vec<[f64; 3]>,
+    /// Per patch, whether its emission is still unshot (every rank knows:
+    /// every rank sees every shot).
+    emission_unshot: Vec<bool>,
 }
 
 /// The area-weighted mean reflectance of a mesh, per channel.
@@ -314,6 +321,15 @@ impl<'m> Solver<'m> {
             overshoot: false,
             mean_reflectance: mean_reflectance(mesh),
             total_area: ambient_area(mesh),
+            direct: vec![[0.0; 3]; mesh.elements.len()],
+            emission_unshot: mesh
+                .patches
+                .iter()
+                .map(|p| {
+                    let e = mesh.polygons[p.polygon as usize].exitance;
+                    e.iter().any(|&x| x > 0.0)
+                })
+                .collect(),
         }
     }
 
@@ -566,6 +582,20 @@ impl<'m> Solver<'m> {
             self.unshot[i] = rest;
         }
         let area = p.area;
+        // The share of this shot that is the shooter's own emission (its
+        // first shot carries all of it), per channel.
+        let emission = mesh.polygons[p.polygon as usize].exitance;
+        let direct_share = if std::mem::take(&mut self.emission_unshot[i]) {
+            [0, 1, 2].map(|c| {
+                if region.shoot[c] > 0.0 {
+                    (emission[c] / region.shoot[c]).min(1.0)
+                } else {
+                    0.0
+                }
+            })
+        } else {
+            [0.0; 3]
+        };
         let mut form_factor_sum = 0.0;
         for t in ff {
             form_factor_sum += t.form_factor;
@@ -579,6 +609,7 @@ impl<'m> Solver<'m> {
             let patch_share = el.area / mesh.patches[el.patch as usize].area;
             for (c, r) in rho.iter().enumerate() {
                 let d = r * t.radiosity[c] * scale;
+                self.direct[j][c] += d * direct_share[c];
                 self.radiosity[j][c] += d;
                 self.element_unshot[j][c] += d;
                 self.unshot[el.patch as usize][c] += d * patch_share;
@@ -632,24 +663,49 @@ impl<'m> Solver<'m> {
     /// This rank's elements' unshot radiosity, in [`Solver::local_state`]'s
     /// element order.
     pub fn local_element_unshot(&self) -> Vec<f64> {
+        self.own_elements(&self.element_unshot)
+    }
+
+    /// Installs every rank's [`Solver::local_element_unshot`] (rank order).
+    pub fn assemble_element_unshot(&mut self, parts: &[Vec<f64>]) {
+        let mut v = std::mem::take(&mut self.element_unshot);
+        self.install_elements(&mut v, parts);
+        self.element_unshot = v;
+    }
+
+    /// This rank's elements' direct part ([`Solver::direct`]), in
+    /// [`Solver::local_state`]'s element order.
+    pub fn local_direct(&self) -> Vec<f64> {
+        self.own_elements(&self.direct)
+    }
+
+    /// Installs every rank's [`Solver::local_direct`] (rank order).
+    pub fn assemble_direct(&mut self, parts: &[Vec<f64>]) {
+        let mut v = std::mem::take(&mut self.direct);
+        self.install_elements(&mut v, parts);
+        self.direct = v;
+    }
+
+    /// `values` of this rank's elements, flattened in [`Solver::local_state`]'s order.
+    fn own_elements(&self, values: &[[f64; 3]]) -> Vec<f64> {
         let mut out = Vec::new();
         for i in self.own_patches() {
             for j in self.mesh.patches[i].elements.clone() {
-                out.extend_from_slice(&self.element_unshot[j as usize]);
+                out.extend_from_slice(&values[j as usize]);
             }
         }
         out
     }
 
-    /// Installs every rank's [`Solver::local_element_unshot`] (rank order).
-    pub fn assemble_element_unshot(&mut self, parts: &[Vec<f64>]) {
+    /// Writes every rank's [`Solver::own_elements`] part (rank order) into `values`.
+    fn install_elements(&self, values: &mut [[f64; 3]], parts: &[Vec<f64>]) {
         let ranks = parts.len();
         for (r, part) in parts.iter().enumerate() {
             let mut it = part.chunks_exact(3);
             for i in owned_patches(r, ranks, self.mesh.patches.len()) {
                 for j in self.mesh.patches[i].elements.clone() {
                     if let Some(x) = it.next() {
-                        self.element_unshot[j as usize] = [x[0], x[1], x[2]];
+                        values[j as usize] = [x[0], x[1], x[2]];
                     }
                 }
             }
@@ -804,6 +860,17 @@ impl<'m> Solver<'m> {
             .iter()
             .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
             .collect()
+    }
+
+    /// Per element, whether no light has reached it (it holds no
+    /// radiosity of its own: hidden under a box, or above a light panel).
+    pub fn unlit(&self) -> Vec<bool> {
+        (0..self.radiosity.len() as u32).map(|j| !self.lit(j)).collect()
+    }
+
+    /// The solution's own direct part per element (see the field's docs).
+    pub fn direct(&self) -> &[[f64; 3]] {
+        &self.direct
     }
 
     /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.

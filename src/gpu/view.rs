@@ -42,24 +42,15 @@ struct Vertex {
     radiance: [f32; 3],
 }
 
-fn vertices(mesh: &Mesh, radiance: &[[f32; 3]], shading: Shading) -> Vec<Vertex> {
+fn vertices(
+    mesh: &Mesh,
+    radiance: &[[f32; 3]],
+    shading: Shading,
+    hidden: Option<&[bool]>,
+) -> Vec<Vertex> {
     let mut out = Vec::with_capacity(mesh.elements.len() * 6);
     let smooth: Vec<[f32; 3]> = if shading == Shading::Smooth {
-        let mut sum = vec![[0.0f32; 3]; mesh.vertices.len()];
-        let mut count = vec![0u32; mesh.vertices.len()];
-        for (e, r) in mesh.elements.iter().zip(radiance) {
-            let distinct = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
-            for &v in &e.vertices[..distinct] {
-                for c in 0..3 {
-                    sum[v as usize][c] += r[c];
-                }
-                count[v as usize] += 1;
-            }
-        }
-        sum.iter()
-            .zip(&count)
-            .map(|(s, &n)| s.map(|x| x / n.max(1) as f32))
-            .collect()
+        crate::interpolate::vertex_values(mesh, radiance, hidden)
     } else {
         Vec::new()
     };
@@ -263,6 +254,23 @@ impl ViewRenderer {
         camera: &Camera,
         settings: &ViewSettings,
     ) -> Result<Vec<[f32; 3]>, GpuError> {
+        self.render_masked(device, queue, mesh, radiance, None, camera, settings)
+    }
+
+    /// [`ViewRenderer::render`], where smooth shading leaves the elements
+    /// marked `hidden` (no light reached them) out of their vertices' values
+    /// ([`crate::interpolate::vertex_values`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn render_masked(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        mesh: &Mesh,
+        radiance: &[[f32; 3]],
+        hidden: Option<&[bool]>,
+        camera: &Camera,
+        settings: &ViewSettings,
+    ) -> Result<Vec<[f32; 3]>, GpuError> {
         let ss = settings.supersample.max(1);
         let (w, h) = (settings.width * ss, settings.height * ss);
         let max_dim = device.limits().max_texture_dimension_2d;
@@ -271,7 +279,7 @@ impl ViewRenderer {
                 "image {w}x{h} (limit {max_dim})"
             )));
         }
-        let verts = vertices(mesh, radiance, settings.shading);
+        let verts = vertices(mesh, radiance, settings.shading, hidden);
         let (near, far) = view_depth_range(mesh, camera);
         let aspect = settings.width as f32 / settings.height as f32;
         let view = Mat4::from_rotation_translation(camera.rotation, camera.position).inverse();

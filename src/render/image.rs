@@ -62,7 +62,21 @@ pub fn solution_image(
         camera,
         view,
         opts.shadow_rays,
+        Some(&Parts {
+            direct: solver.direct(),
+            unlit: solver.unlit(),
+        }),
     )
+}
+
+/// What the solver knows beyond the radiance, for a better picture.
+pub struct Parts<'a> {
+    /// Its own direct part per element ([`Solver::direct`]): replaced by
+    /// the traced direct light, so only the indirect rest is interpolated.
+    pub direct: &'a [[f64; 3]],
+    /// The elements no light reached ([`Solver::unlit`]): left out of
+    /// their vertices' smooth values.
+    pub unlit: Vec<bool>,
 }
 
 /// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2, the solution's
@@ -77,11 +91,13 @@ pub fn camera_image(
     camera: &Camera,
     view: &ViewSettings,
     shadow_rays: u32,
+    parts: Option<&Parts>,
 ) -> Result<Vec<[f32; 3]>, GpuError> {
     let (device, queue) = (&gpu.device, &gpu.queue);
     let mut renderer = ViewRenderer::new(device);
+    let unlit = parts.map(|p| p.unlit.as_slice());
     if shadow_rays == 0 {
-        return renderer.render(device, queue, mesh, radiance, camera, view);
+        return renderer.render_masked(device, queue, mesh, radiance, unlit, camera, view);
     }
     let strata = (shadow_rays as f64).sqrt().ceil() as u32;
     // The mesh's hierarchy holds the same polygons (built once per mesh).
@@ -94,18 +110,26 @@ pub fn camera_image(
         near,
         far,
     );
-    let element_direct = light.element_irradiance(mesh, &seen);
-    let rest: Vec<[f32; 3]> = mesh
-        .elements
-        .iter()
-        .zip(radiance)
-        .zip(&element_direct)
-        .map(|((e, r), d)| {
-            let rho = mesh.polygons[e.polygon as usize].reflectance;
-            [0, 1, 2].map(|c| r[c] - (rho[c] * d[c] / std::f64::consts::PI) as f32)
-        })
-        .collect();
-    let mut pixels = renderer.render(device, queue, mesh, &rest, camera, view)?;
+    let rest: Vec<[f32; 3]> = match parts.map(|p| p.direct) {
+        Some(direct) => radiance
+            .iter()
+            .zip(direct)
+            .map(|(r, d)| [0, 1, 2].map(|c| r[c] - (d[c] / std::f64::consts::PI) as f32))
+            .collect(),
+        None => {
+            let element_direct = light.element_irradiance(mesh, &seen);
+            mesh.elements
+                .iter()
+                .zip(radiance)
+                .zip(&element_direct)
+                .map(|((e, r), d)| {
+                    let rho = mesh.polygons[e.polygon as usize].reflectance;
+                    [0, 1, 2].map(|c| r[c] - (rho[c] * d[c] / std::f64::consts::PI) as f32)
+                })
+                .collect()
+        }
+    };
+    let mut pixels = renderer.render_masked(device, queue, mesh, &rest, unlit, camera, view)?;
     for (p, d) in pixels.iter_mut().zip(&direct) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution

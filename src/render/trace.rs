@@ -24,8 +24,12 @@ pub fn gather_whole<'m>(
     } else {
         None
     };
+    let gd = comm.gather_f64(&solver.local_direct());
     let mut whole = Solver::new(solver.mesh());
     whole.assemble(&gb?, &gu?);
+    if let Some(d) = &gd {
+        whole.assemble_direct(d);
+    }
     if let Some(e) = &ge {
         whole.assemble_element_unshot(e);
     }
