@@ -6,7 +6,10 @@
 //! `RADCKPT1`, the header's length (u64 LE), the header (JSON: what the
 //! state is for, the refinement, the trace so far), then the state's f64
 //! arrays as little-endian bits: radiosity and unshot radiosity per element
-//! (3 each), unshot radiosity per patch (3), the retention pair. Bits, not
+//! (3 each), unshot radiosity per patch (3), the solution's own direct part
+//! per element (3), the retention pair, and one byte per patch (1: its
+//! emission is still unshot). A file without the direct part and the bytes
+//! (written before they were kept) still resumes. Bits, not
 //! decimal text, so a resumed solve continues from exactly the same numbers.
 //! Written atomically (a temporary file renamed), so a crash while writing
 //! leaves the previous checkpoint.
@@ -94,8 +97,14 @@ impl Checkpoint {
         flat(&s.radiosity, &mut out);
         flat(&s.element_unshot, &mut out);
         flat(&s.unshot, &mut out);
+        if !s.direct.is_empty() {
+            flat(&s.direct, &mut out);
+        }
         for x in s.retention {
             out.extend_from_slice(&x.to_bits().to_le_bytes());
+        }
+        if !s.direct.is_empty() {
+            out.extend(s.emission_unshot.iter().map(|&b| b as u8));
         }
         out
     }
@@ -123,6 +132,14 @@ impl Checkpoint {
             serde_json::from_slice(take(len)?).map_err(|e| bad(&format!("header: {e}")))?;
         let shots = u64_at(take(8)?);
         let [patches, elements] = header.counts;
+        // Without the direct part and the emission bytes (an older file):
+        let old_size = (16 + 8 + 16)
+            + len
+            + elements
+                .checked_mul(48)
+                .and_then(|x| x.checked_add(patches.checked_mul(24)?))
+                .ok_or_else(|| bad("counts too large"))?;
+        let has_direct = bytes.len() > old_size;
         let mut triples = |n: usize| -> Result<Vec<[f64; 3]>, CheckpointError> {
             let raw = take(n.checked_mul(24).ok_or_else(|| bad("counts too large"))?)?;
             Ok(raw
@@ -133,11 +150,21 @@ impl Checkpoint {
         let radiosity = triples(elements)?;
         let element_unshot = triples(elements)?;
         let unshot = triples(patches)?;
+        let direct = if has_direct {
+            triples(elements)?
+        } else {
+            Vec::new()
+        };
         let r = take(16)?;
         let retention = [
             f64::from_bits(u64_at(&r[..8])),
             f64::from_bits(u64_at(&r[8..])),
         ];
+        let emission_unshot = if has_direct {
+            take(patches)?.iter().map(|&b| b != 0).collect()
+        } else {
+            Vec::new()
+        };
         if at != bytes.len() {
             return Err(bad("trailing bytes"));
         }
@@ -149,6 +176,8 @@ impl Checkpoint {
                 element_unshot,
                 shots,
                 retention,
+                direct,
+                emission_unshot,
             },
         })
     }
@@ -198,6 +227,8 @@ mod tests {
                 unshot: vec![[7.0, 8.0, 9.0]],
                 shots: 42,
                 retention: [0.7, 0.6],
+                direct: vec![[0.5, 0.25, 0.0], [1e-3, 2.0, 3.0]],
+                emission_unshot: vec![true],
             },
         }
     }
@@ -211,6 +242,12 @@ mod tests {
             s.radiosity.iter().flatten().map(|x| x.to_bits()).collect()
         };
         assert_eq!(bits(&back.state), bits(&c.state));
+        // One written before the direct part was kept still reads.
+        let mut old = c.clone();
+        old.state.direct.clear();
+        old.state.emission_unshot.clear();
+        let back = Checkpoint::from_bytes(Path::new("c"), &old.to_bytes()).expect("parses");
+        assert_eq!(back, old);
     }
 
     #[test]

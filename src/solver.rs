@@ -163,6 +163,11 @@ pub struct SolverState {
     pub shots: u64,
     /// Shot power and landed power so far (the ambient term's retention).
     pub retention: [f64; 2],
+    /// The solution's own direct part per element ([`Solver::direct`]);
+    /// empty when unknown (a checkpoint from before it was kept).
+    pub direct: Vec<[f64; 3]>,
+    /// Per patch, whether its emission is still unshot (empty with `direct`).
+    pub emission_unshot: Vec<bool>,
 }
 
 /// Where a solution's emitted power has gone, W (sum over RGB). Every shot
@@ -242,6 +247,8 @@ pub struct Solver<'m> {
     /// Per patch, whether its emission is still unshot (every rank knows:
     /// every rank sees every shot).
     emission_unshot: Vec<bool>,
+    /// Whether `direct` is known (not after resuming an old checkpoint).
+    direct_known: bool,
 }
 
 /// The area-weighted mean reflectance of a mesh, per channel.
@@ -330,6 +337,7 @@ impl<'m> Solver<'m> {
                     e.iter().any(|&x| x > 0.0)
                 })
                 .collect(),
+            direct_known: true,
         }
     }
 
@@ -721,6 +729,16 @@ impl<'m> Solver<'m> {
             element_unshot: self.element_unshot.clone(),
             shots: self.shots,
             retention: self.retention,
+            direct: if self.direct_known {
+                self.direct.clone()
+            } else {
+                Vec::new()
+            },
+            emission_unshot: if self.direct_known {
+                self.emission_unshot.clone()
+            } else {
+                Vec::new()
+            },
         }
     }
 
@@ -740,6 +758,19 @@ impl<'m> Solver<'m> {
         self.element_unshot.clone_from(&state.element_unshot);
         self.shots = state.shots;
         self.retention = state.retention;
+        self.direct_known = state.direct.len() == e && state.emission_unshot.len() == p;
+        if self.direct_known {
+            self.direct.clone_from(&state.direct);
+            self.emission_unshot.clone_from(&state.emission_unshot);
+        } else {
+            // An old checkpoint: the image falls back to tracing each
+            // element's direct light; emitters that shot do not shoot
+            // their emission again.
+            self.direct = vec![[0.0; 3]; e];
+            if state.shots > 0 {
+                self.emission_unshot = vec![false; p];
+            }
+        }
         Ok(())
     }
 
@@ -769,11 +800,14 @@ impl<'m> Solver<'m> {
         }
     }
 
-    /// Takes over `other`'s retention and energy records (for a solver
-    /// assembled from ranks).
+    /// Takes over `other`'s retention and energy records and which
+    /// emitters have shot (for a solver assembled from ranks: every rank
+    /// holds these whole).
     pub fn copy_retention(&mut self, other: &Solver) {
         self.retention = other.retention;
         self.energy = other.energy;
+        self.emission_unshot.clone_from(&other.emission_unshot);
+        self.direct_known = other.direct_known;
     }
 
     /// Records that a shot of `shot` W (signed, sum over RGB) delivered
@@ -865,12 +899,16 @@ impl<'m> Solver<'m> {
     /// Per element, whether no light has reached it (it holds no
     /// radiosity of its own: hidden under a box, or above a light panel).
     pub fn unlit(&self) -> Vec<bool> {
-        (0..self.radiosity.len() as u32).map(|j| !self.lit(j)).collect()
+        (0..self.radiosity.len() as u32)
+            .map(|j| !self.lit(j))
+            .collect()
     }
 
-    /// The solution's own direct part per element (see the field's docs).
-    pub fn direct(&self) -> &[[f64; 3]] {
-        &self.direct
+    /// The solution's own direct part per element, W/m^2 per channel: the
+    /// light its elements reflect of the emitters' first shots of their
+    /// emission (None after resuming a checkpoint that did not keep it).
+    pub fn direct(&self) -> Option<&[[f64; 3]]> {
+        self.direct_known.then_some(self.direct.as_slice())
     }
 
     /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.

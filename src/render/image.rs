@@ -73,7 +73,8 @@ pub fn solution_image(
 pub struct Parts<'a> {
     /// Its own direct part per element ([`Solver::direct`]): replaced by
     /// the traced direct light, so only the indirect rest is interpolated.
-    pub direct: &'a [[f64; 3]],
+    /// `None` when unknown (then each element's traced mean is taken out).
+    pub direct: Option<&'a [[f64; 3]]>,
     /// The elements no light reached ([`Solver::unlit`]): left out of
     /// their vertices' smooth values.
     pub unlit: Vec<bool>,
@@ -110,7 +111,7 @@ pub fn camera_image(
         near,
         far,
     );
-    let rest: Vec<[f32; 3]> = match parts.map(|p| p.direct) {
+    let rest: Vec<[f32; 3]> = match parts.and_then(|p| p.direct) {
         Some(direct) => radiance
             .iter()
             .zip(direct)

@@ -44,6 +44,10 @@ fn default_images_are_within_two_and_a_half_percent_of_path_traced_images() {
         "family-boxes-1",
         "family-slab-1",
         "family-corridor-1",
+        // Above 2.5 % until the image interpolated only the solution's
+        // indirect part, without hidden elements, extrapolated at edges.
+        "family-floor-1",
+        "family-l-room-1",
     ] {
         let s = score(scene, radiosity::render::image::DEFAULT_SHADOW_RAYS);
         assert!(s <= 0.025, "{scene}: SMAPE {:.2} % > 2.5 %", s * 100.0);

@@ -43,7 +43,7 @@ fn reference(scene: &str) -> Vec<(String, f64, f64)> {
 
 #[test]
 fn default_renders_are_within_one_percent_mean_and_three_worst_of_path_traced_references() {
-    for scene in [
+    check([
         "cornell",
         "family-l-room-1",
         "family-slab-1",
@@ -54,7 +54,26 @@ fn default_renders_are_within_one_percent_mean_and_three_worst_of_path_traced_re
         // walls: above 3 % worst before the contact split.
         "family-stacked-1",
         "family-opening-1",
-    ] {
+    ]);
+}
+
+/// Seed 2 of the family: scenes that no default and no fix was chosen
+/// on (their references were made after the defaults were fixed).
+#[test]
+fn held_out_scenes_are_within_one_percent_mean_and_three_worst() {
+    check([
+        "family-boxes-2",
+        "family-l-room-2",
+        "family-corridor-2",
+        "family-opening-2",
+        "family-floor-2",
+    ]);
+}
+
+/// Default renders of `scenes` against their references: area-weighted
+/// mean node error <= 1 %, worst node <= 3 % (emitters left out).
+fn check<const N: usize>(scenes: [&str; N]) {
+    for scene in scenes {
         let reference = reference(scene);
         let s = radiosity::scene::open(scene).expect("scene");
         let opts = RenderOptions {
