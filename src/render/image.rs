@@ -54,49 +54,52 @@ pub fn solution_image(
     view: &ViewSettings,
 ) -> Result<Vec<[f32; 3]>, GpuError> {
     let radiance = solver.display_radiance(opts.ambient);
+    let parts = Parts {
+        radiance: &radiance,
+        direct: solver.direct(),
+        unlit: Some(solver.unlit()),
+    };
     camera_image(
         gpu,
         scene,
         solver.mesh(),
-        &radiance,
+        &parts,
         camera,
         view,
         opts.shadow_rays,
-        Some(&Parts {
-            direct: solver.direct(),
-            unlit: solver.unlit(),
-        }),
     )
 }
 
-/// What the solver knows beyond the radiance, for a better picture.
+/// A solution as the image needs it: per element its radiance, and what
+/// the solver knows beyond it for a better picture.
 pub struct Parts<'a> {
+    /// Display radiance per element (W sr^-1 m^-2).
+    pub radiance: &'a [[f32; 3]],
     /// Its own direct part per element ([`Solver::direct`]): replaced by
     /// the traced direct light, so only the indirect rest is interpolated.
     /// `None` when unknown (then each element's traced mean is taken out).
     pub direct: Option<&'a [[f64; 3]]>,
     /// The elements no light reached ([`Solver::unlit`]): left out of
-    /// their vertices' smooth values.
-    pub unlit: Vec<bool>,
+    /// their vertices' smooth values (`None`: every element votes).
+    pub unlit: Option<Vec<bool>>,
 }
 
-/// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2, the solution's
-/// display radiance) from `camera`; with `shadow_rays` > 0 the direct light
+/// Renders `mesh` with the solution `parts` from `camera`; with `shadow_rays` > 0 the direct light
 /// is traced per sample with about that many shadow rays per emitter
 /// (rounded to a square), otherwise interpolated like the rest.
 pub fn camera_image(
     gpu: &Gpu,
     scene: &Scene,
     mesh: &Mesh,
-    radiance: &[[f32; 3]],
+    parts: &Parts,
     camera: &Camera,
     view: &ViewSettings,
     shadow_rays: u32,
-    parts: Option<&Parts>,
 ) -> Result<Vec<[f32; 3]>, GpuError> {
     let (device, queue) = (&gpu.device, &gpu.queue);
     let mut renderer = ViewRenderer::new(device);
-    let unlit = parts.map(|p| p.unlit.as_slice());
+    let unlit = parts.unlit.as_deref();
+    let radiance = parts.radiance;
     if shadow_rays == 0 {
         return renderer.render_masked(device, queue, mesh, radiance, unlit, camera, view);
     }
@@ -111,7 +114,7 @@ pub fn camera_image(
         near,
         far,
     );
-    let rest: Vec<[f32; 3]> = match parts.and_then(|p| p.direct) {
+    let rest: Vec<[f32; 3]> = match parts.direct {
         Some(direct) => radiance
             .iter()
             .zip(direct)
