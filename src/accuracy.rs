@@ -85,6 +85,14 @@ pub struct AccuracyArgs {
     /// to docs/bench/regimes.{svg,png,csv} (or --out).
     #[arg(long)]
     regimes: bool,
+    /// Chart refinement by need against uniform meshes instead (the camera
+    /// image's SMAPE against its path-traced reference, and the node errors,
+    /// against elements and solve time): the default, shooters only, a finer
+    /// receiver tolerance and six uniform patch sizes, on the scenes given
+    /// with --scenes (default: the family scenes with image references), to
+    /// docs/bench/receivers (or --out).
+    #[arg(long)]
+    receivers: bool,
     /// Largest samples per sensor for the path tracer (it also stops once a
     /// level takes more than a minute).
     #[arg(long, default_value_t = 1 << 24)]
@@ -92,6 +100,11 @@ pub struct AccuracyArgs {
 }
 
 impl AccuracyArgs {
+    /// `--scenes`' default.
+    fn default_scenes() -> Vec<String> {
+        ["squares", "cornell", "cubes-4"].map(String::from).to_vec()
+    }
+
     fn out_dir(&self) -> PathBuf {
         self.out.clone().unwrap_or_else(|| {
             PathBuf::from(if self.projections {
@@ -738,6 +751,19 @@ pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
             .unwrap_or_else(|| PathBuf::from("docs/bench"));
         std::fs::create_dir_all(&out)?;
         return crate::regimes::run(&gpu, &out);
+    }
+    if args.receivers {
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("docs/bench/receivers"));
+        let default = AccuracyArgs::default_scenes();
+        let scenes: Vec<String> = if args.scenes == default {
+            crate::receivers::SCENES.map(String::from).to_vec()
+        } else {
+            args.scenes.clone()
+        };
+        return crate::receivers::run(&gpu, &scenes, &solve.options(), &out);
     }
     let out = args.out_dir();
     std::fs::create_dir_all(&out)?;

@@ -21,6 +21,7 @@ use std::time::{Duration, Instant};
 
 mod accuracy;
 mod bench;
+mod receivers;
 mod regimes;
 
 /// Progressive radiosity with equal-angle hemisphere form factors rasterised by wgpu.
@@ -128,12 +129,18 @@ pub struct SolveArgs {
     /// Refinement passes by need: the mesh starts 2^N times coarser than the
     /// automatic rule's (or at the scene's own subdivision), each pass solves
     /// it roughly and doubles the patch grid of polygons whose shooters cast
-    /// penumbrae onto a noticeable share of the light, and the element grid of
-    /// quads whose neighbouring elements differ a lot (README "Refinement by
-    /// need"). 0: the mesh as given. Hybrid form factors only; `--patch-size`
-    /// fixes the mesh.
+    /// penumbrae onto a noticeable share of the light, or whose receivers
+    /// hold their light unevenly (see --refine-receivers; README "Refinement
+    /// by need"). 0: the mesh as given. Hybrid form factors only;
+    /// `--patch-size` fixes the mesh.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=6))]
     refine: u32,
+    /// Refinement by need doubles the patch grid of a polygon one of whose
+    /// patches holds its light so unevenly (sum over its elements of area x
+    /// |B - the patch's mean|) that a uniform patch would misplace more than
+    /// this fraction of the emitted power; 0: only shooters ask.
+    #[arg(long, default_value_t = radiosity::mesh::DEFAULT_RECEIVER_TOL, value_parser = fraction)]
+    refine_receivers: f64,
     /// Cap on patches along one polygon edge (automatic subdivision).
     #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=4096))]
     max_patches_per_edge: u32,
@@ -192,6 +199,7 @@ impl SolveArgs {
                 near_field_ratio: self.near_field_ratio,
                 max_patches_per_edge: self.max_patches_per_edge,
                 refine: self.refine,
+                receiver_tol: self.refine_receivers,
                 ..MeshSettings::default()
             },
             raster_pieces: self.raster_pieces,

@@ -14,11 +14,20 @@
 //! smaller shooter narrows that error. In the 64-cube room this picks the
 //! light and the ceiling above it and nothing else.
 //!
-//! Receivers are refined with their patches (each keeps its element grid).
-//! A separate receiver criterion (neighbouring elements differing by more
-//! than half the polygon's mean luminance) was tried: it refined 36 polygons
-//! of the 64-cube room, raised the node errors and cost 4-10x the time, so
-//! it is not used (see the time-to-accuracy notes in the README).
+//! Receivers are refined by a second criterion: a polygon one of whose
+//! patches holds its light unevenly (the sum over its elements of area
+//! times |B - the patch's mean B|, the power one uniform patch in its place
+//! would misplace) by more than `receiver_tol` of the emitted power
+//! ([`crate::mesh::MeshSettings::receiver_tol`], `--refine-receivers`) gets
+//! its patch grid doubled too (each patch keeps its element grid, so its
+//! elements halve with it). A light pool on the floor of a room lit through
+//! a small opening is the case: no occluder there casts a penumbra, yet its
+//! large patches and elements smear the pool's light and the indirect
+//! light it sheds (docs/accuracy.md, "Receivers refined by need"). An
+//! earlier receiver criterion (neighbouring elements differing by more than
+//! half the polygon's mean luminance, whatever the power involved) refined
+//! 36 polygons of the 64-cube room and cost 4-10x the time; this one weighs
+//! the difference by the power it carries.
 //!
 //! The criterion reads only quantities that every rank count computes
 //! identically (the shooters' powers and fixed-point shares summed over
@@ -40,6 +49,25 @@ pub struct PatchStats {
     /// near receivers lost to occlusion, and the row total plus the latter
     /// (both [`crate::formfactor::SHARE_ONE`] fixed point, from its first uncached shot).
     pub penumbra: [u64; 2],
+    /// How unevenly its elements hold their light at the end of the pass
+    /// (`Solver::patch_unevenness`), W.
+    pub uneven: f64,
+}
+
+/// What a pass decides for one polygon.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Decision {
+    /// Its shooters cast penumbrae (see [`SHOOTER_TOL`]).
+    pub shooter: bool,
+    /// Its receivers hold their light unevenly (see the module docs).
+    pub receiver: bool,
+}
+
+impl Decision {
+    /// Whether the polygon's patch grid is doubled.
+    pub fn refine(&self) -> bool {
+        self.shooter || self.receiver
+    }
 }
 
 impl PatchStats {
@@ -53,17 +81,28 @@ impl PatchStats {
     }
 }
 
-/// Per polygon: whether to double its patch grid.
-pub fn decide(mesh: &Mesh, patches: &[PatchStats], emitted: f64) -> Vec<bool> {
+/// Per polygon: whether to double its patch grid, and why (`receiver_tol`:
+/// see the module docs; 0 turns the receivers' criterion off).
+pub fn decide(
+    mesh: &Mesh,
+    patches: &[PatchStats],
+    emitted: f64,
+    receiver_tol: f64,
+) -> Vec<Decision> {
     mesh.polygons
         .iter()
         .map(|poly| {
-            let shooters = patches
+            let own = patches
                 .get(poly.patches.start as usize..poly.patches.end as usize)
-                .unwrap_or(&[])
-                .iter()
-                .any(|p| emitted > 0.0 && p.power * p.penumbra_share() > SHOOTER_TOL * emitted);
-            shooters
+                .unwrap_or(&[]);
+            let lit = emitted > 0.0;
+            Decision {
+                shooter: own
+                    .iter()
+                    .any(|p| lit && p.power * p.penumbra_share() > SHOOTER_TOL * emitted),
+                receiver: receiver_tol > 0.0
+                    && own.iter().any(|p| lit && p.uneven > receiver_tol * emitted),
+            }
         })
         .collect()
 }
@@ -75,6 +114,8 @@ mod tests {
     use crate::mesh::MeshSettings;
     use crate::scene::{Polygon, Scene, Subdivision};
     use glam::Vec3;
+
+    const TOL: f64 = crate::mesh::DEFAULT_RECEIVER_TOL;
 
     fn square() -> Mesh {
         let vertices = vec![
@@ -112,10 +153,25 @@ mod tests {
         patches[1] = PatchStats {
             power: 0.1,
             penumbra: [one / 100, one],
+            uneven: 0.0,
         };
-        assert_eq!(decide(&mesh, &patches, 1.0), vec![false]);
+        assert!(!decide(&mesh, &patches, 1.0, TOL)[0].refine());
         // With a 10 % share: 0.01 of the emitted power, refined.
         patches[1].penumbra = [one / 10, one];
-        assert_eq!(decide(&mesh, &patches, 1.0), vec![true]);
+        let d = decide(&mesh, &patches, 1.0, TOL)[0];
+        assert!(d.shooter && !d.receiver, "{d:?}");
+    }
+
+    #[test]
+    fn receivers_refine_by_the_power_they_hold_unevenly() {
+        let mesh = square();
+        let mut patches = vec![PatchStats::default(); mesh.patches.len()];
+        patches[2].uneven = 0.5 * TOL;
+        assert!(!decide(&mesh, &patches, 1.0, TOL)[0].refine());
+        patches[2].uneven = 2.0 * TOL;
+        let d = decide(&mesh, &patches, 1.0, TOL)[0];
+        assert!(d.receiver && !d.shooter, "{d:?}");
+        // A tolerance of 0 turns the criterion off.
+        assert!(!decide(&mesh, &patches, 1.0, 0.0)[0].refine());
     }
 }

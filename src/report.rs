@@ -153,8 +153,19 @@ pub struct Refinement {
     pub seconds: f64,
     /// Polygons whose patch grid (shooters) was refined at least once.
     pub shooter_polygons: u32,
-    /// Doublings of patch grids, over all polygons and passes.
+    /// Doublings of patch grids for shooters, over all polygons and passes.
     pub shooter_refinements: u32,
+    /// Polygons whose patch grid was refined at least once because its
+    /// receivers held their light unevenly (`refine::RECEIVER_TOL`).
+    #[serde(default)]
+    pub receiver_polygons: u32,
+    /// Doublings of patch grids for uneven receivers (a polygon refined for
+    /// both reasons counts in both), over all polygons and passes.
+    #[serde(default)]
+    pub receiver_refinements: u32,
+    /// Patches and elements of the final mesh.
+    #[serde(default)]
+    pub end: [usize; 2],
     /// Patches and elements of the first (coarsest) mesh.
     pub start: [usize; 2],
 }

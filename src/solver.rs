@@ -896,6 +896,35 @@ impl<'m> Solver<'m> {
             .collect()
     }
 
+    /// Per patch, how unevenly its elements hold their light, W: the sum over
+    /// its elements of area times |B - the patch's mean B| (over RGB), the
+    /// power that one uniform patch in its place would misplace. Only this
+    /// rank's patches are measured (the others are 0).
+    pub fn patch_unevenness(&self) -> Vec<f64> {
+        let mesh = self.mesh;
+        let mut out = vec![0.0; mesh.patches.len()];
+        for i in self.own_patches() {
+            let p = &mesh.patches[i];
+            let mut mean = [0.0; 3];
+            for j in p.elements.clone() {
+                let (b, a) = (self.radiosity[j as usize], mesh.elements[j as usize].area);
+                for c in 0..3 {
+                    mean[c] += b[c] * a / p.area;
+                }
+            }
+            out[i] = p
+                .elements
+                .clone()
+                .map(|j| {
+                    let b = self.radiosity[j as usize];
+                    let a = mesh.elements[j as usize].area;
+                    (0..3).map(|c| (b[c] - mean[c]).abs()).sum::<f64>() * a
+                })
+                .sum();
+        }
+        out
+    }
+
     /// Per element, whether no light has reached it (it holds no
     /// radiosity of its own: hidden under a box, or above a light panel).
     pub fn unlit(&self) -> Vec<bool> {

@@ -233,8 +233,14 @@ fn subdivision_text(s: &Subdivision) -> String {
 }
 
 fn mesh_text(m: &MeshSettings) -> String {
+    // Checkpoints from before receivers were refined resume with it off.
+    let receivers = if m.receiver_tol > 0.0 {
+        format!(", receivers: {:?}", m.receiver_tol)
+    } else {
+        String::new()
+    };
     format!(
-        "MeshSettings {{ patch_size: {}, element_size: {}, near_field_ratio: {:?}, max_patches_per_edge: {}, max_elements_per_edge: {}, refine: {} }}",
+        "MeshSettings {{ patch_size: {}, element_size: {}, near_field_ratio: {:?}, max_patches_per_edge: {}, max_elements_per_edge: {}, refine: {}{receivers} }}",
         option_text(m.patch_size.map(|x| format!("{x:?}"))),
         option_text(m.element_size.map(|x| format!("{x:?}"))),
         m.near_field_ratio,
@@ -267,7 +273,19 @@ mod tests {
                 ..MeshSettings::default()
             },
         ] {
-            assert_eq!(mesh_text(&m), format!("{m:?}"));
+            // Checkpoints were written before receivers were refined: with
+            // the receivers' criterion off, the text is theirs.
+            let off = MeshSettings {
+                receiver_tol: 0.0,
+                ..m
+            };
+            let old = format!("{off:?}").replace(", receiver_tol: 0.0", "");
+            assert_eq!(mesh_text(&off), old);
+            assert!(
+                mesh_text(&m).ends_with(", receivers: 0.0005 }"),
+                "{}",
+                mesh_text(&m)
+            );
         }
         for m in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
             assert_eq!(m.name(), format!("{m:?}"));

@@ -33,6 +33,7 @@ pub fn refined_mesh(
     let mut summary = Refinement::default();
     let levels = settings.refine;
     let mut shooters = vec![false; n];
+    let mut receivers = vec![false; n];
     for pass in 0..levels {
         let mesh = Mesh::build_refined(scene, &settings, &factors);
         if pass == 0 {
@@ -43,17 +44,23 @@ pub fn refined_mesh(
         summary.shots += shots;
         summary.seconds += seconds;
         let mut changed = 0;
-        for ((f, refined), &d) in factors.iter_mut().zip(&mut shooters).zip(&decided) {
-            if d {
-                *f *= 2;
-                *refined = true;
+        for (i, d) in decided.iter().enumerate() {
+            if d.refine() {
+                factors[i] *= 2;
                 changed += 1;
             }
+            shooters[i] |= d.shooter;
+            receivers[i] |= d.receiver;
+            summary.shooter_refinements += d.shooter as u32;
+            summary.receiver_refinements += d.receiver as u32;
         }
-        summary.shooter_refinements += changed;
         if comm.rank() == 0 {
+            let (s, r) = (
+                decided.iter().filter(|d| d.shooter).count(),
+                decided.iter().filter(|d| d.receiver).count(),
+            );
             log::info!(
-                "refinement pass {}: {} patches, {} shots; {changed} polygons get finer shooters",
+                "refinement pass {}: {} patches, {} shots; {changed} polygons refined ({s} for their shooters, {r} for uneven receivers)",
                 pass + 1,
                 mesh.patches.len(),
                 shots,
@@ -64,15 +71,14 @@ pub fn refined_mesh(
         }
     }
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
-    Ok((
-        Mesh::build_refined(scene, &settings, &factors),
-        summary,
-        factors,
-    ))
+    summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
+    let mesh = Mesh::build_refined(scene, &settings, &factors);
+    summary.end = [mesh.patches.len(), mesh.elements.len()];
+    Ok((mesh, summary, factors))
 }
 
-/// One coarse solve of `mesh`: which polygons' patch grids to double, the
-/// shots it took and its solve seconds (set-up left out).
+/// One coarse solve of `mesh`: which polygons' patch grids to double (and
+/// why), the shots it took and its solve seconds (set-up left out).
 fn one_pass(
     gpu: &Gpu,
     scene: &Scene,
@@ -80,7 +86,7 @@ fn one_pass(
     opts: &RenderOptions,
     comm: &dyn Collectives,
     progress: &mut dyn FnMut(&Progress),
-) -> Result<(Vec<bool>, u64, f64), RenderError> {
+) -> Result<(Vec<refine::Decision>, u64, f64), RenderError> {
     let mut source = GpuFormFactors::new(gpu, mesh, opts, comm, scene.extent())?;
     let started = Instant::now();
     // No overshooting here: the passes only measure the shooters, and
@@ -105,18 +111,28 @@ fn one_pass(
             }
         }),
     )?;
-    // Every rank saw its own receivers' penumbrae: sum them (exactly).
-    let mut penumbra: Vec<u64> = source.penumbra.iter().flatten().copied().collect();
-    comm.reduce_broadcast_sum(&mut penumbra);
+    // Every rank saw its own receivers' penumbrae and holds its own
+    // patches' light: sum them (exactly: fixed point, the rest are 0).
+    let emitted = solver.emitted_power();
+    let one = crate::formfactor::SHARE_ONE;
+    let mut sums: Vec<u64> = source.penumbra.iter().flatten().copied().collect();
+    sums.extend(solver.patch_unevenness().iter().map(|&w| {
+        let share = if emitted > 0.0 { w / emitted } else { 0.0 };
+        (share.clamp(0.0, 1.0) * one).round() as u64
+    }));
+    comm.reduce_broadcast_sum(&mut sums);
+    let (penumbra, uneven) = sums.split_at(2 * mesh.patches.len());
     let patches: Vec<PatchStats> = stats
         .patch_power
         .iter()
         .zip(penumbra.chunks_exact(2))
-        .map(|(&power, p)| PatchStats {
+        .zip(uneven)
+        .map(|((&power, p), &u)| PatchStats {
             power,
             penumbra: [p[0], p[1]],
+            uneven: u as f64 / one * emitted,
         })
         .collect();
-    let decided = refine::decide(mesh, &patches, solver.emitted_power());
+    let decided = refine::decide(mesh, &patches, emitted, opts.mesh_settings().receiver_tol);
     Ok((decided, solver.shots(), started.elapsed().as_secs_f64()))
 }

@@ -28,6 +28,11 @@ fn the_cornell_box_refines_its_light_and_nothing_else() {
     let r = &refined.report.refinement;
     assert!(r.passes >= 1, "{r:?}");
     assert_eq!(changed.len() as u32, r.shooter_polygons, "{r:?}");
+    assert_eq!(r.receiver_polygons, 0, "{r:?}");
+    assert_eq!(
+        r.end,
+        [refined.mesh.patches.len(), refined.mesh.elements.len()]
+    );
     assert_eq!(
         r.start,
         [plain.mesh.patches.len(), plain.mesh.elements.len()]
@@ -46,7 +51,7 @@ fn the_cornell_box_refines_its_light_and_nothing_else() {
 }
 
 #[test]
-fn two_facing_squares_refine_nothing() {
+fn two_facing_squares_refine_no_shooter() {
     // No occluder: no receiver is ever partly visible, so no penumbra.
     let (_dir, path) = write_scene(
         "squares",
@@ -67,6 +72,13 @@ fn two_facing_squares_refine_nothing() {
     );
     let r = solve_file(&path, &tight(1e-6));
     assert!(r.report.refinement.passes >= 1);
-    assert_eq!(r.report.refinement.shooter_polygons, 0);
-    assert_eq!(r.report.refinement.start[0], r.mesh.patches.len());
+    let refinement = &r.report.refinement;
+    assert_eq!(refinement.shooter_polygons, 0);
+    // Whatever the receivers asked for is what the final mesh grew by.
+    let receivers = refinement.receiver_polygons as usize;
+    assert_eq!(
+        refinement.start[0] == r.mesh.patches.len(),
+        receivers == 0,
+        "{refinement:?}"
+    );
 }
