@@ -24,7 +24,7 @@ renderer's supersampling, in --passes independent passes whose spread gives
 each 4x4 block's standard error; OUT.exr gets the mean, OUT.json (beside it)
 the command, the passes and the block errors.
 
-Usage: reference.py NODES.json [--target 1e-3] [--batch 65536] [--max-seconds 600]
+Usage: reference.py NODES.json [--target 1e-3] [--batch 65536] [--max-seconds 600] [--trace]
        reference.py NODES.json --image OUT.exr --width 128 --height 128 --spp 4096 [--passes 8]
 Install: pip install mitsuba (and numpy for --image)
 """
@@ -47,6 +47,10 @@ def main():
     ap.add_argument("--batch", type=int, default=1 << 16, help="points per node per batch")
     ap.add_argument("--max-seconds", type=float, default=600.0)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--trace", action="store_true",
+                    help="print one JSON line per round of batches (points per node, "
+                         "seconds, surfaces) for error-against-time charts, kernels "
+                         "compiled before the clock starts")
     ap.add_argument("--image", help="render the camera image to this EXR instead")
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, help="default: width over the camera's aspect ratio, as the renderer")
@@ -161,6 +165,12 @@ def main():
         dr.eval(e)
         return e
 
+    if args.trace:
+        # Compile the kernels before timing, as the renderer's device set-up
+        # is left out of its solve time.
+        for i, node in enumerate(nodes):
+            dr.eval(batch(node, args.batch, 999_983 + i))
+        print(json.dumps({"variant": mi.variant()}), flush=True)
     start = time.perf_counter()
     sums = [[0.0] * 3 for _ in nodes]
     sq = [0.0 for _ in nodes]  # of the RGB sum
@@ -197,8 +207,12 @@ def main():
                            "standard_error": se, "relative_standard_error": rel})
         elapsed = time.perf_counter() - start
         print(f"reference: {max(count)} points per node, worst relative SE {worst:.2e}, {elapsed:.0f} s", file=sys.stderr)
+        if args.trace:
+            print(json.dumps({"points": max(count), "seconds": elapsed, "surfaces": result}), flush=True)
         if all(done) or elapsed > args.max_seconds:
             break
+    if args.trace:
+        return
     print(json.dumps({
         "how": f"Mitsuba 3 {mi.variant()}, next-event estimation + cosine sampling (MIS, power heuristic) at uniform points per node, path integrator beyond (scripts/reference.py --target {args.target})",
         "variant": mi.variant(), "seconds": time.perf_counter() - start,

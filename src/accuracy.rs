@@ -61,8 +61,11 @@ pub struct AccuracyArgs {
     /// ... or after this many shots (overrides --max-shots).
     #[arg(long, default_value_t = 20_000)]
     run_max_shots: u64,
-    /// The path tracer script (Mitsuba 3); empty to skip it.
-    #[arg(long, default_value = "scripts/pathtrace.py")]
+    /// The path tracer script (Mitsuba 3); empty to skip it. The default is
+    /// the strong one (next-event estimation at points on each node, the
+    /// references' own method, run with --trace); `scripts/pathtrace.py` is
+    /// the old irradiance meter per node, without emitter sampling.
+    #[arg(long, default_value = "scripts/reference.py")]
     pathtracer: String,
     /// Python interpreter for the path tracer.
     #[arg(long, default_value = "python3")]
@@ -142,6 +145,9 @@ struct Point {
 /// One curve: a configuration's error against time.
 struct Curve {
     label: String,
+    /// Whether the chart shows it (the default, its alternatives and the
+    /// path tracer; every curve is in the CSV and the summary).
+    key: bool,
     method: String,
     resolution: String,
     patches: usize,
@@ -318,6 +324,7 @@ fn run_curve(
         })
         .collect();
     Ok(Curve {
+        key: false,
         label,
         method: format!("{:?}", o.form_factor).to_lowercase(),
         resolution: o.resolution.to_string(),
@@ -371,18 +378,36 @@ pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Runs `scripts/pathtrace.py` on the exported scene `json`; returns what
-/// it printed (one JSON line per level).
+/// Debian's libLLVM 19, which Mitsuba's `llvm_ad_rgb` variant wants.
+const LIBLLVM: &str = "/usr/lib/x86_64-linux-gnu/libLLVM-19.so";
+
+/// Whether `args.pathtracer` is the strong path tracer (`reference.py`).
+fn strong(args: &AccuracyArgs) -> bool {
+    args.pathtracer.ends_with("reference.py")
+}
+
+/// Runs the path tracer on the exported scene `json`; returns what it
+/// printed (one JSON line per level or round).
 fn run_path_tracer(args: &AccuracyArgs, json: &Path) -> Result<String> {
-    let out = std::process::Command::new(&args.python)
-        .arg(&args.pathtracer)
-        .arg(json)
-        .args([
-            "--variant",
-            &args.variant,
-            "--max-spp",
-            &args.max_spp.to_string(),
-        ])
+    let mut cmd = std::process::Command::new(&args.python);
+    cmd.arg(&args.pathtracer).arg(json);
+    if strong(args) {
+        let variant = match args.variant.as_str() {
+            "auto" if Path::new(LIBLLVM).exists() => "llvm_ad_rgb",
+            "auto" => "scalar_rgb",
+            v => v,
+        };
+        if std::env::var_os("DRJIT_LIBLLVM_PATH").is_none() && Path::new(LIBLLVM).exists() {
+            cmd.env("DRJIT_LIBLLVM_PATH", LIBLLVM);
+        }
+        // Rounds of 16 384 points per node, until a minute has passed.
+        cmd.args(["--trace", "--target", "1e-9", "--batch", "16384"])
+            .args(["--variant", variant]);
+    } else {
+        cmd.args(["--variant", &args.variant])
+            .args(["--max-spp", &args.max_spp.to_string()]);
+    }
+    let out = cmd
         .args(["--max-seconds", "60"])
         .output()
         .with_context(|| format!("cannot run {} {}", args.python, args.pathtracer))?;
@@ -404,6 +429,7 @@ fn path_tracer(
 ) -> Result<Curve> {
     #[derive(Deserialize)]
     struct Level {
+        #[serde(alias = "points")]
         spp: u64,
         seconds: f64,
         surfaces: Vec<Surface>,
@@ -439,10 +465,17 @@ fn path_tracer(
     // The path tracer's most converged estimate, kept as an independent check
     // of the reference.
     if let Some(l) = last {
-        let how = format!(
-            "Mitsuba 3 {variant}, path integrator, {} spp per node (scripts/pathtrace.py)",
-            l.spp
-        );
+        let how = if strong(args) {
+            format!(
+                "Mitsuba 3 {variant}, next-event estimation at {} points per node (scripts/reference.py --trace)",
+                l.spp
+            )
+        } else {
+            format!(
+                "Mitsuba 3 {variant}, path integrator, {} spp per node (scripts/pathtrace.py)",
+                l.spp
+            )
+        };
         let path = args
             .references
             .join(format!("pathtracer-{}.json", stem(&scene.name)));
@@ -454,8 +487,14 @@ fn path_tracer(
         };
         output::write_json(&path, &r)?;
     }
+    let label = if strong(args) {
+        format!("path tracer, next-event estimation (Mitsuba 3 {variant})")
+    } else {
+        format!("path tracer, no emitter sampling (Mitsuba 3 {variant}, spp doubling)")
+    };
     Ok(Curve {
-        label: format!("path tracer (Mitsuba 3 {variant}, spp doubling)"),
+        label,
+        key: true,
         method: "pathtracer".into(),
         resolution: String::new(),
         patches: 0,
@@ -527,12 +566,15 @@ fn draw<DB: plotters::prelude::DrawingBackend>(
 ) -> Result<(), String> {
     use plotters::prelude::*;
     let e = |x: &dyn std::fmt::Display| x.to_string();
-    let ((x0, x1), (y0, y1)) = extent(curves);
+    let curves: Vec<&Curve> = curves.iter().filter(|c| c.key).collect();
+    let ((x0, x1), (y0, y1)) = extent(&curves);
     if x1 <= 0.0 || y1 <= 0.0 {
         return Ok(());
     }
     root.fill(&WHITE).map_err(|x| e(&x))?;
-    let mut chart = ChartBuilder::on(&root)
+    // The legend goes beside the plot, never over the data.
+    let (plot, legend) = root.split_horizontally(640);
+    let mut chart = ChartBuilder::on(&plot)
         .caption(
             format!("{scene}: area-weighted mean error per surface vs solve time"),
             ("sans-serif", 22),
@@ -556,9 +598,8 @@ fn draw<DB: plotters::prelude::DrawingBackend>(
             [(x0 * 0.8, 0.01), (x1 * 1.25, 0.01)],
             BLACK.mix(0.5),
         ))
-        .map_err(|x| e(&x))?
-        .label("1 %")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
+        .map_err(|x| e(&x))?;
+    let mut entries = vec![("1 %".to_string(), BLACK.mix(0.5))];
     for (i, c) in curves.iter().enumerate() {
         let color = if c.method == "pathtracer" {
             BLACK.to_rgba()
@@ -573,27 +614,40 @@ fn draw<DB: plotters::prelude::DrawingBackend>(
             .collect();
         chart
             .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
-            .map_err(|x| e(&x))?
-            .label(c.label.as_str())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-            });
+            .map_err(|x| e(&x))?;
         chart
             .draw_series(points.iter().map(|&p| Circle::new(p, 2, color.filled())))
             .map_err(|x| e(&x))?;
+        entries.push((c.label.clone(), color));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerLeft)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
+    for (k, (label, color)) in entries.iter().enumerate() {
+        let y = 60 + 44 * k as i32;
+        legend
+            .draw(&PathElement::new(
+                vec![(4, y), (28, y)],
+                color.stroke_width(3),
+            ))
+            .map_err(|x| e(&x))?;
+        // Long labels take two lines.
+        let (a, b) = match label.find(" (") {
+            Some(i) if label.len() > 44 => (&label[..i], &label[i + 1..]),
+            _ => (label.as_str(), ""),
+        };
+        for (line, text) in [a, b].iter().enumerate() {
+            legend
+                .draw(&Text::new(
+                    text.to_string(),
+                    (34, y - 7 + 16 * line as i32),
+                    ("sans-serif", 13),
+                ))
+                .map_err(|x| e(&x))?;
+        }
+    }
     root.present().map_err(|x| e(&x))
 }
 
 /// The range of the curves' positive seconds and mean errors.
-fn extent(curves: &[Curve]) -> ((f64, f64), (f64, f64)) {
+fn extent(curves: &[&Curve]) -> ((f64, f64), (f64, f64)) {
     let pts = || {
         curves
             .iter()
@@ -657,7 +711,10 @@ fn projection_curves(
                 scene.name, o.resolution
             );
             let label = format!("{m} {projection:?} {}", o.resolution).to_lowercase();
-            curves.push(run_curve(gpu, scene, &o, label, reference)?);
+            curves.push(Curve {
+                key: true,
+                ..run_curve(gpu, scene, &o, label, reference)?
+            });
         }
     }
     for tol in [0.05f32, 0.5, 2.0] {
@@ -667,7 +724,10 @@ fn projection_curves(
         o.tessellation_tolerance = tol;
         eprintln!("projections: {} tessellated, tolerance {tol}", scene.name);
         let label = format!("{m} tessellated 128x512, tolerance {tol} cells");
-        curves.push(run_curve(gpu, scene, &o, label, reference)?);
+        curves.push(Curve {
+                key: true,
+                ..run_curve(gpu, scene, &o, label, reference)?
+            });
     }
     Ok(curves)
 }
@@ -693,8 +753,21 @@ fn solver_curves(
                 .map(|c| format!(", weak shooters {c}"))
                 .unwrap_or_default();
             let label = format!("{} {res}{coarse}", format!("{method:?}").to_lowercase());
-            curves.push(run_curve(gpu, scene, &o, label, reference)?);
+            let mut curve = run_curve(gpu, scene, &o, label, reference)?;
+            // The default and the other method at the default resolution.
+            curve.key = res == base.resolution;
+            curves.push(curve);
         }
+    }
+    if base.mesh.refine > 0 && base.mesh.receiver_tol > 0.0 {
+        // Refinement by need with and without the receivers' criterion.
+        let mut o = base.clone();
+        o.mesh.receiver_tol = 0.0;
+        eprintln!("accuracy: {} hybrid, shooters refined only", scene.name);
+        let label = "hybrid 128x512, shooters refined only (--refine-receivers 0)".to_string();
+        let mut curve = run_curve(gpu, scene, &o, label, reference)?;
+        curve.key = true;
+        curves.push(curve);
     }
     if base.mesh.refine > 0 {
         // Refinement by need against the mesh it starts from, unrefined.
@@ -702,7 +775,9 @@ fn solver_curves(
         o.mesh.refine = 0;
         eprintln!("accuracy: {} hybrid, no refinement", scene.name);
         let label = "hybrid 128x512, no refinement (--refine 0)".to_string();
-        curves.push(run_curve(gpu, scene, &o, label, reference)?);
+        let mut curve = run_curve(gpu, scene, &o, label, reference)?;
+        curve.key = true;
+        curves.push(curve);
     }
     if base.coarse_below > 0.0 {
         // Coarse hemispheres for weak shooters against every shot at 128 x 512.
