@@ -725,9 +725,9 @@ fn projection_curves(
         eprintln!("projections: {} tessellated, tolerance {tol}", scene.name);
         let label = format!("{m} tessellated 128x512, tolerance {tol} cells");
         curves.push(Curve {
-                key: true,
-                ..run_curve(gpu, scene, &o, label, reference)?
-            });
+            key: true,
+            ..run_curve(gpu, scene, &o, label, reference)?
+        });
     }
     Ok(curves)
 }

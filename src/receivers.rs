@@ -181,6 +181,8 @@ fn draw<DB: plotters::prelude::DrawingBackend>(
         chart
             .configure_mesh()
             .x_desc(desc)
+            .x_labels(6)
+            .x_label_formatter(&|v| format!("{v:.0}"))
             .y_desc("image SMAPE")
             .y_label_formatter(&|v| format!("{:.1} %", v * 100.0))
             .draw()
