@@ -182,7 +182,7 @@ def main():
         for i, node in enumerate(nodes):
             if done[i]:
                 continue
-            e = batch(node, args.batch, seed * 1000003 + i)
+            e = batch(node, args.batch, (seed * 1000003 + i) % (1 << 32))  # Mitsuba's seed is a u32
             seed += 1
             r, g, b = (dr.sum(e.x)[0], dr.sum(e.y)[0], dr.sum(e.z)[0])
             rho = node["reflectance"]

@@ -169,7 +169,8 @@ fn time_to(points: &[Point], level: f64, pick: fn(&Point) -> f64) -> Option<f64>
 }
 
 /// The analytic scene: parallel unit squares 1 apart, a black emitter of
-/// L_e = 1 and a white receiver; the receiver's radiosity is pi F.
+/// L_e = 1 and a grey receiver (reflectance 0.5: a reflectance of 1 is
+/// clamped on loading); the receiver's radiosity is 0.5 pi F.
 fn squares(dir: &Path) -> Result<(Scene, Vec<Surface>)> {
     use glam::Vec3;
     let sq = |z: f32, up: bool| {
@@ -196,7 +197,7 @@ fn squares(dir: &Path) -> Result<(Scene, Vec<Surface>)> {
         GltfSurface {
             name: "receiver".into(),
             polygons: vec![sq(1.0, false)],
-            reflectance: [1.0; 3],
+            reflectance: [0.5; 3],
             emission: [0.0; 3],
             double_sided: false,
             subdivision: None,
@@ -217,7 +218,7 @@ fn squares(dir: &Path) -> Result<(Scene, Vec<Surface>)> {
         Surface {
             node: "receiver".into(),
             area: 1.0,
-            radiosity: [pi * 0.19982; 3],
+            radiosity: [0.5 * pi * 0.19982; 3],
             back: None,
         },
     ];
