@@ -820,19 +820,14 @@ fn solver_curves(
 /// Runs the accuracy benchmark.
 pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
     let gpu = Gpu::new()?;
+    let out_or = |default: &str| args.out.clone().unwrap_or_else(|| PathBuf::from(default));
     if args.regimes {
-        let out = args
-            .out
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("docs/bench"));
+        let out = out_or("docs/bench");
         std::fs::create_dir_all(&out)?;
         return crate::regimes::run(&gpu, &out);
     }
     if args.receivers {
-        let out = args
-            .out
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("docs/bench/receivers"));
+        let out = out_or("docs/bench/receivers");
         let default = AccuracyArgs::default_scenes();
         let scenes: Vec<String> = if args.scenes == default {
             crate::receivers::SCENES.map(String::from).to_vec()

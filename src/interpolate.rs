@@ -123,36 +123,8 @@ fn extrapolate_edges(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::MeshSettings;
-    use crate::scene::{Polygon, Scene, Subdivision};
+    use crate::mesh::unit_square as square;
     use glam::Vec3;
-
-    fn square(patches: u32, elements: u32) -> Mesh {
-        let vertices = vec![
-            Vec3::ZERO,
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        ];
-        let scene = Scene {
-            polygons: vec![Polygon {
-                normal: crate::scene::polygon_normal(&vertices),
-                vertices,
-                reflectance: [0.5; 3],
-                emission: [0.0; 3],
-                node: 0,
-                subdivision: Some(Subdivision {
-                    patches: [patches; 2],
-                    elements: [elements; 2],
-                }),
-                back_side: false,
-                parent: None,
-            }],
-            nodes: vec!["n".into()],
-            ..Default::default()
-        };
-        Mesh::build(&scene, &MeshSettings::default())
-    }
 
     #[test]
     fn a_linear_function_is_reproduced_at_every_vertex() {

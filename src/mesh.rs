@@ -643,6 +643,30 @@ fn centroid(c: &[Vec3; 4]) -> Vec3 {
     (tri * a1 + (c[0] + c[2] + c[3]) / 3.0 * a2) / (a1 + a2)
 }
 
+/// One unit square in z = 0 facing +z, with `patches` x `patches` patches
+/// of `elements` x `elements` elements: a fixture for unit tests.
+#[cfg(test)]
+pub(crate) fn unit_square(patches: u32, elements: u32) -> Mesh {
+    let mut poly = crate::scene::Polygon::square(
+        Vec3::new(0.5, 0.5, 0.0),
+        0.5,
+        Vec3::X,
+        Vec3::Y,
+        [0.5; 3],
+        [0.0; 3],
+    );
+    poly.subdivision = Some(crate::scene::Subdivision {
+        patches: [patches; 2],
+        elements: [elements; 2],
+    });
+    let scene = Scene {
+        polygons: vec![poly],
+        nodes: vec!["n".into()],
+        ..Default::default()
+    };
+    Mesh::build(&scene, &MeshSettings::default())
+}
+
 /// Patch edge length for every polygon under the automatic rule (or the fixed size).
 pub fn patch_sizes(scene: &Scene, s: &MeshSettings) -> Vec<f32> {
     let n = scene.polygons.len();

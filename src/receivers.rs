@@ -149,6 +149,9 @@ fn chart(out: &Path, scene: &str, runs: &[Run]) -> Result<()> {
     .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))
 }
 
+/// What a panel puts along its x axis.
+type Axis = fn(&Run) -> f64;
+
 fn draw<DB: plotters::prelude::DrawingBackend>(
     root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
     scene: &str,
@@ -164,7 +167,7 @@ fn draw<DB: plotters::prelude::DrawingBackend>(
         )
         .map_err(|x| e(&x))?;
     let (left, right) = root.split_horizontally(550);
-    let panels: [(_, &str, fn(&Run) -> f64); 2] = [
+    let panels: [(_, &str, Axis); 2] = [
         (left, "elements (log)", |r| r.elements as f64),
         (right, "solve seconds (log)", |r| r.seconds),
     ];

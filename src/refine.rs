@@ -111,37 +111,11 @@ pub fn decide(
 mod tests {
     use super::*;
     use crate::formfactor::SHARE_ONE;
-    use crate::mesh::MeshSettings;
-    use crate::scene::{Polygon, Scene, Subdivision};
-    use glam::Vec3;
 
     const TOL: f64 = crate::mesh::DEFAULT_RECEIVER_TOL;
 
     fn square() -> Mesh {
-        let vertices = vec![
-            Vec3::ZERO,
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        ];
-        let scene = Scene {
-            polygons: vec![Polygon {
-                normal: crate::scene::polygon_normal(&vertices),
-                vertices,
-                reflectance: [0.5; 3],
-                emission: [0.0; 3],
-                node: 0,
-                subdivision: Some(Subdivision {
-                    patches: [2, 2],
-                    elements: [2, 2],
-                }),
-                back_side: false,
-                parent: None,
-            }],
-            nodes: vec!["n".into()],
-            ..Default::default()
-        };
-        Mesh::build(&scene, &MeshSettings::default())
+        crate::mesh::unit_square(2, 2)
     }
 
     #[test]
