@@ -665,21 +665,9 @@ fn extent(curves: &[&Curve]) -> ((f64, f64), (f64, f64)) {
 }
 
 fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
-    use plotters::prelude::*;
-    let svg = out.join(format!("error-{scene}.svg"));
-    draw(
-        SVGBackend::new(&svg, (1000, 620)).into_drawing_area(),
-        scene,
-        curves,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
-    let png = out.join(format!("error-{scene}.png"));
-    draw(
-        BitMapBackend::new(&png, (1000, 620)).into_drawing_area(),
-        scene,
-        curves,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+    svg_and_png!(out, format!("error-{scene}"), (1000, 620), |root| draw(
+        root, scene, curves
+    ));
     Ok(())
 }
 

@@ -229,28 +229,12 @@ fn chart(
     series: &Series,
     log_y: bool,
 ) -> Result<()> {
-    use plotters::prelude::*;
     if series.iter().all(|s| s.1.is_empty()) {
         return Ok(());
     }
-    let svg = out.join(format!("{stem}.svg"));
-    draw_chart(
-        SVGBackend::new(&svg, (900, 540)).into_drawing_area(),
-        title,
-        axes,
-        series,
-        log_y,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
-    let png = out.join(format!("{stem}.png"));
-    draw_chart(
-        BitMapBackend::new(&png, (900, 540)).into_drawing_area(),
-        title,
-        axes,
-        series,
-        log_y,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+    svg_and_png!(out, stem, (900, 540), |root| draw_chart(
+        root, title, axes, series, log_y
+    ));
     Ok(())
 }
 

@@ -19,6 +19,25 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+/// Draws one chart twice, as `STEM.svg` and `STEM.png` in `out`, at `size`:
+/// `|root| body` is expanded once per backend (the drawing functions are
+/// generic over it), and an error names the file.
+macro_rules! svg_and_png {
+    ($out:expr, $stem:expr, $size:expr, |$root:ident| $body:expr) => {{
+        use plotters::prelude::IntoDrawingArea;
+        let svg = $out.join(format!("{}.svg", $stem));
+        {
+            let $root = plotters::prelude::SVGBackend::new(&svg, $size).into_drawing_area();
+            $body.map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
+        }
+        let png = $out.join(format!("{}.png", $stem));
+        {
+            let $root = plotters::prelude::BitMapBackend::new(&png, $size).into_drawing_area();
+            $body.map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))?;
+        }
+    }};
+}
+
 mod accuracy;
 mod bench;
 mod receivers;

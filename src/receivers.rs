@@ -132,21 +132,10 @@ fn study(gpu: &Gpu, name: &str, base: &RenderOptions) -> Result<Vec<Run>> {
 /// The two panels (image error against elements, and against solve time),
 /// as SVG and PNG.
 fn chart(out: &Path, scene: &str, runs: &[Run]) -> Result<()> {
-    use plotters::prelude::*;
-    let svg = out.join(format!("receivers-{scene}.svg"));
-    draw(
-        SVGBackend::new(&svg, (1100, 460)).into_drawing_area(),
-        scene,
-        runs,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", svg.display()))?;
-    let png = out.join(format!("receivers-{scene}.png"));
-    draw(
-        BitMapBackend::new(&png, (1100, 460)).into_drawing_area(),
-        scene,
-        runs,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", png.display()))
+    svg_and_png!(out, format!("receivers-{scene}"), (1100, 460), |root| draw(
+        root, scene, runs
+    ));
+    Ok(())
 }
 
 /// What a panel puts along its x axis.

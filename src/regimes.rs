@@ -4,7 +4,7 @@
 //! delta form factors from a point shooter against Lambert's contour
 //! integral, for both projections at 128 x 512 and 512 x 2048, charted.
 
-use anyhow::{anyhow, Result};
+use anyhow::Result;
 use glam::{DVec3, Vec3};
 use radiosity::gpu::{Gpu, HemisphereRasterizer};
 use radiosity::hemisphere::{Resolution, TileLayout};
@@ -76,7 +76,6 @@ fn measured(gpu: &Gpu, poly: &[Vec3], res: Resolution, tessellated: bool) -> Res
 
 /// Runs the cases and writes `regimes.csv` and `regimes.{svg,png}` to `out`.
 pub fn run(gpu: &Gpu, out: &Path) -> Result<()> {
-    use plotters::prelude::IntoDrawingArea;
     let resolutions = [128u32, 512].map(|rows| Resolution {
         rows,
         cols: 4 * rows,
@@ -108,21 +107,13 @@ pub fn run(gpu: &Gpu, out: &Path) -> Result<()> {
     }
     radiosity::output::write_atomic(&out.join("regimes.csv"), csv.as_bytes())?;
     let names: Vec<&str> = cases().iter().map(|c| c.0).collect();
-    let svg = out.join("regimes.svg");
-    draw(
-        plotters::prelude::SVGBackend::new(&svg, (1000, 560)).into_drawing_area(),
-        &names,
-        &series,
-    )
-    .map_err(|e| anyhow!("{}: {e}", svg.display()))?;
-    let png = out.join("regimes.png");
-    draw(
-        plotters::prelude::BitMapBackend::new(&png, (1000, 560)).into_drawing_area(),
-        &names,
-        &series,
-    )
-    .map_err(|e| anyhow!("{}: {e}", png.display()))?;
-    println!("wrote {}, .png and regimes.csv", svg.display());
+    svg_and_png!(out, "regimes", (1000, 560), |root| draw(
+        root, &names, &series
+    ));
+    println!(
+        "wrote {}, .png and regimes.csv",
+        out.join("regimes.svg").display()
+    );
     Ok(())
 }
 
