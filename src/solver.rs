@@ -962,3 +962,58 @@ impl<'m> Solver<'m> {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One unit square of 2 x 2 patches that emits 1 W/m^2 and reflects 0.5.
+    fn emitting_square() -> Mesh {
+        let mut mesh = crate::mesh::unit_square(2, 1);
+        mesh.polygons[0].exitance = [1.0; 3];
+        mesh
+    }
+
+    #[test]
+    fn the_direct_part_is_what_an_emitters_first_shot_delivers() {
+        let mesh = emitting_square();
+        let mut solver = Solver::new(&mesh);
+        let shoot = |solver: &mut Solver, patch: u32, to: u32| {
+            let candidate = solver.local_candidate().expect("a shooter");
+            let candidate = Candidate { patch, ..candidate };
+            let region = solver.shooting_region(patch, [0.0; 3]);
+            let f = 0.1;
+            let ff = [Transfer {
+                element: to,
+                form_factor: f,
+                radiosity: region.shoot.map(|s| f * s),
+            }];
+            solver.shoot_candidate(&candidate, &region, &ff);
+        };
+        // Patch 0's first shot carries its emission: all of it is direct.
+        shoot(&mut solver, 0, 3);
+        let direct = solver.direct().expect("known")[3];
+        // rho F E A_i / A_j, with equal areas.
+        assert!((direct[0] - 0.5 * 0.1 * 1.0).abs() < 1e-12, "{direct:?}");
+        // Patch 3's first shot carries its emission (1) and what it received
+        // (0.05): only the emission's share of what it delivers is direct.
+        shoot(&mut solver, 3, 1);
+        let delivered = solver.display_radiosity(false)[1][0] - 1.0;
+        assert!((delivered - 0.5 * 0.1 * 1.05).abs() < 1e-12, "{delivered}");
+        let direct = solver.direct().expect("known")[1];
+        assert!((direct[0] - 0.5 * 0.1 * 1.0).abs() < 1e-12, "{direct:?}");
+        // A patch that has shot its emission adds nothing direct again.
+        shoot(&mut solver, 0, 2);
+        assert_eq!(solver.direct().expect("known")[2], [0.0; 3]);
+        // The state keeps it; a state without it (an old checkpoint) leaves
+        // it unknown.
+        let mut state = solver.state();
+        let mut again = Solver::new(&mesh);
+        again.restore(&state).expect("same mesh");
+        assert_eq!(again.direct(), solver.direct());
+        state.direct.clear();
+        state.emission_unshot.clear();
+        again.restore(&state).expect("same mesh");
+        assert_eq!(again.direct(), None);
+    }
+}
