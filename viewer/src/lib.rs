@@ -17,6 +17,11 @@ pub struct Args {
     /// A .gltf/.glb file or a built-in scene (cornell, cubes-N, classroom-c1, ...).
     #[arg(default_value = "cornell")]
     pub scene: String,
+    /// The glTF perspective camera to look from, by its name or its node's
+    /// (the file's first by default); an unknown name is an error that
+    /// lists the file's cameras.
+    #[arg(long)]
+    pub camera: Option<String>,
     /// Hemisphere resolution R_phi x R_theta.
     #[arg(long, default_value = "128x512")]
     pub resolution: Resolution,

@@ -16,7 +16,10 @@ fn main() {
 
 fn run(args: Args) -> Result<()> {
     // A bad scene is reported before any window opens.
-    let scene = radiosity::scene::open(&args.scene)?;
+    let mut scene = radiosity::scene::open(&args.scene)?;
+    if let Some(name) = &args.camera {
+        scene.use_camera(name)?;
+    }
     let (w, h) = args
         .size
         .split_once('x')

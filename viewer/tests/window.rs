@@ -85,3 +85,18 @@ fn bad_scene_is_a_clear_error() {
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+#[test]
+fn an_unknown_camera_is_a_clear_error() {
+    let out = viewer()
+        .args(["cornell", "--camera", "no-such-camera"])
+        .output()
+        .expect("xvfb-run (install xvfb)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("error:") && stderr.contains("no-such-camera"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
