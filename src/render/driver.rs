@@ -6,7 +6,7 @@ use super::options::{fingerprint, RenderError, RenderOptions};
 use super::passes::refined_mesh;
 use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
-use super::trace::{gather_whole, Trace};
+use super::trace::{gather_whole, Extra, Trace};
 use crate::checkpoint::Header;
 use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
@@ -288,7 +288,11 @@ fn gather_to_root<'m>(
     excluded: Traffic,
 ) -> Option<Gathered<'m>> {
     // With overshooting the unshot fraction sums elements' |unshot|.
-    let whole = gather_whole(comm, solver, opts.overshoot);
+    let extra = Extra {
+        element_unshot: opts.overshoot,
+        direct: true,
+    };
+    let whole = gather_whole(comm, solver, extra);
     let mine = pack_rank_stats(&source.timings, stats, comm.traffic(), excluded);
     let all_stats = comm.gather_f64(&mine);
     let busy = comm.gather_f64(&source.busy);

@@ -3,7 +3,7 @@
 
 use super::options::{CheckpointPlan, RenderError};
 use super::shoot::{Flags, LoopHooks};
-use super::trace::{gather_whole, Trace};
+use super::trace::{gather_whole, Extra, Trace};
 use crate::checkpoint::{Checkpoint, Header};
 use crate::parallel::Collectives;
 use crate::solver::Solver;
@@ -72,7 +72,11 @@ impl LoopHooks for SolveHooks<'_, '_> {
         };
         // Rank 0 assembles the whole state and writes it; every rank learns
         // whether that worked, so none waits for a rank that gave up.
-        let written = match gather_whole(self.comm, solver, true) {
+        let all = Extra {
+            element_unshot: true,
+            direct: true,
+        };
+        let written = match gather_whole(self.comm, solver, all) {
             Some(whole) => {
                 let mut header = self.header.clone();
                 header.seconds = self

@@ -36,4 +36,4 @@ pub use options::{
 pub use passes::refined_mesh;
 pub use shoot::{shoot_until, AfterShot, Flags, LoopHooks, LoopStats, ShotLoop, Step, Stopped};
 pub use source::{GpuFormFactors, PhaseTimes};
-pub use trace::{gather_whole, Trace};
+pub use trace::{gather_whole, Extra, Trace};

@@ -7,35 +7,46 @@ use crate::report::{self, Report, TracePoint};
 use crate::solver::Solver;
 use std::time::{Duration, Instant};
 
+/// What [`gather_whole`] gathers besides radiosities and unshot radiosities.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Extra {
+    /// The elements' unshot radiosities (a checkpoint needs them, and so
+    /// does the unshot fraction under overshooting).
+    pub element_unshot: bool,
+    /// The solution's own direct part (the image and checkpoints need it;
+    /// without it the whole solution's is unknown).
+    pub direct: bool,
+}
+
 /// Gathers every rank's share of `solver` to rank 0 and assembles the whole
 /// solution there (`None` on the other ranks): radiosities, unshot
-/// radiosities, shots, retention, overshooting, and with `elements` the
-/// elements' unshot radiosities (a checkpoint needs them, and so does the
-/// unshot fraction under overshooting). Every rank must call it.
+/// radiosities, shots, retention, overshooting, and what `extra` asks for.
+/// Every rank must call it.
 pub fn gather_whole<'m>(
     comm: &dyn Collectives,
     solver: &Solver<'m>,
-    elements: bool,
+    extra: Extra,
 ) -> Option<Solver<'m>> {
     let (b, u) = solver.local_state();
     let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
-    let ge = if elements {
-        comm.gather_f64(&solver.local_element_unshot())
-    } else {
-        None
-    };
-    let gd = comm.gather_f64(&solver.local_direct());
+    let ge = (extra.element_unshot)
+        .then(|| comm.gather_f64(&solver.local_element_unshot()))
+        .flatten();
+    let gd = (extra.direct)
+        .then(|| comm.gather_f64(&solver.local_direct()))
+        .flatten();
     let mut whole = Solver::new(solver.mesh());
     whole.assemble(&gb?, &gu?);
-    if let Some(d) = &gd {
-        whole.assemble_direct(d);
-    }
     if let Some(e) = &ge {
         whole.assemble_element_unshot(e);
     }
     whole.set_overshoot(solver.overshoot());
     whole.set_shots(solver.shots());
     whole.copy_retention(solver);
+    match &gd {
+        Some(d) => whole.assemble_direct(d),
+        None => whole.forget_direct(),
+    }
     Some(whole)
 }
 
@@ -104,7 +115,11 @@ impl Trace {
             ))
         } else {
             // With overshooting the unshot fraction sums elements' |unshot|.
-            gather_whole(comm, solver, solver.overshoot()).map(|whole| {
+            let extra = Extra {
+                element_unshot: solver.overshoot(),
+                direct: false,
+            };
+            gather_whole(comm, solver, extra).map(|whole| {
                 (
                     report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),
                     whole.unshot_fraction(),

@@ -766,6 +766,12 @@ impl<'m> Solver<'m> {
         self.direct_known.then_some(self.direct.as_slice())
     }
 
+    /// Marks the direct part unknown (an assembled solution whose ranks'
+    /// direct parts were not gathered).
+    pub fn forget_direct(&mut self) {
+        self.direct_known = false;
+    }
+
     /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.
     pub fn display_radiosity(&self, ambient: bool) -> Vec<[f64; 3]> {
         let amb = if ambient { self.ambient() } else { [0.0; 3] };

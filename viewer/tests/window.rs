@@ -71,32 +71,28 @@ fn screenshot_shows_the_cornell_box_the_right_way_round() {
     );
 }
 
-#[test]
-fn bad_scene_is_a_clear_error() {
+/// Runs the viewer with `args`: it must fail with one clear error line that
+/// names `what`, and no panic.
+fn fails_clearly(args: &[&str], what: &str) {
     let out = viewer()
-        .args(["/nonexistent/scene.gltf"])
+        .args(args)
         .output()
         .expect("xvfb-run (install xvfb)");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        stderr.contains("error:") && stderr.contains("/nonexistent/scene.gltf"),
+        stderr.contains("error:") && stderr.contains(what),
         "{stderr}"
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
 #[test]
+fn bad_scene_is_a_clear_error() {
+    fails_clearly(&["/nonexistent/scene.gltf"], "/nonexistent/scene.gltf");
+}
+
+#[test]
 fn an_unknown_camera_is_a_clear_error() {
-    let out = viewer()
-        .args(["cornell", "--camera", "no-such-camera"])
-        .output()
-        .expect("xvfb-run (install xvfb)");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
-    assert!(
-        stderr.contains("error:") && stderr.contains("no-such-camera"),
-        "{stderr}"
-    );
-    assert!(!stderr.contains("panicked"), "{stderr}");
+    fails_clearly(&["cornell", "--camera", "no-such-camera"], "no-such-camera");
 }
