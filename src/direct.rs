@@ -2,7 +2,9 @@
 //! emitter's unoccluded form factor (Lambert's contour integral, exact) times
 //! the share of the emitter the point sees, estimated by shadow rays to
 //! stratified points on the emitter (a ratio estimator: exact where the point
-//! sees all or none of the emitter, noisy only in penumbrae).
+//! sees all or none of the emitter, noisy only in penumbrae); and each point,
+//! spot or directional light's irradiance with its one shadow ray
+//! ([`crate::lights::irradiance`]).
 //!
 //! The image is then the solution's indirect part, interpolated, plus this
 //! direct part per pixel: contact shadows and shadow edges as sharp as the
@@ -13,6 +15,7 @@ use crate::formfactor::point_to_polygon;
 use crate::fuzz::Rng;
 use crate::mesh::Mesh;
 use crate::raytrace::Bvh;
+use crate::sampling::{in_parallel, point_in, unit};
 use crate::scene::{Camera, Scene};
 use glam::{DVec3, Vec3};
 
@@ -33,6 +36,8 @@ struct Emitter {
 pub struct DirectLight<'a> {
     bvh: &'a Bvh,
     emitters: Vec<Emitter>,
+    /// Point, spot and directional lights (one shadow ray each).
+    lights: Vec<crate::scene::Light>,
     normals: Vec<Vec3>,
     reflectance: Vec<[f32; 3]>,
     /// Shadow rays per emitter per point (per image sample): `strata` x `strata`.
@@ -69,34 +74,6 @@ impl Strata {
     }
 }
 
-/// A point of a triangle or convex quad from (u, v) in the unit square, and
-/// the density's Jacobian there (area per unit (u, v)): bilinear for a quad,
-/// the square folded onto a triangle for a triangle.
-fn point_in(c: &[Vec3], u: f32, v: f32) -> (Vec3, f32) {
-    if c.len() == 3 {
-        let (u, v) = if u + v > 1.0 {
-            (1.0 - u, 1.0 - v)
-        } else {
-            (u, v)
-        };
-        let (e1, e2) = (c[1] - c[0], c[2] - c[0]);
-        (c[0] + e1 * u + e2 * v, e1.cross(e2).length())
-    } else {
-        let p = c[0] * (1.0 - u) * (1.0 - v)
-            + c[1] * u * (1.0 - v)
-            + c[2] * u * v
-            + c[3] * (1.0 - u) * v;
-        let du = (c[1] - c[0]) * (1.0 - v) + (c[2] - c[3]) * v;
-        let dv = (c[3] - c[0]) * (1.0 - u) + (c[2] - c[1]) * u;
-        (p, du.cross(dv).length())
-    }
-}
-
-/// A uniform number in [0, 1).
-fn unit(rng: &mut Rng) -> f32 {
-    (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-}
-
 impl<'a> DirectLight<'a> {
     /// Gathers `scene`'s emitters; `bvh` holds the scene's polygons (the
     /// mesh's [`Mesh::occluders`], built once); `strata` squared shadow rays
@@ -119,6 +96,7 @@ impl<'a> DirectLight<'a> {
         DirectLight {
             bvh,
             emitters,
+            lights: scene.lights.clone(),
             normals: scene.polygons.iter().map(|p| p.normal).collect(),
             reflectance: scene.polygons.iter().map(|p| p.reflectance).collect(),
             strata: strata.max(1),
@@ -139,6 +117,12 @@ impl<'a> DirectLight<'a> {
         let n = self.normals[polygon as usize];
         let origin = x + n * self.eps;
         let mut out = [0.0; 3];
+        for light in &self.lights {
+            let d = crate::lights::irradiance(light, self.bvh, x, n, polygon, self.eps);
+            for (o, d) in out.iter_mut().zip(d) {
+                *o += d;
+            }
+        }
         for e in &self.emitters {
             if e.polygon == polygon || (x - e.centre).dot(e.normal) <= 0.0 {
                 continue;
@@ -309,26 +293,6 @@ impl<'a> DirectLight<'a> {
         }
         (pixels.into_iter().map(|p| p.0).collect(), seen)
     }
-}
-
-/// Runs `work(index, slot)` over every slot, on every core; each slot's
-/// result depends only on its index, so the output is the same on any
-/// number of threads.
-fn in_parallel<T: Send>(out: &mut [T], work: impl Fn(usize, &mut T) + Sync) {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let chunk = out.len().div_ceil(threads * 8).max(1);
-    let next = std::sync::Mutex::new(out.chunks_mut(chunk).enumerate());
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| loop {
-                let item = next.lock().map(|mut it| it.next()).ok().flatten();
-                let Some((c, slots)) = item else { break };
-                for (k, slot) in slots.iter_mut().enumerate() {
-                    work(c * chunk + k, slot);
-                }
-            });
-        }
-    });
 }
 
 #[cfg(test)]

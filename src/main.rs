@@ -305,6 +305,8 @@ struct RenderArgs {
     #[arg(long)]
     resume: Option<PathBuf>,
     #[command(flatten)]
+    lights: radiosity::scene::light::LightArgs,
+    #[command(flatten)]
     solve: SolveArgs,
 }
 
@@ -713,6 +715,8 @@ fn run_render(args: RenderArgs) -> Result<()> {
             if let Some(name) = &args.camera {
                 s.use_camera(name)?;
             }
+            args.lights.apply(&mut s);
+            s.check_lit()?;
             Ok(s)
         })
         .map_err(anyhow::Error::from)

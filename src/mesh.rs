@@ -147,6 +147,9 @@ pub struct Mesh {
     pub occluders: crate::raytrace::Bvh,
     /// How far a ray starts off its surface, m (1e-5 of the scene's size).
     pub ray_offset: f32,
+    /// What the scene's lights and sky deliver to each element (empty
+    /// without them): their one shot, which every solver starts from.
+    pub light_field: crate::lights::LightField,
 }
 
 /// A glTF node whose polygons close a volume with their fronts facing out (a
@@ -319,6 +322,7 @@ impl Mesh {
         (mesh.solids, mesh.solid_of) = find_solids(&scene.polygons);
         mesh.occluders = crate::raytrace::Bvh::new(&scene.polygons);
         mesh.ray_offset = 1e-5 * scene.extent().max(1e-6);
+        mesh.light_field = crate::lights::element_field(&mesh, &scene.lights, scene.sky);
         mesh
     }
 

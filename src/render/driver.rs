@@ -162,6 +162,7 @@ pub fn render_on(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Option<Rendered>, RenderError> {
     opts.validate()?;
+    scene.check_lit()?;
     let mut timings = Timings {
         load: load_time.as_secs_f64(),
         ..Default::default()

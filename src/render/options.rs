@@ -185,6 +185,9 @@ pub enum RenderError {
     /// scene or resolution is beyond what the sums can hold).
     #[error("the fixed-point form-factor sums of shooter {0} overflowed 64 bits")]
     Overflow(u32),
+    /// The scene cannot be rendered as it is (nothing lights it).
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
 }
 
 /// What a checkpoint must match to be resumed here: the scene's geometry,
@@ -201,6 +204,14 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         }
         let subdivision = option_text(p.subdivision.as_ref().map(subdivision_text));
         geometry.extend_from_slice(format!("{} {subdivision};", p.node).as_bytes());
+    }
+    // Lights change the numbers; scenes without them keep the text older
+    // checkpoints were written with.
+    for l in &scene.lights {
+        geometry.extend_from_slice(format!("light {};", l.describe()).as_bytes());
+    }
+    if let Some(sky) = scene.sky {
+        geometry.extend_from_slice(format!("sky {sky:?};").as_bytes());
     }
     let settings = format!(
         "{} {} {} {} {} {} {} {} {}",

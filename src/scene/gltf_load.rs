@@ -1,6 +1,6 @@
 //! glTF 2.0 loading (DESIGN.md section 6).
 
-use super::{Camera, Polygon, Scene, SceneError, Subdivision};
+use super::{Camera, Light, LightKind, Polygon, Scene, SceneError, Subdivision};
 use glam::{DMat4, DVec3, Vec3};
 use std::path::Path;
 
@@ -94,6 +94,7 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         scene: Scene::default(),
         origin: None,
         camera_at: Vec::new(),
+        light_at: Vec::new(),
     };
     loader.scene.name = name.to_string();
     loader.scene.warnings = tolerated;
@@ -118,16 +119,14 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
     for ((_, cam), at) in loader.scene.cameras.iter_mut().zip(&loader.camera_at) {
         cam.position = (*at - origin).as_vec3();
     }
+    for (light, at) in loader.scene.lights.iter_mut().zip(&loader.light_at) {
+        light.position = (*at - origin).as_vec3();
+    }
     loader.scene.camera = loader.scene.cameras.first().map(|c| c.1);
     let mut scene = loader.scene;
     scene.origin = origin.to_array();
     if scene.polygons.is_empty() {
         return Err(SceneError::NoTriangles {
-            path: name.to_string(),
-        });
-    }
-    if !scene.polygons.iter().any(Polygon::is_emitter) {
-        return Err(SceneError::NoEmitter {
             path: name.to_string(),
         });
     }
@@ -147,6 +146,8 @@ struct Loader<'a> {
     origin: Option<DVec3>,
     /// The cameras' world positions (made relative at the end).
     camera_at: Vec<DVec3>,
+    /// The lights' world positions (made relative at the end).
+    light_at: Vec<DVec3>,
 }
 
 struct Material {
@@ -184,6 +185,9 @@ impl Loader<'_> {
                 self.scene.cameras.push((label, camera));
             }
         }
+        if let Some(light) = node.light() {
+            self.light(&light, world, &name)?;
+        }
         if let Some(mesh) = node.mesh() {
             let subdivision = self.extras(node, &name)?;
             let node_id = self.scene.nodes.len();
@@ -201,6 +205,69 @@ impl Loader<'_> {
         for child in node.children() {
             self.visit(&child, world, depth + 1)?;
         }
+        Ok(())
+    }
+
+    /// A `KHR_lights_punctual` light at the node's world transform,
+    /// shining along the node's -Z; its intensity times its colour, in
+    /// radiometric units (see [`super::light`]).
+    fn light(
+        &mut self,
+        light: &gltf::khr_lights_punctual::Light,
+        world: DMat4,
+        node: &str,
+    ) -> Result<(), SceneError> {
+        use gltf::khr_lights_punctual::Kind;
+        let name = light
+            .name()
+            .map_or_else(|| node.to_string(), str::to_string);
+        let bad = |message: String| SceneError::BadMaterial {
+            path: self.path.clone(),
+            node: node.to_string(),
+            message: format!("light '{name}': {message}"),
+        };
+        let (color, intensity) = (light.color(), light.intensity());
+        if !(intensity.is_finite() && intensity >= 0.0) {
+            return Err(bad(format!(
+                "intensity {intensity} must be finite and >= 0"
+            )));
+        }
+        if !color.iter().all(|c| c.is_finite() && *c >= 0.0) {
+            return Err(bad(format!("color {color:?} must be finite and >= 0")));
+        }
+        let kind = match light.kind() {
+            Kind::Point => LightKind::Point,
+            Kind::Directional => LightKind::Directional,
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let ok = (0.0..=std::f32::consts::FRAC_PI_2).contains(&outer_cone_angle)
+                    && (0.0..outer_cone_angle.max(f32::MIN_POSITIVE)).contains(&inner_cone_angle);
+                if !ok {
+                    return Err(bad(format!(
+                        "spot cone angles inner {inner_cone_angle}, outer {outer_cone_angle}: glTF needs 0 <= inner < outer <= pi/2"
+                    )));
+                }
+                LightKind::Spot {
+                    inner: inner_cone_angle,
+                    outer: outer_cone_angle,
+                }
+            }
+        };
+        let direction = world.transform_vector3(DVec3::NEG_Z);
+        if !(direction.is_finite() && direction.length() > 0.0) {
+            return Err(bad("its node's transform is degenerate".into()));
+        }
+        let position = world.transform_point3(DVec3::ZERO);
+        self.light_at.push(position);
+        self.scene.lights.push(Light {
+            name,
+            kind,
+            position: Vec3::ZERO,
+            direction: direction.normalize().as_vec3(),
+            intensity: color.map(|c| f64::from(c) * f64::from(intensity)),
+        });
         Ok(())
     }
 
@@ -257,7 +324,9 @@ impl Loader<'_> {
             node: node.to_string(),
             message,
         };
-        let base = m.pbr_metallic_roughness().base_color_factor();
+        let pbr = m.pbr_metallic_roughness();
+        let base = pbr.base_color_factor();
+        let metallic = pbr.metallic_factor();
         let strength = m.emissive_strength().unwrap_or(1.0);
         let e = m.emissive_factor();
         let unit = |x: f32| x.is_finite() && (0.0..=1.0).contains(&x);
@@ -272,6 +341,11 @@ impl Loader<'_> {
                 "{what}: emissiveFactor {e:?} is outside [0, 1] (scale it with KHR_materials_emissive_strength)"
             )));
         }
+        if !unit(metallic) {
+            return Err(bad(format!(
+                "{what}: metallicFactor {metallic} is outside [0, 1]"
+            )));
+        }
         if !(strength.is_finite() && strength >= 0.0) {
             return Err(bad(format!(
                 "{what}: KHR_materials_emissive_strength {strength} must be finite and >= 0"
@@ -279,13 +353,22 @@ impl Loader<'_> {
         }
         // Reflectance 1 (glTF's default when a material gives no factor)
         // never converges: 0.95 instead, said once per material.
-        let reflectance = [base[0], base[1], base[2]].map(|x| if x >= 1.0 { CLAMPED } else { x });
+        // A metal's diffuse part is (1 - metallic) of its base colour
+        // (glTF's BRDF); what it reflects specularly is not modelled.
+        let reflectance = [base[0], base[1], base[2]]
+            .map(|x| if x >= 1.0 { CLAMPED } else { x } * (1.0 - metallic));
         if base[..3].iter().any(|&x| x >= 1.0) {
             let w = format!(
                 "{what}: a reflectance of 1 (baseColorFactor {:?}) never converges: clamped to {CLAMPED}",
                 &base[..3]
             );
             clamped.push(w);
+        }
+        if metallic >= 1.0 && base[..3].iter().any(|&x| x > 0.0) {
+            // glTF's default when a material gives no metallicFactor.
+            clamped.push(format!(
+                "{what}: metallicFactor 1 (fully metal): no diffuse reflectance, so it absorbs all light here"
+            ));
         }
         Ok(Material {
             reflectance,

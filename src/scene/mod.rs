@@ -9,11 +9,13 @@ pub mod contact;
 pub mod family;
 mod gltf_load;
 mod gltf_write;
+pub mod light;
 pub mod tolerate;
 
 pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};
 pub use gltf_write::{axis_rect, to_glb, write_gltf, GltfSurface};
+pub use light::{parse_sky, parse_sun, Light, LightKind, LUMENS_PER_WATT};
 
 use glam::{Quat, Vec3};
 
@@ -138,6 +140,12 @@ pub struct Scene {
     /// relative to: the loader works in f64 and keeps f32 coordinates near
     /// zero, so a scene far from the world origin loses no precision.
     pub origin: [f64; 3],
+    /// Lights that are not surfaces: the file's `KHR_lights_punctual` and a
+    /// `--sun` (see [`light`]).
+    pub lights: Vec<Light>,
+    /// A uniform sky's radiance (W sr^-1 m^-2 per channel) seen by every
+    /// direction that leaves the scene (`--sky`).
+    pub sky: Option<[f64; 3]>,
 }
 
 impl Scene {
@@ -156,6 +164,38 @@ impl Scene {
     pub fn extent(&self) -> f32 {
         let (lo, hi) = self.bounds();
         (hi - lo).length()
+    }
+
+    /// Whether anything lights the scene: an emitting surface, a light or
+    /// a sky brighter than 0. The error says how to light it.
+    pub fn check_lit(&self) -> Result<(), SceneError> {
+        let lights = self
+            .lights
+            .iter()
+            .any(|l| l.intensity.iter().any(|&i| i > 0.0));
+        let sky = self.sky.is_some_and(|s| s.iter().any(|&l| l > 0.0));
+        if lights || sky || self.polygons.iter().any(Polygon::is_emitter) {
+            Ok(())
+        } else {
+            Err(SceneError::NoEmitter {
+                path: self.name.clone(),
+            })
+        }
+    }
+
+    /// Reads the file's light units as photometric (`--photometric`): a
+    /// point or spot light's intensity as candela, a directional light's as
+    /// lux, emission as nits, each divided by [`LUMENS_PER_WATT`] into the
+    /// radiometric units the solver uses. Lights added by `--sun` and
+    /// `--sky` are radiometric: add them after this.
+    pub fn read_photometric(&mut self) {
+        let k = 1.0 / LUMENS_PER_WATT;
+        for l in &mut self.lights {
+            l.intensity = l.intensity.map(|i| i * k);
+        }
+        for p in &mut self.polygons {
+            p.emission = p.emission.map(|e| (f64::from(e) * k) as f32);
+        }
     }
 
     /// Makes the camera named `name` the view; the error lists the names.
@@ -221,7 +261,7 @@ pub enum SceneError {
         path: String,
     },
     /// Nothing emits light, so the solution would be black.
-    #[error("scene '{path}' has no emitter: give some material an emissiveFactor")]
+    #[error("scene '{path}' has no emitter: give some material an emissiveFactor, add a KHR_lights_punctual light, or light it with --sun / --sky")]
     NoEmitter {
         /// The scene path.
         path: String,

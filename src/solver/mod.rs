@@ -286,8 +286,8 @@ impl<'m> Solver<'m> {
             .iter()
             .map(|p| mesh.polygons[p.polygon as usize].exitance)
             .collect();
-        let emitted_power = mesh.emitted_power();
-        Self {
+        let emitted_power = mesh.emitted_power() + mesh.light_field.emitted;
+        let mut solver = Self {
             mesh,
             rank,
             ranks: ranks.max(1),
@@ -311,7 +311,37 @@ impl<'m> Solver<'m> {
                 })
                 .collect(),
             direct_known: true,
+        };
+        solver.receive_lights();
+        solver
+    }
+
+    /// The lights' and sky's one shot ([`crate::lights`]): each element
+    /// reflects rho E of what they deliver, into its radiosity and its
+    /// patch's unshot store; the lights' part is direct light (the camera
+    /// image traces it again), the sky's is not. Every rank does it whole,
+    /// as every rank starts from the emitters' exitance.
+    fn receive_lights(&mut self) {
+        let mesh = self.mesh;
+        let field = &mesh.light_field;
+        if field.is_empty() {
+            return;
         }
+        for (j, e) in mesh.elements.iter().enumerate() {
+            let rho = mesh.polygons[e.polygon as usize].reflectance;
+            let share = e.area / mesh.patches[e.patch as usize].area;
+            let (lights, sky) = (field.direct[j], field.sky[j]);
+            for c in 0..3 {
+                let d = rho[c] * (lights[c] + sky[c]);
+                self.direct[j][c] += rho[c] * lights[c];
+                self.radiosity[j][c] += d;
+                self.element_unshot[j][c] += d;
+                self.unshot[e.patch as usize][c] += d * share;
+            }
+        }
+        // Shot as one: what missed the elements left the scene (or met
+        // the backs of one-sided surfaces, which rays do not tell apart).
+        self.note_energy(field.emitted, field.delivered, 0.0);
     }
 
     /// Turns overshooting by the ambient term on or off (off by default, here

@@ -11,8 +11,35 @@ use std::time::Duration;
 
 fn cornell(opts: &RenderOptions, stop_at: Option<u64>) -> Rendered {
     let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    solve_scene(&scene, opts, stop_at)
+}
+
+/// The Cornell box with a point light, a sun and a sky besides its panel.
+fn lit_cornell() -> radiosity::scene::Scene {
+    use radiosity::scene::{Light, LightKind};
+    let mut scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let (lo, hi) = scene.bounds();
+    scene.lights.push(Light {
+        name: "bulb".into(),
+        kind: LightKind::Point,
+        position: lo + (hi - lo) * glam::Vec3::new(0.3, 0.7, 0.6),
+        direction: -glam::Vec3::Z,
+        intensity: [0.05, 0.04, 0.03],
+    });
+    scene
+        .lights
+        .push(Light::sun(glam::Vec3::new(0.2, 0.4, 1.0), [2.0; 3]));
+    scene.sky = Some([0.1, 0.12, 0.2]);
+    scene
+}
+
+fn solve_scene(
+    scene: &radiosity::scene::Scene,
+    opts: &RenderOptions,
+    stop_at: Option<u64>,
+) -> Rendered {
     let flag = opts.interrupt.clone();
-    render(gpu(), &scene, opts, Duration::ZERO, &mut |p| {
+    render(gpu(), scene, opts, Duration::ZERO, &mut |p| {
         // A signal arriving after shot `stop_at`.
         if let (Some(f), Some(n)) = (&flag, stop_at) {
             if p.shots == n {
@@ -112,6 +139,46 @@ fn a_checkpoint_from_other_settings_is_refused() {
     opts.resume = Some(Arc::new(saved));
     let scene = radiosity::scene::open("cornell").expect("built-in scene");
     let err = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_solve_with_lights_sun_and_sky_resumes_to_the_same_bits_and_other_lights_are_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("lit.ckpt");
+    let scene = lit_cornell();
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.threshold = 2e-3;
+    let straight = solve_scene(&scene, &opts, None);
+    opts.checkpoint = Some(CheckpointPlan {
+        path: path.clone(),
+        every: None,
+    });
+    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    let stopped = solve_scene(&scene, &opts, Some(60));
+    assert!(stopped.interrupted);
+    let saved = Arc::new(Checkpoint::read(&path).expect("checkpoint written"));
+    opts.interrupt = None;
+    opts.checkpoint = None;
+    opts.resume = Some(saved.clone());
+    opts.layout = Some(TileLayout {
+        tile_w: 4,
+        tile_h: 2,
+        px: 2,
+        py: 2,
+    });
+    same_solution(&solve_scene(&scene, &opts, None), &straight);
+    let mut brighter = scene.clone();
+    brighter.sky = Some([0.2, 0.12, 0.2]);
+    let err = render(gpu(), &brighter, &opts, Duration::ZERO, &mut |_| {})
         .err()
         .expect("refused");
     assert!(

@@ -12,6 +12,7 @@ mod energy;
 mod furnace;
 mod fuzz;
 mod image;
+mod lights;
 mod mpi;
 mod overshoot;
 mod projections;

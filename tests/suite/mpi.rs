@@ -454,3 +454,17 @@ fn overshooting_and_coarse_shots_agree_across_ranks() {
         one["timings"]["coarse_shots"]
     );
 }
+
+#[test]
+fn a_sun_and_a_sky_give_the_same_bits_on_every_rank_count() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let args = ["--sun", "0.3,0.5,1,20", "--sky", "0.2,0.25,0.4"];
+    let one = mpirun(1, dir.path(), "one", &args);
+    let emitted = one["energy"]["emitted"].as_f64().expect("emitted");
+    assert!(emitted > 0.0);
+    for ranks in [2, 3] {
+        let r = mpirun(ranks, dir.path(), &format!("n{ranks}"), &args);
+        same_result(&one, &r, &format!("{ranks} ranks with a sun and a sky"));
+        assert_eq!(r["energy"], one["energy"]);
+    }
+}

@@ -14,18 +14,65 @@ fn cornell_with(edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
 }
 
 #[test]
-fn sponza_as_shipped_loads_but_for_its_missing_light() {
+fn sponza_as_shipped_loads_with_the_documented_warnings_and_a_sun_lights_it() {
     // Missing normal and roughness images, DDS-only textures and the
-    // required AMD_split_roughnessMetallic used to stop the load; what is
-    // left is that the file has no emitter (it is lit by the sky and sun).
+    // required AMD_split_roughnessMetallic used to stop the load. It has
+    // no light of its own (the sky and sun light it): rendering it alone
+    // says how to light it.
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/scenes/sponza/Sponza.gltf");
     assert!(path.exists(), "{} is missing", path.display());
-    match load(&path) {
+    let mut scene = load(&path).unwrap_or_else(|e| panic!("Sponza: {e}"));
+    let about = |s: &str| scene.warnings.iter().filter(|w| w.contains(s)).count();
+    assert_eq!(
+        about("AMD_split_roughnessMetallic"),
+        1,
+        "{:?}",
+        scene.warnings
+    );
+    assert_eq!(about("MSFT_texture_dds"), 1, "{:?}", scene.warnings);
+    match scene.check_lit() {
         Err(SceneError::NoEmitter { .. }) => {}
-        Err(e) => panic!("Sponza: {e}"),
-        Ok(_) => panic!("Sponza has no emitter, yet loaded"),
+        other => panic!("Sponza has no light of its own, yet {other:?}"),
     }
+    scene
+        .lights
+        .push(radiosity::scene::parse_sun("0.2,1,0.3,1000").expect("sun"));
+    scene.check_lit().expect("the sun lights it");
+}
+
+#[test]
+fn metallic_materials_reflect_one_minus_metallic_of_their_base_colour() {
+    let bytes = cornell_with(|d| {
+        let m = &mut d["materials"][0];
+        m["pbrMetallicRoughness"]["baseColorFactor"] = serde_json::json!([0.8, 0.6, 0.4, 1.0]);
+        m["pbrMetallicRoughness"]["metallicFactor"] = serde_json::json!(0.25);
+    });
+    let scene = load_slice(&bytes, "metal").expect("loads");
+    let want = [0.8f32, 0.6, 0.4].map(|x| x * 0.75);
+    assert!(
+        scene.polygons.iter().any(|p| p
+            .reflectance
+            .iter()
+            .zip(&want)
+            .all(|(a, b)| (a - b).abs() < 1e-6)),
+        "no polygon reflects {want:?}"
+    );
+    let bytes = cornell_with(|d| {
+        d["materials"][0]["pbrMetallicRoughness"]["metallicFactor"] = serde_json::json!(1.5);
+    });
+    let err = load_slice(&bytes, "too metal").expect_err("1.5 is outside [0, 1]");
+    assert!(err.to_string().contains("metallicFactor"), "{err}");
+}
+
+#[test]
+fn a_reflectance_above_one_is_an_error() {
+    let bytes = cornell_with(|d| {
+        d["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] =
+            serde_json::json!([1.5, 0.5, 0.5, 1.0]);
+    });
+    let err = load_slice(&bytes, "bright").expect_err("1.5 creates energy");
+    assert!(err.to_string().contains("outside [0, 1]"), "{err}");
 }
 
 #[test]

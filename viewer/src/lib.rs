@@ -22,6 +22,9 @@ pub struct Args {
     /// lists the file's cameras.
     #[arg(long)]
     pub camera: Option<String>,
+    /// A sun, a sky and photometric units, as the renderer takes them.
+    #[command(flatten)]
+    pub lights: radiosity::scene::light::LightArgs,
     /// Hemisphere resolution R_phi x R_theta.
     #[arg(long, default_value = "128x512")]
     pub resolution: Resolution,

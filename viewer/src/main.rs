@@ -20,6 +20,8 @@ fn run(args: Args) -> Result<()> {
     if let Some(name) = &args.camera {
         scene.use_camera(name)?;
     }
+    args.lights.apply(&mut scene);
+    scene.check_lit()?;
     let (w, h) = args
         .size
         .split_once('x')

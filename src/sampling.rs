@@ -1,0 +1,54 @@
+//! Sampling shared by the CPU's light estimates: points on triangles and
+//! quads, uniform numbers from the project's seeded generator, and a
+//! deterministic parallel map (each slot's result depends only on its index).
+
+use crate::fuzz::Rng;
+use glam::Vec3;
+
+/// A point of a triangle or convex quad from (u, v) in the unit square, and
+/// the density's Jacobian there (area per unit (u, v)): bilinear for a quad,
+/// the square folded onto a triangle for a triangle.
+pub fn point_in(c: &[Vec3], u: f32, v: f32) -> (Vec3, f32) {
+    if c.len() == 3 {
+        let (u, v) = if u + v > 1.0 {
+            (1.0 - u, 1.0 - v)
+        } else {
+            (u, v)
+        };
+        let (e1, e2) = (c[1] - c[0], c[2] - c[0]);
+        (c[0] + e1 * u + e2 * v, e1.cross(e2).length())
+    } else {
+        let p = c[0] * (1.0 - u) * (1.0 - v)
+            + c[1] * u * (1.0 - v)
+            + c[2] * u * v
+            + c[3] * (1.0 - u) * v;
+        let du = (c[1] - c[0]) * (1.0 - v) + (c[2] - c[3]) * v;
+        let dv = (c[3] - c[0]) * (1.0 - u) + (c[2] - c[1]) * u;
+        (p, du.cross(dv).length())
+    }
+}
+
+/// A uniform number in [0, 1).
+pub fn unit(rng: &mut Rng) -> f32 {
+    (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// Runs `work(index, slot)` over every slot, on every core; each slot's
+/// result depends only on its index, so the output is the same on any
+/// number of threads.
+pub fn in_parallel<T: Send>(out: &mut [T], work: impl Fn(usize, &mut T) + Sync) {
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let chunk = out.len().div_ceil(threads * 8).max(1);
+    let next = std::sync::Mutex::new(out.chunks_mut(chunk).enumerate());
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let item = next.lock().map(|mut it| it.next()).ok().flatten();
+                let Some((c, slots)) = item else { break };
+                for (k, slot) in slots.iter_mut().enumerate() {
+                    work(c * chunk + k, slot);
+                }
+            });
+        }
+    });
+}
