@@ -40,6 +40,8 @@ pub struct DirectLight<'a> {
     lights: Vec<crate::scene::Light>,
     normals: Vec<Vec3>,
     reflectance: Vec<[f32; 3]>,
+    /// Each polygon's texture map, if it has one (`reflectance` is then its mean).
+    textures: Vec<Option<&'a crate::scene::TexMap>>,
     /// Shadow rays per emitter per point (per image sample): `strata` x `strata`.
     strata: u32,
     /// Offset of ray ends off their surfaces, m.
@@ -74,11 +76,24 @@ impl Strata {
     }
 }
 
+/// What [`DirectLight::image`] gives: per pixel the direct radiance and the
+/// texture multiplier, and which polygons the pixels saw.
+#[derive(Clone, Debug)]
+pub struct Image {
+    /// Reflected direct radiance per pixel.
+    pub direct: Vec<[f32; 3]>,
+    /// Per polygon, whether some sample saw it.
+    pub seen: Vec<bool>,
+    /// Per pixel, the mean texture reflectance over its samples (1 where
+    /// they meet no textured polygon).
+    pub texture: Vec<[f32; 3]>,
+}
+
 impl<'a> DirectLight<'a> {
     /// Gathers `scene`'s emitters; `bvh` holds the scene's polygons (the
     /// mesh's [`Mesh::occluders`], built once); `strata` squared shadow rays
     /// go to each emitter from each point.
-    pub fn new(scene: &Scene, bvh: &'a Bvh, strata: u32) -> Self {
+    pub fn new(scene: &'a Scene, bvh: &'a Bvh, strata: u32) -> Self {
         let emitters = scene
             .polygons
             .iter()
@@ -99,6 +114,7 @@ impl<'a> DirectLight<'a> {
             lights: scene.lights.clone(),
             normals: scene.polygons.iter().map(|p| p.normal).collect(),
             reflectance: scene.polygons.iter().map(|p| p.reflectance).collect(),
+            textures: scene.polygons.iter().map(|p| p.texture.as_ref()).collect(),
             strata: strata.max(1),
             eps: 1e-5 * scene.extent().max(1e-6),
         }
@@ -221,23 +237,20 @@ impl<'a> DirectLight<'a> {
 
     /// The camera image's direct part: `width * height` pixels (top row
     /// first) of reflected direct radiance rho E / pi, box-filtered over
-    /// `ss` x `ss` samples per pixel at the centres the rasteriser uses;
-    /// and which polygons some sample saw.
-    pub fn image(
-        &self,
-        camera: &Camera,
-        size: [u32; 2],
-        ss: u32,
-        near: f32,
-        far: f32,
-    ) -> (Vec<[f32; 3]>, Vec<bool>) {
+    /// `ss` x `ss` samples per pixel at the centres the rasteriser uses
+    /// (rho the texture's at each sample on a textured polygon); which
+    /// polygons some sample saw; and per pixel the mean over its samples
+    /// of the texture's reflectance where they meet a textured polygon, 1
+    /// elsewhere (what the interpolated irradiance of textured elements is
+    /// multiplied by: see `render::image`).
+    pub fn image(&self, camera: &Camera, size: [u32; 2], ss: u32, near: f32, far: f32) -> Image {
         let [width, height] = size;
         let ss = ss.max(1);
         let (w, h) = ((width * ss) as f32, (height * ss) as f32);
         let tan = (0.5 * camera.yfov).tan();
         let aspect = width as f32 / height as f32;
         let per_pixel = (ss * ss) as f64;
-        let work = |p: usize, out: &mut ([f32; 3], u32)| {
+        let work = |p: usize, out: &mut ([f32; 3], u32, [f32; 3])| {
             let (px, py) = ((p as u32 % width) * ss, (p as u32 / width) * ss);
             let mut rng = Rng(0xd1ec_7000_0000 ^ p as u64);
             // The pixel's samples share one (ss * strata)^2 stratification of
@@ -248,6 +261,7 @@ impl<'a> DirectLight<'a> {
                 order.swap(k, rng.below(k + 1));
             }
             let mut sum = [0.0f64; 3];
+            let mut texture = [0.0f64; 3];
             for k in 0..ss * ss {
                 let (sx, sy) = ((px + k % ss) as f32 + 0.5, (py + k / ss) as f32 + 0.5);
                 let dir = Vec3::new(
@@ -262,13 +276,18 @@ impl<'a> DirectLight<'a> {
                     .bvh
                     .nearest_facing(camera.position, dir, near, far, 1e-5)
                 else {
+                    texture.iter_mut().for_each(|t| *t += 1.0);
                     continue;
                 };
                 out.1 = hit.polygon + 1;
+                let x = camera.position + dir * hit.t;
+                let textured = self.textures[hit.polygon as usize].map(|m| m.reflectance(x));
+                for (t, r) in texture.iter_mut().zip(textured.unwrap_or([1.0; 3])) {
+                    *t += f64::from(r);
+                }
                 if dir.dot(self.normals[hit.polygon as usize]) >= 0.0 {
                     continue;
                 }
-                let x = camera.position + dir * hit.t;
                 let block = order[k as usize];
                 let strata = Strata {
                     grid: ss * self.strata,
@@ -276,22 +295,27 @@ impl<'a> DirectLight<'a> {
                     side: self.strata,
                 };
                 let e = self.irradiance_in(x, hit.polygon, &mut rng, strata);
-                let rho = self.reflectance[hit.polygon as usize];
+                let rho = textured.unwrap_or(self.reflectance[hit.polygon as usize]);
                 for c in 0..3 {
                     sum[c] += rho[c] as f64 * e[c] / std::f64::consts::PI;
                 }
             }
             out.0 = sum.map(|s| (s / per_pixel) as f32);
+            out.2 = texture.map(|t| (t / per_pixel) as f32);
         };
-        let mut pixels = vec![([0.0f32; 3], 0u32); (width * height) as usize];
+        let mut pixels = vec![([0.0f32; 3], 0u32, [1.0f32; 3]); (width * height) as usize];
         in_parallel(&mut pixels, work);
         let mut seen = vec![false; self.normals.len()];
-        for (_, p) in &pixels {
+        for (_, p, _) in &pixels {
             if *p > 0 {
                 seen[*p as usize - 1] = true;
             }
         }
-        (pixels.into_iter().map(|p| p.0).collect(), seen)
+        Image {
+            direct: pixels.iter().map(|p| p.0).collect(),
+            seen,
+            texture: pixels.iter().map(|p| p.2).collect(),
+        }
     }
 }
 

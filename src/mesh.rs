@@ -123,6 +123,9 @@ pub struct Element {
     pub area: f64,
     /// Shading-vertex indices of the corners (shared within a polygon).
     pub vertices: [u32; 4],
+    /// Reflectance per channel: its polygon's, or, on a textured polygon,
+    /// the texture's mean over the element times the factor.
+    pub reflectance: [f64; 3],
     /// Centroid (see [`element_centre`]), kept: every shot evaluates its
     /// receivers' form factors there.
     pub centre: Vec3,
@@ -303,6 +306,28 @@ fn outward_solid(
     })
 }
 
+/// Points per element along each axis for its texture mean.
+const TEXTURE_POINTS: u32 = 4;
+
+/// The mean reflectance of `map`'s texture over element `e`, from the
+/// midpoints of a [`TEXTURE_POINTS`]-square grid over it.
+fn texture_mean(map: &crate::scene::TexMap, e: &Element) -> [f32; 3] {
+    let corners: &[Vec3] = if e.corners[3] == e.corners[2] {
+        &e.corners[..3]
+    } else {
+        &e.corners
+    };
+    let n = TEXTURE_POINTS;
+    let points: Vec<Vec3> = (0..n * n)
+        .map(|q| {
+            let u = ((q % n) as f32 + 0.5) / n as f32;
+            let v = ((q / n) as f32 + 0.5) / n as f32;
+            crate::sampling::point_in(corners, u, v).0
+        })
+        .collect();
+    map.mean_reflectance(&points, e.area as f32)
+}
+
 impl Mesh {
     /// Subdivides every polygon of `scene`.
     pub fn build(scene: &Scene, settings: &MeshSettings) -> Mesh {
@@ -465,6 +490,12 @@ impl Mesh {
         } else {
             self.quad(index, v, patch_grid, element_grid);
         }
+        for e in &mut self.elements[first_element as usize..] {
+            e.reflectance = match &poly.texture {
+                Some(map) => texture_mean(map, e).map(f64::from),
+                None => refl,
+            };
+        }
         let tangent = (v[1] - v[0]).normalize();
         self.polygons.push(MeshPolygon {
             node: poly.node,
@@ -513,6 +544,7 @@ impl Mesh {
             area,
             vertices,
             centre: centroid(&corners),
+            reflectance: [0.0; 3],
         });
     }
 
@@ -776,6 +808,7 @@ mod tests {
                     subdivision: None,
                     back_side: false,
                     parent: None,
+                    texture: None,
                 });
             }
         }
@@ -823,6 +856,7 @@ mod tests {
             subdivision: sub,
             back_side: false,
             parent: None,
+            texture: None,
         }
     }
 

@@ -44,6 +44,7 @@ fn measured(gpu: &Gpu, poly: &[Vec3], res: Resolution, tessellated: bool) -> Res
             }),
             back_side: false,
             parent: None,
+            texture: None,
         }],
         ..Default::default()
     };

@@ -107,38 +107,51 @@ pub fn camera_image(
     // The mesh's hierarchy holds the same polygons (built once per mesh).
     let light = DirectLight::new(scene, &mesh.occluders, strata);
     let (near, far) = view_depth_range(mesh, camera);
-    let (direct, seen) = light.image(
+    let traced = light.image(
         camera,
         [view.width, view.height],
         view.supersample,
         near,
         far,
     );
-    let rest: Vec<[f32; 3]> = match parts.direct {
+    let mut rest: Vec<[f32; 3]> = match parts.direct {
         Some(direct) => radiance
             .iter()
             .zip(direct)
             .map(|(r, d)| [0, 1, 2].map(|c| r[c] - (d[c] / std::f64::consts::PI) as f32))
             .collect(),
         None => {
-            let element_direct = light.element_irradiance(mesh, &seen);
+            let element_direct = light.element_irradiance(mesh, &traced.seen);
             mesh.elements
                 .iter()
                 .zip(radiance)
                 .zip(&element_direct)
                 .map(|((e, r), d)| {
-                    let rho = mesh.polygons[e.polygon as usize].reflectance;
+                    let rho = e.reflectance;
                     [0, 1, 2].map(|c| r[c] - (rho[c] * d[c] / std::f64::consts::PI) as f32)
                 })
                 .collect()
         }
     };
+    // Textured elements interpolate their irradiance (the rest over their
+    // reflectance); each pixel multiplies it by its texture.
+    for (r, e) in rest.iter_mut().zip(&mesh.elements) {
+        if scene.polygons[e.polygon as usize].texture.is_some() {
+            for (x, rho) in r.iter_mut().zip(e.reflectance) {
+                *x = if rho > 1e-6 {
+                    (f64::from(*x) / rho) as f32
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
     let mut pixels = renderer.render_masked(device, queue, mesh, &rest, unlit, camera, view)?;
-    for (p, d) in pixels.iter_mut().zip(&direct) {
+    for ((p, d), t) in pixels.iter_mut().zip(&traced.direct).zip(&traced.texture) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution
             // underestimated can dip below 0 where the traced light is small.
-            p[c] = (p[c] + d[c]).max(0.0);
+            p[c] = (p[c] * t[c] + d[c]).max(0.0);
         }
     }
     Ok(pixels)

@@ -1,8 +1,11 @@
 //! glTF 2.0 loading (DESIGN.md section 6).
 
+use super::texture::{TexMap, Texture, TextureRef, Wrap};
 use super::{Camera, Light, LightKind, Polygon, Scene, SceneError, Subdivision};
-use glam::{DMat4, DVec3, Vec3};
-use std::path::Path;
+use glam::{DMat4, DVec3, Vec2, Vec3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Cosine of the largest fold (0.8 degrees) between two triangles merged into
 /// a quad: the Cornell box's measured red wall is folded by 0.4 degrees.
@@ -90,6 +93,8 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
 
     let mut loader = Loader {
         path: name.to_string(),
+        base: base.map(Path::to_path_buf),
+        textures: HashMap::new(),
         buffers: &buffers,
         scene: Scene::default(),
         origin: None,
@@ -139,6 +144,10 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
 
 struct Loader<'a> {
     path: String,
+    /// Where relative URIs point (the file's folder).
+    base: Option<PathBuf>,
+    /// Base-colour textures by glTF texture index (`None`: it did not load).
+    textures: HashMap<usize, Option<Arc<TextureRef>>>,
     buffers: &'a [gltf::buffer::Data],
     scene: Scene,
     /// The first vertex's world position: every position is stored relative
@@ -154,6 +163,42 @@ struct Material {
     reflectance: [f32; 3],
     emission: [f32; 3],
     double_sided: bool,
+    /// The base-colour texture, if it loaded.
+    texture: Option<MaterialTexture>,
+}
+
+/// A triangle's corners and their vertex indices.
+type Indexed = ([Vec3; 3], [u32; 3]);
+
+/// A material's base-colour texture as its primitives map it.
+struct MaterialTexture {
+    texture: Arc<TextureRef>,
+    /// The TEXCOORD set.
+    set: u32,
+    /// `KHR_texture_transform` as a 2 x 3 affine matrix (rows).
+    transform: [[f32; 3]; 2],
+    /// baseColorFactor times (1 - metallic), unclamped.
+    factor: [f32; 3],
+}
+
+impl MaterialTexture {
+    fn apply(&self, uv: [f32; 2]) -> Vec2 {
+        let m = &self.transform;
+        Vec2::new(
+            m[0][0] * uv[0] + m[0][1] * uv[1] + m[0][2],
+            m[1][0] * uv[0] + m[1][1] * uv[1] + m[1][2],
+        )
+    }
+}
+
+/// `KHR_texture_transform`'s offset, rotation and scale as the 2 x 3
+/// matrix T(offset) R(rotation) S(scale) the extension defines.
+fn transform_matrix(offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> [[f32; 3]; 2] {
+    let (s, c) = rotation.sin_cos();
+    [
+        [c * scale[0], s * scale[1], offset[0]],
+        [-s * scale[0], c * scale[1], offset[1]],
+    ]
 }
 
 impl Loader<'_> {
@@ -309,7 +354,7 @@ impl Loader<'_> {
     /// strength finite and >= 0. A reflectance above 1 would create energy
     /// (a room 7x too bright), so it is an error, not a clamp.
     fn material(
-        &self,
+        &mut self,
         prim: &gltf::Primitive,
         node: &str,
         clamped: &mut Vec<String>,
@@ -351,6 +396,40 @@ impl Loader<'_> {
                 "{what}: KHR_materials_emissive_strength {strength} must be finite and >= 0"
             )));
         }
+        if m.alpha_mode() == gltf::material::AlphaMode::Mask {
+            clamped.push(format!(
+                "{what}: alphaMode MASK is not cut out: its surfaces are treated as opaque"
+            ));
+        }
+        let factor = [0, 1, 2].map(|c| base[c] * (1.0 - metallic));
+        let texture = pbr.base_color_texture().and_then(|info| {
+            let texture = self.texture(&info.texture(), &what)?;
+            let (mut set, mut transform) =
+                (info.tex_coord(), transform_matrix([0.0; 2], 0.0, [1.0; 2]));
+            if let Some(t) = info.texture_transform() {
+                transform = transform_matrix(t.offset(), t.rotation(), t.scale());
+                set = t.tex_coord().unwrap_or(set);
+            }
+            Some(MaterialTexture {
+                texture,
+                set,
+                transform,
+                factor,
+            })
+        });
+        if let Some(t) = &texture {
+            // The texture's mean stands for the polygon; its elements get
+            // their own (see `super::texture`).
+            let mean = t.texture.texture.mean();
+            let reflectance =
+                [0, 1, 2].map(|c| (factor[c] * mean[c]).min(super::texture::MAX_REFLECTANCE));
+            return Ok(Material {
+                reflectance,
+                emission: [e[0] * strength, e[1] * strength, e[2] * strength],
+                double_sided: m.double_sided(),
+                texture,
+            });
+        }
         // Reflectance 1 (glTF's default when a material gives no factor)
         // never converges: 0.95 instead, said once per material.
         // A metal's diffuse part is (1 - metallic) of its base colour
@@ -374,7 +453,84 @@ impl Loader<'_> {
             reflectance,
             emission: [e[0] * strength, e[1] * strength, e[2] * strength],
             double_sided: m.double_sided(),
+            texture: None,
         })
+    }
+
+    /// The base-colour texture `texture`, decoded once (PNG or JPEG, from a
+    /// file beside the scene, a data URI or a buffer view); `None`, with a
+    /// warning naming the image, when it cannot be had (the material's
+    /// factor then stands in).
+    fn texture(&mut self, texture: &gltf::Texture, material: &str) -> Option<Arc<TextureRef>> {
+        let index = texture.index();
+        if let Some(t) = self.textures.get(&index) {
+            return t.clone();
+        }
+        let image = texture.source();
+        let label = match image.source() {
+            gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_string(),
+            _ => image
+                .name()
+                .map_or_else(|| format!("images[{}]", image.index()), str::to_string),
+        };
+        let decoded = self.image_bytes(&image).and_then(|bytes| {
+            image::load_from_memory(&bytes)
+                .map(|i| i.to_rgba8())
+                .map_err(|e| e.to_string())
+        });
+        let sampler = texture.sampler();
+        let wrap = [
+            Wrap::from_gltf(sampler.wrap_s()),
+            Wrap::from_gltf(sampler.wrap_t()),
+        ];
+        let out = match decoded {
+            Ok(img) => {
+                let (w, h) = (img.width() as usize, img.height() as usize);
+                let texels: Vec<[u8; 4]> = img.pixels().map(|p| p.0).collect();
+                Some(Arc::new(TextureRef {
+                    index,
+                    texture: Texture::from_srgb8(&label, w, h, &texels, wrap),
+                }))
+            }
+            Err(why) => {
+                self.scene.warnings.push(format!(
+                    "{material}: base colour texture '{label}' cannot be used ({why}): its factor stands in"
+                ));
+                None
+            }
+        };
+        self.textures.insert(index, out.clone());
+        out
+    }
+
+    /// The encoded bytes of `image`.
+    fn image_bytes(&self, image: &gltf::Image) -> Result<Vec<u8>, String> {
+        match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let buffer = self
+                    .buffers
+                    .get(view.buffer().index())
+                    .ok_or("its buffer is missing")?;
+                buffer
+                    .0
+                    .get(view.offset()..view.offset() + view.length())
+                    .map(<[u8]>::to_vec)
+                    .ok_or_else(|| "its buffer view runs past its buffer".to_string())
+            }
+            gltf::image::Source::Uri { uri, .. } => {
+                if let Some(rest) = uri.strip_prefix("data:") {
+                    let (_, data) = rest
+                        .split_once(";base64,")
+                        .ok_or("a data URI that is not base64")?;
+                    use base64::Engine;
+                    return base64::engine::general_purpose::STANDARD
+                        .decode(data)
+                        .map_err(|e| e.to_string());
+                }
+                let base = self.base.as_deref().ok_or("no folder to find it in")?;
+                std::fs::read(base.join(percent_decode(uri))).map_err(|e| e.to_string())
+            }
+        }
     }
 
     /// The gltf crate's readers assume the spec's accessor types (and hit
@@ -415,7 +571,7 @@ impl Loader<'_> {
         indices: &[u32],
         flip: bool,
         name: &str,
-    ) -> Result<Vec<[Vec3; 3]>, SceneError> {
+    ) -> Result<Vec<Indexed>, SceneError> {
         let mut tris = Vec::with_capacity(indices.len() / 3);
         let mut degenerate = 0usize;
         for (k, t) in indices.chunks_exact(3).enumerate() {
@@ -428,7 +584,11 @@ impl Loader<'_> {
                     ),
                 });
             };
-            let tri = if flip { [a, c, b] } else { [a, b, c] };
+            let (tri, idx) = if flip {
+                ([a, c, b], [t[0], t[2], t[1]])
+            } else {
+                ([a, b, c], [t[0], t[1], t[2]])
+            };
             let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
             let scale = (tri[1] - tri[0])
                 .length_squared()
@@ -437,7 +597,7 @@ impl Loader<'_> {
                 degenerate += 1;
                 continue;
             }
-            tris.push(tri);
+            tris.push((tri, idx));
         }
         if degenerate > 0 {
             self.scene.warnings.push(format!(
@@ -452,11 +612,12 @@ impl Loader<'_> {
     fn add_polygons(
         &mut self,
         tris: &[[Vec3; 3]],
+        maps: &[Option<TexMap>],
         mat: &Material,
         node: usize,
         subdivision: Option<Subdivision>,
     ) {
-        for verts in merge_quads(tris) {
+        for (verts, texture) in merge_quads(tris, maps) {
             let normal = polygon_normal(&verts);
             let poly = Polygon {
                 vertices: verts,
@@ -467,6 +628,7 @@ impl Loader<'_> {
                 subdivision,
                 back_side: false,
                 parent: None,
+                texture,
             };
             if mat.double_sided {
                 let mut back = poly.clone();
@@ -479,6 +641,45 @@ impl Loader<'_> {
                 self.scene.polygons.push(poly);
             }
         }
+    }
+
+    /// Each triangle's texture map (`None` for all without a texture; a
+    /// primitive without the coordinates its texture needs falls back to
+    /// the material's mean, with a warning).
+    fn texture_maps(
+        &mut self,
+        uvs: &[[f32; 2]],
+        tris: &[Indexed],
+        mat: &Material,
+        name: &str,
+    ) -> Vec<Option<TexMap>> {
+        let Some(t) = &mat.texture else {
+            return vec![None; tris.len()];
+        };
+        let mut missing = 0usize;
+        let maps = tris
+            .iter()
+            .map(|(p, idx)| {
+                let uv = idx.map(|i| uvs.get(i as usize).copied());
+                let [Some(a), Some(b), Some(c)] = uv else {
+                    missing += 1;
+                    return None;
+                };
+                TexMap::of_triangle(
+                    *p,
+                    [t.apply(a), t.apply(b), t.apply(c)],
+                    t.texture.clone(),
+                    t.factor,
+                )
+            })
+            .collect();
+        if missing > 0 {
+            self.scene.warnings.push(format!(
+                "node '{name}': {missing} triangle(s) lack TEXCOORD_{} for their texture: their material's mean stands in",
+                t.set
+            ));
+        }
+        maps
     }
 
     fn primitive(
@@ -542,7 +743,15 @@ impl Loader<'_> {
             }
         }
         let tris = self.triangles(&positions, &indices, flip, name)?;
-        self.add_polygons(&tris, &mat, node, subdivision);
+        let uvs: Vec<[f32; 2]> = mat
+            .texture
+            .as_ref()
+            .and_then(|t| reader.read_tex_coords(t.set))
+            .map(|c| c.into_f32().collect())
+            .unwrap_or_default();
+        let maps = self.texture_maps(&uvs, &tris, &mat, name);
+        let tris: Vec<[Vec3; 3]> = tris.into_iter().map(|t| t.0).collect();
+        self.add_polygons(&tris, &maps, &mat, node, subdivision);
         Ok(())
     }
 }
@@ -557,21 +766,50 @@ pub fn polygon_normal(v: &[Vec3]) -> Vec3 {
 
 /// Merges consecutive triangles that share an edge, are coplanar and together
 /// form a convex quad; everything else stays a triangle.
-fn merge_quads(tris: &[[Vec3; 3]]) -> Vec<Vec<Vec3>> {
+/// A textured pair merges only where both triangles map onto their
+/// texture alike (so the quad's one affine map is exact on both).
+fn merge_quads(tris: &[[Vec3; 3]], maps: &[Option<TexMap>]) -> Vec<(Vec<Vec3>, Option<TexMap>)> {
     let mut out = Vec::with_capacity(tris.len());
     let mut i = 0;
+    let map = |i: usize| maps.get(i).cloned().flatten();
     while i < tris.len() {
         if i + 1 < tris.len() {
             if let Some(q) = try_merge(&tris[i], &tris[i + 1]) {
-                out.push(q.to_vec());
-                i += 2;
-                continue;
+                let alike = match (map(i), map(i + 1)) {
+                    (None, None) => true,
+                    (Some(a), Some(b)) => a.agrees(&b, &q),
+                    _ => false,
+                };
+                if alike {
+                    out.push((q.to_vec(), map(i)));
+                    i += 2;
+                    continue;
+                }
             }
         }
-        out.push(tris[i].to_vec());
+        out.push((tris[i].to_vec(), map(i)));
         i += 1;
     }
     out
+}
+
+/// `uri` with its %XX escapes decoded (glTF URIs are percent-encoded).
+fn percent_decode(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' && i + 2 < bytes.len() {
+            if let Ok(b) = u8::from_str_radix(&uri[i + 1..i + 3], 16) {
+                out.push(b);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
 
 fn try_merge(a: &[Vec3; 3], b: &[Vec3; 3]) -> Option<[Vec3; 4]> {

@@ -10,12 +10,14 @@ pub mod family;
 mod gltf_load;
 mod gltf_write;
 pub mod light;
+pub mod texture;
 pub mod tolerate;
 
 pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};
 pub use gltf_write::{axis_rect, to_glb, write_gltf, GltfSurface};
 pub use light::{parse_sky, parse_sun, Light, LightKind, LUMENS_PER_WATT};
+pub use texture::{TexMap, Texture};
 
 use glam::{Quat, Vec3};
 
@@ -41,6 +43,10 @@ pub struct Polygon {
     /// [`contact`]), as an index into the list before the split; `None`
     /// when it was not split. Subdivision sizes come from the whole.
     pub parent: Option<u32>,
+    /// How a base-colour texture maps onto it, if its material has one
+    /// (then `reflectance` is the texture's mean times the factor, and
+    /// each element gets its own mean: see [`texture`]).
+    pub texture: Option<TexMap>,
 }
 
 impl Polygon {
@@ -83,6 +89,7 @@ impl Polygon {
             subdivision: None,
             back_side: false,
             parent: None,
+            texture: None,
         }
     }
 

@@ -232,7 +232,7 @@ fn mean_reflectance(mesh: &Mesh) -> [f64; 3] {
         return out;
     }
     for e in mesh.elements.iter().filter(|e| takes_ambient(mesh, e)) {
-        let rho = mesh.polygons[e.polygon as usize].reflectance;
+        let rho = e.reflectance;
         for c in 0..3 {
             out[c] += rho[c] * e.area;
         }
@@ -328,7 +328,7 @@ impl<'m> Solver<'m> {
             return;
         }
         for (j, e) in mesh.elements.iter().enumerate() {
-            let rho = mesh.polygons[e.polygon as usize].reflectance;
+            let rho = e.reflectance;
             let share = e.area / mesh.patches[e.patch as usize].area;
             let (lights, sky) = (field.direct[j], field.sky[j]);
             for c in 0..3 {
@@ -615,7 +615,7 @@ impl<'m> Solver<'m> {
             if !self.owns(el.patch) {
                 continue;
             }
-            let rho = mesh.polygons[el.polygon as usize].reflectance;
+            let rho = el.reflectance;
             let scale = area / el.area;
             let patch_share = el.area / mesh.patches[el.patch as usize].area;
             for (c, r) in rho.iter().enumerate() {
@@ -809,7 +809,7 @@ impl<'m> Solver<'m> {
             .iter()
             .zip(&self.mesh.elements)
             .map(|(b, e)| {
-                let rho = self.mesh.polygons[e.polygon as usize].reflectance;
+                let rho = e.reflectance;
                 let amb = if takes_ambient(self.mesh, e) {
                     amb
                 } else {

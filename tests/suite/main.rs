@@ -20,4 +20,5 @@ mod real_files;
 mod reference;
 mod refine;
 mod shaders;
+mod textures;
 mod traps;

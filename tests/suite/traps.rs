@@ -53,6 +53,7 @@ fn look_with(
             }),
             back_side: false,
             parent: None,
+            texture: None,
         })
         .collect();
     let scene = Scene {
