@@ -10,6 +10,14 @@
 //! lit surfaces span [0, 1] and only emitters clip). The report's `bake`
 //! section says the scale; B includes the ambient term when the report's
 //! radiosities do.
+//!
+//! # Textures
+//! A textured surface keeps its texture (the image as the scene file had
+//! it, in the bake's buffer) and its coordinates, and its `COLOR_0` is the
+//! irradiance, `B / (pi rho) * scale` with rho the element's mean
+//! reflectance, so a viewer that multiplies the texture by the vertex
+//! colour (glTF's unlit materials do) shows the lit texture. The scale then
+//! covers the brightest of both.
 
 use crate::mesh::Mesh;
 use crate::scene::Scene;
@@ -36,7 +44,7 @@ pub fn colour_scale(mesh: &Mesh, radiosity: &[[f64; 3]]) -> f64 {
         .iter()
         .zip(&mesh.elements)
         .filter(|(_, e)| mesh.polygons[e.polygon as usize].exitance == [0.0; 3])
-        .flat_map(|(b, _)| b.iter().copied())
+        .flat_map(|(b, e)| baked_value(mesh, e, b))
         .filter(|x| x.is_finite())
         .fold(0.0f64, f64::max)
         / std::f64::consts::PI;
@@ -47,25 +55,54 @@ pub fn colour_scale(mesh: &Mesh, radiosity: &[[f64; 3]]) -> f64 {
     }
 }
 
+/// Appends `bytes` to the buffer (4-byte aligned) as a new buffer view.
+fn push_view(
+    bin: &mut Vec<u8>,
+    views: &mut Vec<Value>,
+    bytes: &[u8],
+    target: Option<u32>,
+) -> usize {
+    let offset = bin.len();
+    bin.extend_from_slice(bytes);
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let mut v = json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()});
+    if let Some(t) = target {
+        v["target"] = json!(t);
+    }
+    views.push(v);
+    views.len() - 1
+}
+
+/// What element `e` of radiosity `b` bakes (before 1 / pi and the scale):
+/// B, or B / rho on a textured polygon (see the module docs).
+fn baked_value(mesh: &Mesh, e: &crate::mesh::Element, b: &[f64; 3]) -> [f64; 3] {
+    if mesh.polygons[e.polygon as usize].textured {
+        [0, 1, 2].map(|c| {
+            if e.reflectance[c] > 1e-6 {
+                b[c] / e.reflectance[c]
+            } else {
+                0.0
+            }
+        })
+    } else {
+        *b
+    }
+}
+
 /// The solved scene as a glTF document (buffer embedded as a data URI; see
 /// [`crate::scene::to_glb`] for GLB). `radiosity` is per element of `mesh`.
 pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (Value, usize) {
     let origin = DVec3::from(scene.origin);
     let mut bin: Vec<u8> = Vec::new();
-    let (mut nodes, mut meshes, mut materials, mut accessors, mut views) =
-        (vec![], vec![], vec![], vec![], vec![]);
+    let (mut nodes, mut meshes, mut materials, mut accessors) = (vec![], vec![], vec![], vec![]);
+    let mut views: Vec<Value> = Vec::new();
     let mut triangles = 0usize;
-    let mut view = |bin: &mut Vec<u8>, bytes: &[u8], target: u32| -> usize {
-        let offset = bin.len();
-        bin.extend_from_slice(bytes);
-        while bin.len() % 4 != 0 {
-            bin.push(0);
-        }
-        views.push(
-            json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len(), "target": target}),
-        );
-        views.len() - 1
-    };
+    let mut images: Vec<Value> = Vec::new();
+    let mut textures: Vec<Value> = Vec::new();
+    // Texture index in the scene -> index in the bake.
+    let mut texture_of = std::collections::HashMap::new();
     for (n, name) in scene.nodes.iter().enumerate() {
         // Vertices in the node's own frame, so its transform stays its own.
         let world = scene
@@ -74,35 +111,89 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
             .map(DMat4::from_cols_array)
             .filter(|m| m.determinant().is_finite() && m.determinant() != 0.0)
             .unwrap_or(DMat4::IDENTITY);
-        let g = node_geometry(mesh, radiosity, n, world.inverse(), origin, scale);
-        let Some((reflectance, exitance)) = g.material else {
+        let groups = node_geometry(scene, mesh, radiosity, n, world.inverse(), origin, scale);
+        if groups.is_empty() {
             continue;
-        };
-        triangles += g.triangles;
-        let (pos, col, idx, lo, hi) = (g.pos, g.col, g.idx, g.lo, g.hi);
-        let count = pos.len() / 3;
-        let p = view(&mut bin, bytemuck::cast_slice(&pos), 34962);
-        let c = view(&mut bin, bytemuck::cast_slice(&col), 34962);
-        let i = view(&mut bin, bytemuck::cast_slice(&idx), 34963);
-        let a = accessors.len();
-        accessors.push(
-            json!({"bufferView": p, "componentType": 5126, "count": count, "type": "VEC3",
-            "min": lo.to_array().map(|x| x as f32), "max": hi.to_array().map(|x| x as f32)}),
-        );
-        accessors
-            .push(json!({"bufferView": c, "componentType": 5126, "count": count, "type": "VEC3"}));
-        accessors.push(
-            json!({"bufferView": i, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}),
-        );
-        let m = materials.len();
-        materials.push(baked_material(name, reflectance, exitance));
-        meshes.push(json!({"name": name, "primitives": [{"attributes": {"POSITION": a, "COLOR_0": a + 1}, "indices": a + 2, "material": m, "mode": 4}]}));
+        }
+        let mut primitives = Vec::new();
+        for g in groups {
+            triangles += g.triangles;
+            let count = g.pos.len() / 3;
+            let p = push_view(
+                &mut bin,
+                &mut views,
+                bytemuck::cast_slice(&g.pos),
+                Some(34962),
+            );
+            let c = push_view(
+                &mut bin,
+                &mut views,
+                bytemuck::cast_slice(&g.col),
+                Some(34962),
+            );
+            let i = push_view(
+                &mut bin,
+                &mut views,
+                bytemuck::cast_slice(&g.idx),
+                Some(34963),
+            );
+            let a = accessors.len();
+            accessors.push(
+                json!({"bufferView": p, "componentType": 5126, "count": count, "type": "VEC3",
+                "min": g.lo.to_array().map(|x| x as f32), "max": g.hi.to_array().map(|x| x as f32)}),
+            );
+            accessors.push(
+                json!({"bufferView": c, "componentType": 5126, "count": count, "type": "VEC3"}),
+            );
+            accessors.push(
+                json!({"bufferView": i, "componentType": 5125, "count": g.idx.len(), "type": "SCALAR"}),
+            );
+            let mut attributes = json!({"POSITION": a, "COLOR_0": a + 1});
+            let mut material = baked_material(name, g.reflectance, g.exitance);
+            if let Some(t) = &g.texture {
+                let uv = push_view(
+                    &mut bin,
+                    &mut views,
+                    bytemuck::cast_slice(&g.uv),
+                    Some(34962),
+                );
+                attributes["TEXCOORD_0"] = json!(accessors.len());
+                accessors.push(
+                    json!({"bufferView": uv, "componentType": 5126, "count": count, "type": "VEC2"}),
+                );
+                let index = match texture_of.get(&t.index) {
+                    Some((k, _)) => *k,
+                    None => {
+                        let v = push_view(&mut bin, &mut views, &t.encoded.0, None);
+                        images.push(json!({"bufferView": v, "mimeType": t.encoded.1, "name": t.texture.name}));
+                        let [s, tw] = t.texture.wrap.map(|w| match w {
+                            crate::scene::texture::Wrap::Repeat => 10497,
+                            crate::scene::texture::Wrap::Mirror => 33648,
+                            crate::scene::texture::Wrap::Clamp => 33071,
+                        });
+                        let k = textures.len();
+                        textures.push(json!({"source": images.len() - 1, "sampler": k}));
+                        texture_of.insert(t.index, (k, json!({"wrapS": s, "wrapT": tw})));
+                        k
+                    }
+                };
+                material["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": index});
+            }
+            let m = materials.len();
+            materials.push(material);
+            primitives.push(
+                json!({"attributes": attributes, "indices": a + 2, "material": m, "mode": 4}),
+            );
+        }
+        meshes.push(json!({"name": name, "primitives": primitives}));
         let mut node = json!({"name": name, "mesh": meshes.len() - 1});
         if world != DMat4::IDENTITY {
             node["matrix"] = json!(world.to_cols_array().map(|x| x as f32));
         }
         nodes.push(node);
     }
+    let mut samplers: Vec<(usize, Value)> = texture_of.into_values().collect();
+    samplers.sort_by_key(|(i, _)| *i);
     let mut doc = json!({
         "asset": {"version": "2.0", "generator": "radiosity (baked solution)"},
         "extensionsUsed": ["KHR_materials_unlit"],
@@ -115,6 +206,11 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
             base64::engine::general_purpose::STANDARD.encode(&bin)
         )}],
     });
+    if !images.is_empty() {
+        doc["images"] = json!(images);
+        doc["textures"] = json!(textures);
+        doc["samplers"] = json!(samplers.into_iter().map(|s| s.1).collect::<Vec<_>>());
+    }
     if let Some(cam) = &scene.camera {
         add_camera(&mut doc, cam, origin);
     }
@@ -137,43 +233,67 @@ fn add_camera(doc: &mut Value, cam: &crate::scene::Camera, origin: DVec3) {
     }
 }
 
-/// One node's elements as triangles in its own frame (`to_local`), with
-/// their colours, bounds and material.
+/// One node's elements of one texture (or none) as triangles in its own
+/// frame, with their colours, coordinates, bounds and material.
 struct NodeGeometry {
+    texture: Option<std::sync::Arc<crate::scene::texture::TextureRef>>,
     pos: Vec<f32>,
     col: Vec<f32>,
+    uv: Vec<f32>,
     idx: Vec<u32>,
     lo: DVec3,
     hi: DVec3,
-    /// The node's reflectance and exitance; `None`: the node has no elements.
-    material: Option<([f64; 3], [f64; 3])>,
+    /// The group's first polygon's reflectance and exitance.
+    reflectance: [f64; 3],
+    exitance: [f64; 3],
     triangles: usize,
 }
 
+/// Node `n`'s elements, grouped by texture (untextured first), in the
+/// node's frame (`to_local`).
 fn node_geometry(
+    scene: &Scene,
     mesh: &Mesh,
     radiosity: &[[f64; 3]],
     n: usize,
     to_local: DMat4,
     origin: DVec3,
     scale: f64,
-) -> NodeGeometry {
-    let mut g = NodeGeometry {
-        pos: Vec::new(),
-        col: Vec::new(),
-        idx: Vec::new(),
-        lo: DVec3::splat(f64::INFINITY),
-        hi: DVec3::splat(f64::NEG_INFINITY),
-        material: None,
-        triangles: 0,
-    };
+) -> Vec<NodeGeometry> {
+    let mut groups: Vec<NodeGeometry> = Vec::new();
     for (e, b) in mesh.elements.iter().zip(radiosity) {
         let poly = &mesh.polygons[e.polygon as usize];
         if poly.node != n {
             continue;
         }
-        g.material.get_or_insert((poly.reflectance, poly.exitance));
-        let colour = b.map(|x| ((x / std::f64::consts::PI * scale).clamp(0.0, 1.0)) as f32);
+        let map = scene
+            .polygons
+            .get(e.polygon as usize)
+            .and_then(|p| p.texture.as_ref());
+        let key = map.map(|m| m.texture.index);
+        let g = match groups
+            .iter()
+            .position(|g| g.texture.as_ref().map(|t| t.index) == key)
+        {
+            Some(k) => &mut groups[k],
+            None => {
+                groups.push(NodeGeometry {
+                    texture: map.map(|m| m.texture.clone()),
+                    pos: Vec::new(),
+                    col: Vec::new(),
+                    uv: Vec::new(),
+                    idx: Vec::new(),
+                    lo: DVec3::splat(f64::INFINITY),
+                    hi: DVec3::splat(f64::NEG_INFINITY),
+                    reflectance: poly.reflectance,
+                    exitance: poly.exitance,
+                    triangles: 0,
+                });
+                groups.last_mut().expect("just pushed")
+            }
+        };
+        let colour = baked_value(mesh, e, b)
+            .map(|x| ((x / std::f64::consts::PI * scale).clamp(0.0, 1.0)) as f32);
         let corners: &[glam::Vec3] = if e.corners[3] == e.corners[2] {
             &e.corners[..3]
         } else {
@@ -186,13 +306,17 @@ fn node_geometry(
             g.hi = g.hi.max(p);
             g.pos.extend(p.to_array().map(|x| x as f32));
             g.col.extend_from_slice(&colour);
+            if let Some(m) = map {
+                g.uv.extend(m.uv(*c).to_array());
+            }
         }
         for k in 1..corners.len() as u32 - 1 {
             g.idx.extend_from_slice(&[base, base + k, base + k + 1]);
             g.triangles += 1;
         }
     }
-    g
+    groups.sort_by_key(|g| g.texture.as_ref().map(|t| t.index));
+    groups
 }
 
 /// An unlit material that shows the vertex colours; emitters stay emitters

@@ -84,6 +84,8 @@ pub struct MeshPolygon {
     pub exitance: [f64; 3],
     /// The back side of a double-sided surface (see [`crate::scene::Polygon::back_side`]).
     pub back_side: bool,
+    /// Whether a texture gives its elements their reflectances.
+    pub textured: bool,
     /// Patches of this polygon.
     pub patches: Range<u32>,
     /// Elements of this polygon.
@@ -504,6 +506,7 @@ impl Mesh {
             reflectance: refl,
             exitance,
             back_side: poly.back_side,
+            textured: poly.texture.is_some(),
             patches: first_patch..self.patches.len() as u32,
             elements: first_element..self.elements.len() as u32,
             patch_grid: if tri { [patch_grid[0]; 2] } else { patch_grid },

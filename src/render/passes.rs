@@ -34,6 +34,9 @@ pub fn refined_mesh(
     let levels = settings.refine;
     let mut shooters = vec![false; n];
     let mut receivers = vec![false; n];
+    // The last pass's mesh, when it asked for nothing more (the final
+    // mesh would be built the same: building it again costs its light field).
+    let mut last = None;
     for pass in 0..levels {
         let mesh = Mesh::build_refined(scene, &settings, &factors);
         if pass == 0 {
@@ -67,12 +70,13 @@ pub fn refined_mesh(
             );
         }
         if changed == 0 {
+            last = Some(mesh);
             break;
         }
     }
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
     summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
-    let mesh = Mesh::build_refined(scene, &settings, &factors);
+    let mesh = last.unwrap_or_else(|| Mesh::build_refined(scene, &settings, &factors));
     summary.end = [mesh.patches.len(), mesh.elements.len()];
     Ok((mesh, summary, factors))
 }

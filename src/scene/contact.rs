@@ -184,25 +184,32 @@ impl EdgeGrid {
             Self::key(lo - eps, self.cell),
             Self::key(hi + eps, self.cell),
         );
-        let mut seen = std::collections::BTreeSet::new();
+        let plane = n.dot(p.vertices[0]);
+        // Only edges in this polygon's plane can cut it: test that first
+        // (two dot products), then sort the few left (a dense scene puts
+        // thousands of edges in a cell).
+        let mut seen = Vec::new();
         for x in klo[0]..=khi[0] {
             for y in klo[1]..=khi[1] {
                 for z in klo[2]..=khi[2] {
-                    if let Some(list) = self.cells.get(&[x, y, z]) {
-                        seen.extend(list.iter().copied());
-                    }
+                    let Some(list) = self.cells.get(&[x, y, z]) else {
+                        continue;
+                    };
+                    seen.extend(list.iter().copied().filter(|&e| {
+                        let (a, b, q) = self.edges[e as usize];
+                        q as usize != i
+                            && (n.dot(a) - plane).abs() <= eps
+                            && (n.dot(b) - plane).abs() <= eps
+                    }));
                 }
             }
         }
-        let plane = n.dot(p.vertices[0]);
+        seen.sort_unstable();
+        seen.dedup();
         let mut out: Vec<(Vec3, f32, Vec3, Vec3)> = Vec::new();
         for e in seen {
             let (a, b, q) = self.edges[e as usize];
-            if q as usize == i
-                || (n.dot(a) - plane).abs() > eps
-                || (n.dot(b) - plane).abs() > eps
-                || polygons[q as usize].normal.dot(n).abs() > 0.99
-            {
+            if polygons[q as usize].normal.dot(n).abs() > 0.99 {
                 continue;
             }
             let u = b - a;

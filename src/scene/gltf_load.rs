@@ -474,8 +474,12 @@ impl Loader<'_> {
                 .map_or_else(|| format!("images[{}]", image.index()), str::to_string),
         };
         let decoded = self.image_bytes(&image).and_then(|bytes| {
+            let mime = match image::guess_format(&bytes) {
+                Ok(image::ImageFormat::Jpeg) => "image/jpeg",
+                _ => "image/png",
+            };
             image::load_from_memory(&bytes)
-                .map(|i| i.to_rgba8())
+                .map(|i| (i.to_rgba8(), (bytes, mime.to_string())))
                 .map_err(|e| e.to_string())
         });
         let sampler = texture.sampler();
@@ -484,12 +488,13 @@ impl Loader<'_> {
             Wrap::from_gltf(sampler.wrap_t()),
         ];
         let out = match decoded {
-            Ok(img) => {
+            Ok((img, encoded)) => {
                 let (w, h) = (img.width() as usize, img.height() as usize);
                 let texels: Vec<[u8; 4]> = img.pixels().map(|p| p.0).collect();
                 Some(Arc::new(TextureRef {
                     index,
                     texture: Texture::from_srgb8(&label, w, h, &texels, wrap),
+                    encoded,
                 }))
             }
             Err(why) => {

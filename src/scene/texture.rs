@@ -215,6 +215,9 @@ pub struct TextureRef {
     pub index: usize,
     /// The texture.
     pub texture: Texture,
+    /// The image as the file had it (PNG or JPEG bytes) and its MIME type,
+    /// for a bake to carry (empty when made from texels).
+    pub encoded: (Vec<u8>, String),
 }
 
 impl PartialEq for TextureRef {
@@ -319,6 +322,7 @@ mod tests {
         Arc::new(TextureRef {
             index: 0,
             texture: Texture::from_linear("halves", 8, 2, texels, [Wrap::Repeat; 2]),
+            encoded: Default::default(),
         })
     }
 

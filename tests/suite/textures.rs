@@ -215,3 +215,57 @@ fn a_missing_texture_falls_back_to_the_factor_with_a_warning_naming_it() {
         .iter()
         .all(|p| p.texture.is_none() && p.reflectance == [0.95; 3]));
 }
+
+#[test]
+fn a_textured_bake_keeps_the_texture_and_bakes_irradiance() {
+    let image = png(8, |x| if x < 4 { GREY } else { 40 });
+    let mut scene = textured_floor(&image, None, false);
+    let e = 100.0;
+    scene.lights.push(Light::sun(glam::Vec3::Y, [e; 3]));
+    let r = render(gpu(), &scene, &tight(1e-6), Duration::ZERO, &mut |_| {}).expect("render");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("baked.glb");
+    let baked = radiosity::bake::write(&path, &scene, &r.mesh, &r.radiosity).expect("bake");
+    let (doc, buffers, images) = gltf::import(&path).expect("the bake is valid glTF");
+    assert_eq!(images.len(), 1, "the texture travels with the bake");
+    assert_eq!((images[0].width, images[0].height), (8, 1));
+    let prim = doc
+        .meshes()
+        .next()
+        .expect("a mesh")
+        .primitives()
+        .next()
+        .expect("a primitive");
+    let info = prim
+        .material()
+        .pbr_metallic_roughness()
+        .base_color_texture()
+        .expect("textured");
+    assert_eq!(info.tex_coord(), 0);
+    let reader = prim.reader(|b| Some(&buffers[b.index()]));
+    let uv: Vec<[f32; 2]> = reader
+        .read_tex_coords(0)
+        .expect("TEXCOORD_0")
+        .into_f32()
+        .collect();
+    assert!(
+        uv.iter().all(|t| (-1e-6..=1.0 + 1e-6).contains(&t[0])),
+        "{uv:?}"
+    );
+    // A sun straight overhead: the same irradiance everywhere, whatever
+    // the texture, so every vertex has the brightest colour.
+    let colours: Vec<[f32; 4]> = reader
+        .read_colors(0)
+        .expect("COLOR_0")
+        .into_rgba_f32()
+        .collect();
+    assert!(
+        colours.iter().all(|c| (c[0] - 1.0).abs() < 1e-4),
+        "{colours:?}"
+    );
+    assert!(
+        rel(baked.scale, std::f64::consts::PI / e) < 1e-3,
+        "scale {}",
+        baked.scale
+    );
+}
