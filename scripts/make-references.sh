@@ -7,6 +7,8 @@
 # Needs Mitsuba 3 (pip install mitsuba numpy; apt-get install libllvm19) and
 # a release build of the renderer.
 # Usage: [IMAGE=1] scripts/make-references.sh SCENE...   (e.g. family-boxes-2)
+#   LIGHTS="--sun X,Y,Z,E --sky L": lights for the scene (as render takes them)
+#   NAME=N: the reference's name (default: the scene's; one scene then)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=target/release/radiosity
@@ -16,10 +18,12 @@ export DRJIT_LIBLLVM_PATH="${DRJIT_LIBLLVM_PATH:-/usr/lib/x86_64-linux-gnu/libLL
 llvm="DRJIT_LIBLLVM_PATH=$DRJIT_LIBLLVM_PATH"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
+lights="${LIGHTS:-}"
 for scene in "$@"; do
-  "$bin" scene "$scene" --nodes "$tmp/nodes.json" >/dev/null
+  name="${NAME:-$scene}"
+  "$bin" scene "$scene" --nodes "$tmp/nodes.json" $lights >/dev/null
   if [ -n "${IMAGE:-}" ]; then
-    out="docs/references/images/$scene.exr"
+    out="docs/references/images/$name.exr"
     args="--image $out --width 128 --spp $spp --passes 8"
     python3 scripts/reference.py "$tmp/nodes.json" $args
     meta="${out%.exr}.json"
@@ -27,11 +31,11 @@ for scene in "$@"; do
   else
     args="--target $target --max-seconds 300"
     python3 scripts/reference.py "$tmp/nodes.json" $args > "$tmp/ref.json"
-    meta="docs/references/$scene.json"
+    meta="docs/references/$name.json"
     src="$tmp/ref.json"
   fi
-  cmd="radiosity scene $scene --nodes nodes.json && $llvm python3 scripts/reference.py nodes.json $args"
-  python3 - "$scene" "$cmd" "$src" "$meta" <<'PY'
+  cmd="radiosity scene $scene --nodes nodes.json${lights:+ $lights} && $llvm python3 scripts/reference.py nodes.json $args"
+  python3 - "$name" "$cmd" "$src" "$meta" <<'PY'
 import json, os, sys
 scene, cmd, src, dst = sys.argv[1:]
 r = json.load(open(src))

@@ -105,6 +105,19 @@ def main():
             shape["emitter"] = {"type": "area",
                                 "radiance": {"type": "rgb", "value": node["emission"]}}
         d[f"n{i}"] = shape
+    # Lights that are not surfaces (the renderer's KHR_lights_punctual,
+    # --sun, --sky), in the same units.
+    for k, light in enumerate(doc.get("lights", [])):
+        rgb = {"type": "rgb", "value": light["intensity"]}
+        if light["kind"] == "point":
+            d[f"light{k}"] = {"type": "point", "position": light["position"], "intensity": rgb}
+        elif light["kind"] == "directional":
+            d[f"light{k}"] = {"type": "directional", "direction": light["direction"], "irradiance": rgb}
+        else:
+            # Mitsuba's spot falls off differently from glTF's.
+            sys.exit(f"reference.py: a {light['kind']} light has no Mitsuba counterpart here")
+    if doc.get("sky"):
+        d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": doc["sky"]}}
     if args.image:
         return render_image(mi, dr, d, doc["camera"], args)
     scene = mi.load_dict(d)
@@ -146,6 +159,8 @@ def main():
         cos_e = dr.maximum(dr.dot(nrm, ds.d), 0.0)
         pdf_cos = cos_e / math.pi
         w_e = dr.select(ds.pdf > 0, dr.square(ds.pdf) / (dr.square(ds.pdf) + dr.square(pdf_cos)), 0.0)
+        # A point or directional light cannot be hit by the cosine sample.
+        w_e = dr.select(ds.delta, 1.0, w_e)
         direct = em_w * cos_e * w_e
         # Cosine sample: the path integrator's radiance along it, its first
         # hit's emission MIS-weighted against the emitter density.
@@ -154,10 +169,11 @@ def main():
         ray = si.spawn_ray(dirn)
         L, _, _ = integrator.sample(scene, sampler, ray)
         hit = scene.ray_intersect(ray)
+        # An escaping ray's emitter is the sky (Mitsuba's environment), if any.
         emitter = hit.emitter(scene)
-        le = dr.select(hit.is_valid(), emitter.eval(hit), 0.0)
+        le = emitter.eval(hit)
         ds2 = mi.DirectionSample3f(scene, hit, si)
-        pdf_em = dr.select(hit.is_valid(), scene.pdf_emitter_direction(si, ds2), 0.0)
+        pdf_em = scene.pdf_emitter_direction(si, ds2)
         pdf_b = local.z / math.pi
         w_b = dr.select(pdf_em > 0, dr.square(pdf_b) / (dr.square(pdf_b) + dr.square(pdf_em)), 1.0)
         indirect = (L - le + le * w_b) * math.pi

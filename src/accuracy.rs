@@ -372,9 +372,26 @@ pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
         "yfov_degrees": cam.yfov.to_degrees(),
         "aspect": cam.aspect,
     });
+    // Lights as reference.py hands them to Mitsuba (point: W/sr; spot: its
+    // cones too; directional: W/m^2 along `direction`; sky: radiance).
+    let lights: Vec<serde_json::Value> = scene
+        .lights
+        .iter()
+        .map(|l| {
+            let (kind, cones) = match l.kind {
+                crate::scene::LightKind::Point => ("point", None),
+                crate::scene::LightKind::Spot { inner, outer } => ("spot", Some([inner, outer])),
+                crate::scene::LightKind::Directional => ("directional", None),
+            };
+            serde_json::json!({
+                "kind": kind, "name": l.name, "position": l.position.to_array(),
+                "direction": l.direction.to_array(), "intensity": l.intensity, "cones": cones,
+            })
+        })
+        .collect();
     output::write_json(
         path,
-        &serde_json::json!({ "nodes": nodes, "camera": camera }),
+        &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky }),
     )?;
     Ok(())
 }

@@ -6,8 +6,9 @@
 //! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
 //! - [`settings`]: the enums a render is told and the report records;
-//! - [`raytrace`], [`direct`]: exact visibility on the CPU and the camera
-//!   image's direct light (pure maths);
+//! - [`raytrace`], [`direct`], [`lights`], [`sampling`]: exact visibility
+//!   on the CPU, the camera image's direct light, what lights, suns and
+//!   skies deliver (pure maths);
 //! - [`interpolate`]: per-element values to vertex values for smooth shading;
 //! - [`solver`]: progressive refinement, knows nothing of GPUs;
 //! - [`refine`]: which polygons a coarse solution says to subdivide (pure maths);

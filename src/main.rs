@@ -67,6 +67,9 @@ enum Command {
         /// the JSON `scripts/reference.py` reads.
         #[arg(long)]
         nodes: Option<PathBuf>,
+        /// Lights for --nodes (a sun, a sky, photometric units), as `render` takes them.
+        #[command(flatten)]
+        lights: radiosity::scene::light::LightArgs,
     },
     /// Score an EXR image against a reference EXR of the same size: the SMAPE
     /// over interior 4x4 blocks (README "An independent yardstick").
@@ -391,7 +394,12 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
-        Command::Scene { name, out, nodes } => write_scene(&name, out.as_deref(), nodes.as_deref()),
+        Command::Scene {
+            name,
+            out,
+            nodes,
+            lights,
+        } => write_scene(&name, out.as_deref(), nodes.as_deref(), &lights),
         Command::Compare { image, reference } => compare_images(&image, &reference),
         Command::Bench(args) => bench::run(args),
         Command::BenchReport(args) => bench::report(args),
@@ -554,7 +562,12 @@ fn compare_images(image: &Path, reference: &Path) -> Result<()> {
     Ok(())
 }
 
-fn write_scene(name: &str, out: Option<&Path>, nodes: Option<&Path>) -> Result<()> {
+fn write_scene(
+    name: &str,
+    out: Option<&Path>,
+    nodes: Option<&Path>,
+    lights: &radiosity::scene::light::LightArgs,
+) -> Result<()> {
     if let Some(out) = out {
         let text = scene::builtin_gltf(name).with_context(|| {
             format!(
@@ -566,7 +579,9 @@ fn write_scene(name: &str, out: Option<&Path>, nodes: Option<&Path>) -> Result<(
         eprintln!("wrote {}", out.display());
     }
     if let Some(path) = nodes {
-        accuracy::export_for_pathtracer(&scene::open(name)?, path)?;
+        let mut scene = scene::open(name)?;
+        lights.apply(&mut scene);
+        accuracy::export_for_pathtracer(&scene, path)?;
         eprintln!("wrote {}", path.display());
     }
     if out.is_none() && nodes.is_none() {

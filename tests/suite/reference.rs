@@ -70,17 +70,42 @@ fn held_out_scenes_are_within_one_percent_mean_and_three_worst() {
     ]);
 }
 
+/// The Cornell box with a point light besides its panel
+/// (`scenes/cornell-lit.gltf`), a sun and a sky through its open front
+/// (issue 18's benchmark: lights against the strong path tracer).
+#[test]
+fn a_point_light_a_sun_and_a_sky_are_within_one_percent_mean_of_a_path_traced_reference() {
+    let path = format!("{}/scenes/cornell-lit.gltf", env!("CARGO_MANIFEST_DIR"));
+    let mut s = radiosity::scene::open(&path).expect("scene");
+    assert_eq!(s.lights.len(), 1, "the file's point light");
+    s.lights
+        .push(radiosity::scene::parse_sun(LIT_SUN).expect("sun"));
+    s.sky = Some(radiosity::scene::parse_sky(LIT_SKY).expect("sky"));
+    check_scene("cornell-lit", &s);
+}
+
+/// The sun and sky the lit Cornell box's reference was made with.
+const LIT_SUN: &str = "0.3,0.5,1,3";
+const LIT_SKY: &str = "0.3";
+
 /// Default renders of `scenes` against their references: area-weighted
 /// mean node error <= 1 %, worst node <= 3 % (emitters left out).
 fn check<const N: usize>(scenes: [&str; N]) {
     for scene in scenes {
-        let reference = reference(scene);
         let s = radiosity::scene::open(scene).expect("scene");
+        check_scene(scene, &s);
+    }
+}
+
+/// [`check`] of one scene `s` against the reference named `scene`.
+fn check_scene(scene: &str, s: &radiosity::scene::Scene) {
+    {
+        let reference = reference(scene);
         let opts = RenderOptions {
             width: 0,
             ..RenderOptions::default()
         };
-        let r = render(gpu(), &s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+        let r = render(gpu(), s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
         let (mut weighted, mut area, mut worst) = (0.0, 0.0, (0.0f64, String::new()));
         for surface in &r.report.surfaces {
             // The emitters' radiosity is their emission: nothing to score.

@@ -96,3 +96,31 @@ fn bad_scene_is_a_clear_error() {
 fn an_unknown_camera_is_a_clear_error() {
     fails_clearly(&["cornell", "--camera", "no-such-camera"], "no-such-camera");
 }
+
+#[test]
+fn a_sun_and_a_sky_light_the_view_and_a_bad_sun_is_a_clear_error() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = dir.path().join("sun.png");
+    let out = viewer()
+        .args([
+            "cornell",
+            "--shots",
+            "10",
+            "--sun",
+            "0.3,0.5,1,50",
+            "--sky",
+            "0.2",
+        ])
+        .arg("--screenshot")
+        .arg(&shot)
+        .output()
+        .expect("xvfb-run (install xvfb)");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "viewer failed: {stderr}");
+    let img = image::open(&shot).expect("a PNG screenshot").to_rgb8();
+    let mut colours: Vec<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    colours.sort_unstable();
+    colours.dedup();
+    assert!(colours.len() > 500, "screenshot looks blank");
+    fails_clearly(&["cornell", "--sun", "0,0,0,5"], "--sun");
+}
