@@ -54,12 +54,40 @@ impl Wrap {
     }
 }
 
-/// One mip level: linear RGB texels, row by row.
+/// One mip level's texels, row by row: the image as decoded (8-bit sRGB,
+/// a quarter of the memory: Sponza's twenty 1024 x 1024 textures take 60 MB
+/// so) or linear (the mip levels, and textures made from linear texels).
+#[derive(Clone, Debug)]
+enum Texels {
+    Srgb8(Vec<[u8; 3]>),
+    Linear(Vec<[f32; 3]>),
+}
+
+/// sRGB 8-bit to linear, tabulated once.
+fn srgb8_table() -> &'static [f32; 256] {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
+}
+
+/// One mip level.
 #[derive(Clone, Debug)]
 struct Level {
     width: usize,
     height: usize,
-    texels: Vec<[f32; 3]>,
+    texels: Texels,
+}
+
+impl Level {
+    /// Texel `i`, linear.
+    fn get(&self, i: usize) -> [f32; 3] {
+        match &self.texels {
+            Texels::Srgb8(t) => {
+                let lut = srgb8_table();
+                t[i].map(|c| lut[c as usize])
+            }
+            Texels::Linear(t) => t[i],
+        }
+    }
 }
 
 /// A decoded base-colour image and its mip levels.
@@ -91,12 +119,8 @@ impl Texture {
         rgba: &[[u8; 4]],
         wrap: [Wrap; 2],
     ) -> Self {
-        let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
-        let texels = rgba
-            .iter()
-            .map(|t| [lut[t[0] as usize], lut[t[1] as usize], lut[t[2] as usize]])
-            .collect();
-        Self::from_linear(name, width, height, texels, wrap)
+        let texels = rgba.iter().map(|t| [t[0], t[1], t[2]]).collect();
+        Self::from_level(name, [width, height], Texels::Srgb8(texels), wrap)
     }
 
     /// A texture from linear RGB texels (`width * height`, row by row).
@@ -105,6 +129,15 @@ impl Texture {
         width: usize,
         height: usize,
         texels: Vec<[f32; 3]>,
+        wrap: [Wrap; 2],
+    ) -> Self {
+        Self::from_level(name, [width, height], Texels::Linear(texels), wrap)
+    }
+
+    fn from_level(
+        name: &str,
+        [width, height]: [usize; 2],
+        texels: Texels,
         wrap: [Wrap; 2],
     ) -> Self {
         let mut levels = vec![Level {
@@ -122,7 +155,7 @@ impl Texture {
                     for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                         let (sx, sy) = (2 * x + dx, 2 * y + dy);
                         if sx < last.width && sy < last.height {
-                            let t = last.texels[sy * last.width + sx];
+                            let t = last.get(sy * last.width + sx);
                             for c in 0..3 {
                                 sum[c] += t[c];
                             }
@@ -135,7 +168,7 @@ impl Texture {
             levels.push(Level {
                 width: w,
                 height: h,
-                texels: next,
+                texels: Texels::Linear(next),
             });
         }
         Texture {
@@ -152,7 +185,7 @@ impl Texture {
 
     /// The mean linear colour of the whole image.
     pub fn mean(&self) -> [f32; 3] {
-        self.levels.last().map_or([0.0; 3], |l| l.texels[0])
+        self.levels.last().map_or([0.0; 3], |l| l.get(0))
     }
 
     /// Bilinear sample at `uv` of the level whose texels are about
@@ -173,7 +206,7 @@ impl Texture {
         let at = |i: i64, j: i64| {
             let xi = self.wrap[0].index(i, l.width);
             let yj = self.wrap[1].index(j, l.height);
-            l.texels[yj * l.width + xi]
+            l.get(yj * l.width + xi)
         };
         let (a, b, c, d) = (
             at(x0, y0),

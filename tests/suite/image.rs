@@ -18,6 +18,16 @@ fn score(scene: &str, shadow_rays: u32) -> f64 {
 /// The SMAPE of `scene`'s image at the reference's size, with the default
 /// settings as `change` leaves them.
 fn score_with(scene: &str, change: impl Fn(&mut RenderOptions)) -> f64 {
+    let s = radiosity::scene::open(scene).expect("scene");
+    score_scene(scene, &s, change)
+}
+
+/// [`score_with`] of the scene `s` against the reference named `scene`.
+fn score_scene(
+    scene: &str,
+    s: &radiosity::scene::Scene,
+    change: impl Fn(&mut RenderOptions),
+) -> f64 {
     let dir = format!("{}/docs/references/images", env!("CARGO_MANIFEST_DIR"));
     let meta: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(format!("{dir}/{scene}.json")).expect("reference metadata"),
@@ -30,14 +40,13 @@ fn score_with(scene: &str, change: impl Fn(&mut RenderOptions)) -> f64 {
     let (w, h, reference) =
         radiosity::output::read_exr(std::path::Path::new(&format!("{dir}/{scene}.exr")))
             .expect("reference EXR");
-    let s = radiosity::scene::open(scene).expect("scene");
     let mut opts = RenderOptions {
         width: w,
         height: Some(h),
         ..RenderOptions::default()
     };
     change(&mut opts);
-    let r = render(gpu(), &s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+    let r = render(gpu(), s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
     let (iw, ih, pixels) = r.image.expect("an image");
     assert_eq!((iw, ih), (w, h));
     radiosity::compare::smape(&pixels, &reference, w as usize, h as usize)
@@ -98,4 +107,12 @@ fn refining_uneven_receivers_beats_refining_shooters_only() {
         on * 100.0,
         off * 100.0
     );
+}
+
+#[test]
+fn a_point_light_a_sun_and_a_sky_give_the_path_traced_picture_within_two_and_a_half_percent() {
+    // The lights' direct light is traced per sample like the panel's.
+    let s = score_scene("cornell-lit", &crate::reference::lit_cornell(), |_| {});
+    eprintln!("cornell-lit: {:.2} %", 100.0 * s);
+    assert!(s < 0.025, "cornell-lit: SMAPE {:.2} %", 100.0 * s);
 }

@@ -75,13 +75,18 @@ fn held_out_scenes_are_within_one_percent_mean_and_three_worst() {
 /// (issue 18's benchmark: lights against the strong path tracer).
 #[test]
 fn a_point_light_a_sun_and_a_sky_are_within_one_percent_mean_of_a_path_traced_reference() {
+    check_scene("cornell-lit", &lit_cornell());
+}
+
+/// `scenes/cornell-lit.gltf` with the sun and sky its references were made with.
+pub fn lit_cornell() -> radiosity::scene::Scene {
     let path = format!("{}/scenes/cornell-lit.gltf", env!("CARGO_MANIFEST_DIR"));
     let mut s = radiosity::scene::open(&path).expect("scene");
     assert_eq!(s.lights.len(), 1, "the file's point light");
     s.lights
         .push(radiosity::scene::parse_sun(LIT_SUN).expect("sun"));
     s.sky = Some(radiosity::scene::parse_sky(LIT_SKY).expect("sky"));
-    check_scene("cornell-lit", &s);
+    s
 }
 
 /// The sun and sky the lit Cornell box's reference was made with.
