@@ -90,17 +90,38 @@ def main():
 
     tmp = tempfile.mkdtemp(prefix="reference-")
     d = {"type": "scene"}
+    textures = {}
     for i, node in enumerate(nodes):
         path = os.path.join(tmp, f"n{i}.obj")
+        tex = node.get("texture")
         with open(path, "w") as obj:
             for t in node["triangles"]:
                 for v in t:
                     obj.write(f"v {v[0]!r} {v[1]!r} {v[2]!r}\n")
-            for k in range(len(node["triangles"])):
-                obj.write(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}\n")
+            if tex:
+                # OBJ's v runs up, glTF's down: Mitsuba's loader flips it
+                # back (flip_tex_coords), so shapes see glTF's v as
+                # batch() does.
+                for t in node["uvs"]:
+                    for uv in t:
+                        obj.write(f"vt {uv[0]!r} {1.0 - uv[1]!r}\n")
+                for k in range(len(node["triangles"])):
+                    a, b, c = 3 * k + 1, 3 * k + 2, 3 * k + 3
+                    obj.write(f"f {a}/{a} {b}/{b} {c}/{c}\n")
+            else:
+                for k in range(len(node["triangles"])):
+                    obj.write(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}\n")
+        reflectance = {"type": "rgb", "value": node["reflectance"]}
+        if tex:
+            if any(abs(f - 1.0) > 1e-6 for f in tex["factor"]):
+                sys.exit(f"reference.py: node {node['name']}: a texture factor other than 1 is not supported")
+            image = os.path.join(os.path.dirname(os.path.abspath(args.nodes)), tex["image"])
+            wrap = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp"}[tex["wrap"][0]]
+            reflectance = {"type": "bitmap", "filename": image, "wrap_mode": wrap,
+                           "filter_type": "bilinear", "raw": False}
+            textures[i] = mi.load_dict(reflectance)
         shape = {"type": "obj", "filename": path, "face_normals": True,
-                 "bsdf": {"type": "diffuse",
-                          "reflectance": {"type": "rgb", "value": node["reflectance"]}}}
+                 "bsdf": {"type": "diffuse", "reflectance": reflectance}}
         if any(e > 0 for e in node["emission"]):
             shape["emitter"] = {"type": "area",
                                 "radiance": {"type": "rgb", "value": node["emission"]}}
@@ -123,8 +144,9 @@ def main():
     scene = mi.load_dict(d)
     integrator = mi.load_dict({"type": "path", "max_depth": -1})
 
-    def batch(node, n, seed):
-        """n irradiance samples (RGB) at points on `node`."""
+    def batch(node, n, seed, texture=None):
+        """n irradiance samples (RGB) at points on `node` (times the
+        texture's reflectance there, for a textured node)."""
         tris = node["triangles"]
         areas = []
         for a, b, c in tris:
@@ -178,6 +200,13 @@ def main():
         w_b = dr.select(pdf_em > 0, dr.square(pdf_b) / (dr.square(pdf_b) + dr.square(pdf_em)), 1.0)
         indirect = (L - le + le * w_b) * math.pi
         e = direct + indirect
+        if texture is not None:
+            uv_of = lambda j, axis: dr.gather(mi.Float, mi.Float([t[j][axis] for t in node["uvs"]]), idx)
+            w0 = 1 - bary.x - bary.y
+            si.uv = mi.Point2f(
+                uv_of(0, 0) * w0 + uv_of(1, 0) * bary.x + uv_of(2, 0) * bary.y,
+                uv_of(0, 1) * w0 + uv_of(1, 1) * bary.x + uv_of(2, 1) * bary.y)
+            e = e * texture.eval(si)
         dr.eval(e)
         return e
 
@@ -185,7 +214,7 @@ def main():
         # Compile the kernels before timing, as the renderer's device set-up
         # is left out of its solve time.
         for i, node in enumerate(nodes):
-            dr.eval(batch(node, args.batch, 999_983 + i))
+            dr.eval(batch(node, args.batch, 999_983 + i, textures.get(i)))
         print(json.dumps({"variant": mi.variant()}), flush=True)
     start = time.perf_counter()
     sums = [[0.0] * 3 for _ in nodes]
@@ -198,10 +227,11 @@ def main():
         for i, node in enumerate(nodes):
             if done[i]:
                 continue
-            e = batch(node, args.batch, (seed * 1000003 + i) % (1 << 32))  # Mitsuba's seed is a u32
+            e = batch(node, args.batch, (seed * 1000003 + i) % (1 << 32), textures.get(i))  # Mitsuba's seed is a u32
             seed += 1
             r, g, b = (dr.sum(e.x)[0], dr.sum(e.y)[0], dr.sum(e.z)[0])
-            rho = node["reflectance"]
+            # A textured node's samples carry their reflectance already.
+            rho = [1.0, 1.0, 1.0] if i in textures else node["reflectance"]
             s = e.x * rho[0] + e.y * rho[1] + e.z * rho[2]
             sums[i][0] += r; sums[i][1] += g; sums[i][2] += b
             sq[i] += dr.sum(s * s)[0]
@@ -212,6 +242,8 @@ def main():
             n = count[i]
             E = [x / n for x in sums[i]]
             rho, le = node["reflectance"], node["emission"]
+            if i in textures:
+                rho = [1.0, 1.0, 1.0]
             Bv = [rho[c] * E[c] + math.pi * le[c] for c in range(3)]
             mean_s = sum(rho[c] * E[c] for c in range(3))
             var = max(sq[i] / n - mean_s * mean_s, 0.0)

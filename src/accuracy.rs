@@ -336,31 +336,72 @@ fn run_curve(
 }
 
 /// Writes the scene as JSON for the path tracer: per node, world-space
-/// triangles, reflectance, emitted radiance, area.
+/// triangles, reflectance, emitted radiance, area; a textured node also its
+/// texture (the image written beside `path`, its factor and wrap modes) and
+/// each triangle's texture coordinates.
 pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
     let mut nodes: Vec<serde_json::Value> = Vec::new();
+    let mut written = std::collections::HashMap::new();
     for (i, name) in scene.nodes.iter().enumerate() {
         let polys: Vec<_> = scene.polygons.iter().filter(|p| p.node == i).collect();
-        let mut tris = Vec::new();
+        let map = polys.iter().find_map(|p| p.texture.as_ref());
+        if let Some(m) = map {
+            let alike = polys.iter().all(|p| {
+                p.texture
+                    .as_ref()
+                    .is_some_and(|t| t.texture == m.texture && t.factor == m.factor)
+            });
+            anyhow::ensure!(
+                alike,
+                "node '{name}' mixes textured and other materials: the path tracer takes one per node"
+            );
+        }
+        let (mut tris, mut uvs) = (Vec::new(), Vec::new());
         for p in &polys {
             for k in 1..p.vertices.len() - 1 {
-                tris.push([
-                    p.vertices[0].to_array(),
-                    p.vertices[k].to_array(),
-                    p.vertices[k + 1].to_array(),
-                ]);
+                let t = [p.vertices[0], p.vertices[k], p.vertices[k + 1]];
+                tris.push(t.map(|v| v.to_array()));
+                if let Some(m) = &p.texture {
+                    uvs.push(t.map(|v| m.uv(v).to_array()));
+                }
             }
         }
         let (refl, emit) = polys
             .first()
             .map_or(([0.0; 3], [0.0; 3]), |p| (p.reflectance, p.emission));
-        nodes.push(serde_json::json!({
+        let mut node = serde_json::json!({
             "name": name,
             "triangles": tris,
             "reflectance": refl,
             "emission": emit,
             "area": polys.iter().map(|p| p.area() as f64).sum::<f64>(),
-        }));
+        });
+        if let Some(m) = map {
+            let t = &m.texture;
+            let file = match written.get(&t.index) {
+                Some(f) => f,
+                None => {
+                    let ext = if t.encoded.1 == "image/jpeg" {
+                        "jpg"
+                    } else {
+                        "png"
+                    };
+                    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("nodes");
+                    let file = format!("{stem}.texture{}.{ext}", t.index);
+                    let dir = path.parent().unwrap_or(Path::new("."));
+                    output::write_atomic(&dir.join(&file), &t.encoded.0)?;
+                    written.entry(t.index).or_insert(file)
+                }
+            };
+            let wrap = t.texture.wrap.map(|w| match w {
+                crate::scene::texture::Wrap::Repeat => "repeat",
+                crate::scene::texture::Wrap::Mirror => "mirror",
+                crate::scene::texture::Wrap::Clamp => "clamp",
+            });
+            node["texture"] = serde_json::json!({"image": file, "factor": m.factor, "wrap": wrap});
+            node["uvs"] = serde_json::json!(uvs);
+        }
+        nodes.push(node);
     }
     // The camera the render uses (the file's first, or the default), for
     // path-traced images.

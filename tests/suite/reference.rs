@@ -78,9 +78,27 @@ fn a_point_light_a_sun_and_a_sky_are_within_one_percent_mean_of_a_path_traced_re
     check_scene("cornell-lit", &lit_cornell());
 }
 
+/// The same with a striped texture on the floor (`scenes/cornell-textured.gltf`):
+/// the path tracer samples the texture at each point, the renderer takes
+/// its mean per element.
+#[test]
+fn a_textured_floor_under_lights_is_within_one_percent_mean_of_a_path_traced_reference() {
+    let s = lit_cornell_file("cornell-textured");
+    assert!(
+        s.polygons.iter().any(|p| p.texture.is_some()),
+        "the floor is textured"
+    );
+    check_scene("cornell-textured", &s);
+}
+
 /// `scenes/cornell-lit.gltf` with the sun and sky its references were made with.
 pub fn lit_cornell() -> radiosity::scene::Scene {
-    let path = format!("{}/scenes/cornell-lit.gltf", env!("CARGO_MANIFEST_DIR"));
+    lit_cornell_file("cornell-lit")
+}
+
+/// `scenes/NAME.gltf` with the sun and sky the lit references were made with.
+pub fn lit_cornell_file(name: &str) -> radiosity::scene::Scene {
+    let path = format!("{}/scenes/{name}.gltf", env!("CARGO_MANIFEST_DIR"));
     let mut s = radiosity::scene::open(&path).expect("scene");
     assert_eq!(s.lights.len(), 1, "the file's point light");
     s.lights
