@@ -577,6 +577,23 @@ impl Viewer {
         }
     }
 
+    /// A run nobody watches (`--screenshot`, `--exit-after`,
+    /// `--exit-when-converged`) that meets an error ends with it, instead of
+    /// waiting for a restart that will not come.
+    fn end_unattended_run_on_error(&mut self, ctx: &egui::Context, snap: &Snapshot) {
+        let unattended = self.args.screenshot.is_some()
+            || self.args.exit_after.is_some()
+            || self.args.exit_when_converged;
+        let Some(e) = snap.error.as_ref().filter(|_| unattended) else {
+            return;
+        };
+        if let Ok(mut r) = self.result.lock() {
+            *r = Err(e.clone());
+        }
+        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+        ctx.request_repaint();
+    }
+
     fn take_screenshot_when_ready(&mut self, ctx: &egui::Context, snap: &Snapshot) {
         let (Some(path), Some(n)) = (self.args.screenshot.clone(), self.args.shots) else {
             return;
@@ -695,6 +712,7 @@ impl eframe::App for Viewer {
                 }
             });
         self.take_screenshot_when_ready(&ctx, &snap);
+        self.end_unattended_run_on_error(&ctx, &snap);
         self.frames.record(frame_start);
         if self.args.continuous {
             // Benchmark: paint continuously, so frame-to-frame time is the

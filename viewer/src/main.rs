@@ -30,6 +30,14 @@ fn run(args: Args) -> Result<()> {
     // The renderer's backends (Vulkan only by default).
     let mut setup = eframe::egui_wgpu::WgpuSetupCreateNew::without_display_handle();
     setup.instance_descriptor.backends = radiosity::gpu::backends();
+    // The adapter's own limits, as the renderer asks (`Gpu::new`): wgpu's
+    // defaults cap a buffer at 256 MB, and Sponza's rasterisation proxies
+    // need 377 MB.
+    setup.device_descriptor = std::sync::Arc::new(|adapter| eframe::wgpu::DeviceDescriptor {
+        label: Some("radiosity-viewer device"),
+        required_limits: adapter.limits(),
+        ..Default::default()
+    });
     let mut wgpu_options = eframe::egui_wgpu::WgpuConfiguration {
         wgpu_setup: eframe::egui_wgpu::WgpuSetup::CreateNew(setup),
         ..Default::default()
