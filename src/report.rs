@@ -293,6 +293,30 @@ pub struct RankStats {
     pub bytes_sent: u64,
     /// Bytes received in exchanges.
     pub bytes_received: u64,
+    /// Work counted (not timed), summed over the shots this rank drew:
+    /// rectangles drawn (each rank bounds and draws every rectangle that
+    /// holds one of its cells)...
+    pub rects: u64,
+    /// ... hemisphere cells in its tiles (divided between the ranks) ...
+    pub cells: u64,
+    /// ... and receiving elements whose form factors it summed.
+    pub receivers: u64,
+    /// This process's peak resident memory, bytes (Linux `VmHWM`; 0 where
+    /// unknown), when the solve was gathered.
+    pub peak_resident_bytes: u64,
+}
+
+/// This process's peak resident memory so far, bytes (`VmHWM` in
+/// `/proc/self/status`; 0 where there is none).
+pub fn peak_resident_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
 }
 
 /// Statistics of epsilon = T_min / T_max over shots (1 is perfect balance).

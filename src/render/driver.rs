@@ -324,6 +324,9 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, all: Traffic, excluded: Tr
         (all.sent - excluded.sent.min(all.sent)) as f64,
         (all.received - excluded.received.min(all.received)) as f64,
         t.rects as f64,
+        t.cells as f64,
+        t.receivers as f64,
+        crate::report::peak_resident_bytes() as f64,
     ]
 }
 
@@ -340,6 +343,10 @@ fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
         update: v[6],
         bytes_sent: v[7] as u64,
         bytes_received: v[8] as u64,
+        rects: v[9] as u64,
+        cells: v[10] as u64,
+        receivers: v[11] as u64,
+        peak_resident_bytes: v[12] as u64,
     }
 }
 

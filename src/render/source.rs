@@ -31,6 +31,12 @@ pub struct PhaseTimes {
     pub sum: Duration,
     /// Rectangles drawn.
     pub rects: u64,
+    /// Hemisphere cells this rank drew (its tiles' cells, summed over the
+    /// shots it drew): work the ranks divide.
+    pub cells: u64,
+    /// Receiving elements whose form factors this rank summed (entries of
+    /// the rows it computed, summed over shots).
+    pub receivers: u64,
     /// Shots answered from the form-factor row cache (no rasterisation).
     pub cached: u64,
     /// Shots split into one hemisphere per group of shooter elements.
@@ -312,6 +318,7 @@ impl<'a> GpuFormFactors<'a> {
         )?;
         self.timings.bounds += stats.bounds;
         self.timings.rects += stats.rects as u64;
+        self.timings.cells += tier.cells.cells_at(own) as u64;
         self.timings.rasterise += stats.rasterise;
         self.timings.read_back += stats.readback;
         Ok(())
@@ -327,6 +334,7 @@ impl<'a> GpuFormFactors<'a> {
         let exchange = self.hemisphere(shooter, centre, tier)?;
         match self.method {
             FormFactorMethod::Hemisphere => {
+                self.timings.receivers += self.pairs.len() as u64;
                 let (sums, more) = self.sum_over_ranks(vec![self.view[1]]);
                 let row = Row {
                     columns: 1,
@@ -355,6 +363,7 @@ impl<'a> GpuFormFactors<'a> {
         };
         let centre = self.last_centre;
         self.add_far_receivers(shooter, centre, tier);
+        self.timings.receivers += self.pairs.len() as u64;
         let mut row = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
         if let Some(p) = self.penumbra.get_mut(shooter as usize) {
             *p = [row.partial + row.near_hidden, row.total + row.near_hidden];
@@ -380,6 +389,7 @@ impl<'a> GpuFormFactors<'a> {
         for (group, at) in formfactor::split_groups(self.mesh, shooter, columns) {
             exchange += self.hemisphere(shooter, at, tier)?;
             self.add_far_receivers(shooter, at, tier);
+            self.timings.receivers += self.pairs.len() as u64;
             let mut part = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, group.clone());
             let mut parts = self.view.to_vec();
             parts.extend(part.column_totals());

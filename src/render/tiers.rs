@@ -92,6 +92,9 @@ pub struct TierCells {
     pub cell_counts: Vec<usize>,
     /// The whole hemisphere's cells, assembled from every rank's.
     pub full: Vec<u32>,
+    /// How many cells each grid position of `layout` owns (row-major over
+    /// the grid), for the work accounting.
+    position_cells: Vec<usize>,
 }
 
 impl TierCells {
@@ -116,6 +119,13 @@ impl TierCells {
                 }
             }
         }
+        let mut position_cells = vec![0usize; layout.ranks() as usize];
+        for p in 0..res.rows {
+            for t in 0..res.cols {
+                let (x, y) = layout.owner(p, t);
+                position_cells[(y * layout.px + x) as usize] += 1;
+            }
+        }
         let shares = res
             .delta_form_factors()
             .iter()
@@ -129,7 +139,14 @@ impl TierCells {
             cell_counts: cells_of.iter().map(Vec::len).collect(),
             cells_of,
             full: vec![EMPTY; res.cells()],
+            position_cells,
         }
+    }
+
+    /// How many cells the tiles of grid position `own` hold.
+    pub fn cells_at(&self, own: (u32, u32)) -> usize {
+        let k = (own.1 * self.layout.px + own.0) as usize;
+        self.position_cells.get(k).copied().unwrap_or(0)
     }
 
     /// What a drawing of the tiles of grid position `own` shows (`items`:

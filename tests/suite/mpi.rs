@@ -468,3 +468,58 @@ fn a_sun_and_a_sky_give_the_same_bits_on_every_rank_count() {
         assert_eq!(r["energy"], one["energy"]);
     }
 }
+
+#[test]
+fn ranks_divide_the_hemisphere_cells_and_say_what_they_repeat() {
+    // Work counted, not timed (issue 19): the cells each rank draws sum to
+    // the one-rank count and are split evenly; what each rank repeats
+    // (rectangles bounded, receivers summed) is in the report beside it.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let one = mpirun(1, dir.path(), "one", &[]);
+    let count = |r: &serde_json::Value, key: &str| -> Vec<u64> {
+        r["parallel"]["per_rank"]
+            .as_array()
+            .expect("per rank")
+            .iter()
+            .map(|s| s[key].as_u64().unwrap_or_else(|| panic!("{key}")))
+            .collect()
+    };
+    let cells = count(&one, "cells")[0];
+    assert!(cells > 0, "one rank drew no cells");
+    assert!(
+        count(&one, "peak_resident_bytes")[0] > 0,
+        "peak memory missing"
+    );
+    for ranks in [2, 3, 4] {
+        let r = mpirun(ranks, dir.path(), &format!("n{ranks}"), &[]);
+        let per = count(&r, "cells");
+        assert_eq!(per.iter().sum::<u64>(), cells, "{ranks} ranks: {per:?}");
+        // 1 x 1 tiles dealt by 2-D interleave: within a row or column of
+        // cells of an even split.
+        let fair = cells as f64 / ranks as f64;
+        let slack = 0.01;
+        assert!(
+            per.iter().all(|&c| (c as f64) <= fair * (1.0 + slack)),
+            "{ranks} ranks: {per:?} (even: {fair})"
+        );
+        // Each rank sums the form factors of its own receivers only
+        // (owner computes): the one-rank count, split by patch ownership.
+        let receivers = count(&r, "receivers");
+        let all = count(&one, "receivers")[0];
+        assert_eq!(receivers.iter().sum::<u64>(), all, "{ranks} ranks: {receivers:?}");
+        let fair = all as f64 / ranks as f64;
+        assert!(
+            receivers.iter().all(|&c| (c as f64) <= fair * 1.1),
+            "{ranks} ranks: receivers {receivers:?} (even: {fair})"
+        );
+        // Rectangles are what every rank repeats: with 1 x 1 tiles nearly
+        // every rectangle holds cells of every rank (issue 19, item 1).
+        eprintln!(
+            "{ranks} ranks: cells {per:?}, rects {:?}, receivers {:?} (one rank: {cells} cells, {:?} rects, {:?} receivers)",
+            count(&r, "rects"),
+            count(&r, "receivers"),
+            count(&one, "rects"),
+            count(&one, "receivers")
+        );
+    }
+}
