@@ -280,9 +280,11 @@ struct RenderArgs {
     no_ambient: bool,
     /// Tile size WxH in hemisphere cells when running on several MPI ranks
     /// (tiles are dealt to the rank grid by 2-D interleave; 1x1 is the paper's
-    /// per-cell interleave).
-    #[arg(long, default_value = "1x1", value_parser = parse_tile)]
-    tile: (u32, u32),
+    /// per-cell interleave). Default: automatic, 4 x 4 tiles per rank (64x32
+    /// on two ranks at 128x512), so each rank skips the rectangles outside
+    /// its tiles. Results are the same bits for any tiles.
+    #[arg(long, value_parser = parse_tile)]
+    tile: Option<(u32, u32)>,
     /// How ranks exchange form factors each shot.
     #[arg(long, value_enum, default_value = "hemispheres")]
     exchange: Exchange,

@@ -185,7 +185,7 @@ mod tests {
     fn exchanged(kind: Exchange, method: FormFactorMethod, ranks: usize) -> Vec<(u32, u64)> {
         let res = Resolution { rows: 8, cols: 32 };
         let opts = RenderOptions {
-            tile: (3, 2),
+            tile: Some((3, 2)),
             ..RenderOptions::default()
         };
         let (whole, coverage) = drawing(res);

@@ -40,8 +40,9 @@ pub struct RenderOptions {
     /// process every rank's tiles are drawn in turn (one tile by default).
     pub layout: Option<TileLayout>,
     /// Tile size in cells (width along theta, height along phi) when running on
-    /// several ranks; 1 x 1 is the paper's per-cell interleave.
-    pub tile: (u32, u32),
+    /// several ranks; 1 x 1 is the paper's per-cell interleave; `None`:
+    /// automatic (`render::tiers::auto_tile`: 4 x 4 tiles per rank).
+    pub tile: Option<(u32, u32)>,
     /// How ranks exchange form factors.
     pub exchange: Exchange,
     /// Image width in pixels (0: no image).
@@ -102,7 +103,7 @@ impl Default for RenderOptions {
             projection: Projection::Exact,
             tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
             layout: None,
-            tile: (1, 1),
+            tile: None,
             exchange: Exchange::Hemispheres,
             width: 512,
             height: None,
