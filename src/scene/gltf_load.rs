@@ -305,6 +305,9 @@ impl Loader<'_> {
             return Err(bad("its node's transform is degenerate".into()));
         }
         let position = world.transform_point3(DVec3::ZERO);
+        if !position.is_finite() {
+            return Err(bad("its node's position is not finite".into()));
+        }
         self.light_at.push(position);
         self.scene.lights.push(Light {
             name,
