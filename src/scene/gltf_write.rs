@@ -116,7 +116,13 @@ pub fn to_glb(doc: &Value) -> Option<Vec<u8>> {
     doc.pointer_mut("/buffers/0")?
         .as_object_mut()?
         .remove("uri");
-    let mut json = serde_json::to_vec(&doc).ok()?;
+    glb_from(&doc, data)
+}
+
+/// A GLB of `doc` (whose buffer 0 has no URI) and `bin`, that buffer's bytes.
+pub fn glb_from(doc: &Value, bin: Vec<u8>) -> Option<Vec<u8>> {
+    let data = bin;
+    let mut json = serde_json::to_vec(doc).ok()?;
     while json.len() % 4 != 0 {
         json.push(b' ');
     }

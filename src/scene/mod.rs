@@ -15,7 +15,7 @@ pub mod tolerate;
 
 pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};
-pub use gltf_write::{axis_rect, to_glb, write_gltf, GltfSurface};
+pub use gltf_write::{axis_rect, glb_from, to_glb, write_gltf, GltfSurface};
 pub use light::{parse_sky, parse_sun, Light, LightKind, LUMENS_PER_WATT};
 pub use texture::{TexMap, Texture};
 
