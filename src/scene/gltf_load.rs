@@ -404,6 +404,12 @@ impl Loader<'_> {
                 "{what}: alphaMode MASK is not cut out: its surfaces are treated as opaque"
             ));
         }
+        if metallic >= 1.0 && base[..3].iter().any(|&x| x > 0.0) {
+            // glTF's default when a material gives no metallicFactor.
+            clamped.push(format!(
+                "{what}: metallicFactor 1 (fully metal): no diffuse reflectance, so it absorbs all light here"
+            ));
+        }
         let factor = [0, 1, 2].map(|c| base[c] * (1.0 - metallic));
         let texture = pbr.base_color_texture().and_then(|info| {
             let texture = self.texture(&info.texture(), &what)?;
@@ -445,12 +451,6 @@ impl Loader<'_> {
                 &base[..3]
             );
             clamped.push(w);
-        }
-        if metallic >= 1.0 && base[..3].iter().any(|&x| x > 0.0) {
-            // glTF's default when a material gives no metallicFactor.
-            clamped.push(format!(
-                "{what}: metallicFactor 1 (fully metal): no diffuse reflectance, so it absorbs all light here"
-            ));
         }
         Ok(Material {
             reflectance,

@@ -31,6 +31,9 @@ fn sponza_as_shipped_loads_with_the_documented_warnings_and_a_sun_lights_it() {
         scene.warnings
     );
     assert_eq!(about("MSFT_texture_dds"), 1, "{:?}", scene.warnings);
+    // Its fabrics and chain give no metallicFactor: glTF's 1, fully metal,
+    // textured or not.
+    assert_eq!(about("fully metal"), 7, "{:?}", scene.warnings);
     match scene.check_lit() {
         Err(SceneError::NoEmitter { .. }) => {}
         other => panic!("Sponza has no light of its own, yet {other:?}"),
