@@ -413,22 +413,11 @@ pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
         "yfov_degrees": cam.yfov.to_degrees(),
         "aspect": cam.aspect,
     });
-    // Lights as reference.py hands them to Mitsuba (point: W/sr; spot: its
-    // cones too; directional: W/m^2 along `direction`; sky: radiance).
-    let lights: Vec<serde_json::Value> = scene
+    // Lights as the report gives them (reference.py hands them to Mitsuba).
+    let lights: Vec<radiosity::report::LightSummary> = scene
         .lights
         .iter()
-        .map(|l| {
-            let (kind, cones) = match l.kind {
-                crate::scene::LightKind::Point => ("point", None),
-                crate::scene::LightKind::Spot { inner, outer } => ("spot", Some([inner, outer])),
-                crate::scene::LightKind::Directional => ("directional", None),
-            };
-            serde_json::json!({
-                "kind": kind, "name": l.name, "position": l.position.to_array(),
-                "direction": l.direction.to_array(), "intensity": l.intensity, "cones": cones,
-            })
-        })
+        .map(radiosity::report::LightSummary::of)
         .collect();
     output::write_json(
         path,

@@ -28,6 +28,11 @@ pub struct Report {
     /// Where the emitted power went: absorbed, unshot, escaped, and the
     /// balance (absorbed + unshot) / emitted, 1 in a closed scene.
     pub energy: crate::solver::Energy,
+    /// The lights that are not surfaces (`KHR_lights_punctual`, `--sun`),
+    /// as the solve used them (radiometric units).
+    pub lights: Vec<LightSummary>,
+    /// The uniform sky's radiance (`--sky`), W sr^-1 m^-2 per channel.
+    pub sky: Option<[f64; 3]>,
     /// Wall-clock seconds per phase (rank 0's; every rank's are in `parallel`).
     pub timings: Timings,
     /// Ranks, their grid and tiles, the exchange, per-rank phases and traffic, load balance.
@@ -45,6 +50,48 @@ pub struct Report {
     pub bake: Option<crate::bake::Baked>,
     /// Non-fatal problems met on the way.
     pub warnings: Vec<String>,
+}
+
+/// One light as the report gives it.
+#[derive(Clone, Debug, Serialize)]
+pub struct LightSummary {
+    /// Its name (the glTF light's, its node's, or `sun`).
+    pub name: String,
+    /// `point`, `spot` or `directional`.
+    pub kind: &'static str,
+    /// Where it is, relative to the scene's origin (its first vertex, as
+    /// every position the renderer keeps); unused for a directional light.
+    pub position: [f32; 3],
+    /// The unit vector it shines along.
+    pub direction: [f32; 3],
+    /// W/sr (point, spot) or W/m^2 (directional), per channel.
+    pub intensity: [f64; 3],
+    /// A spot's inner and outer cone half-angles, radians.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cones: Option<[f32; 2]>,
+    /// The power it emits, W (sum over RGB; none for a directional light).
+    pub power: Option<f64>,
+}
+
+impl LightSummary {
+    /// The summary of `light`.
+    pub fn of(light: &crate::scene::Light) -> Self {
+        use crate::scene::LightKind;
+        let (kind, cones) = match light.kind {
+            LightKind::Point => ("point", None),
+            LightKind::Spot { inner, outer } => ("spot", Some([inner, outer])),
+            LightKind::Directional => ("directional", None),
+        };
+        LightSummary {
+            name: light.name.clone(),
+            kind,
+            position: light.position.to_array(),
+            direction: light.direction.to_array(),
+            intensity: light.intensity,
+            cones,
+            power: light.power(),
+        }
+    }
 }
 
 impl Report {

@@ -453,6 +453,12 @@ pub fn build_report(
                 .map(|c| (c.to_string(), opts.coarse_below)),
         },
         device: gpu.describe(),
+        lights: scene
+            .lights
+            .iter()
+            .map(crate::report::LightSummary::of)
+            .collect(),
+        sky: scene.sky,
         refinement: Refinement::default(),
         bake: None,
         counts: Counts {

@@ -166,6 +166,11 @@ fn a_point_light_in_a_closed_room_balances_its_power() {
     let e = r.report.energy;
     let power = 4.0 * std::f64::consts::PI * 3.0;
     check("emitted", e.emitted, power, 1e-9);
+    // The report says which lights the solve used.
+    let lights = &r.report.lights;
+    assert_eq!(lights.len(), 1);
+    assert_eq!((lights[0].name.as_str(), lights[0].kind), ("bulb", "point"));
+    assert!(rel(lights[0].power.expect("a point light's power"), power) < 1e-12);
     check("balance", e.balance, 1.0, 0.01);
 }
 
