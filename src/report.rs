@@ -76,15 +76,13 @@ pub struct LightSummary {
 impl LightSummary {
     /// The summary of `light`.
     pub fn of(light: &crate::scene::Light) -> Self {
-        use crate::scene::LightKind;
-        let (kind, cones) = match light.kind {
-            LightKind::Point => ("point", None),
-            LightKind::Spot { inner, outer } => ("spot", Some([inner, outer])),
-            LightKind::Directional => ("directional", None),
+        let cones = match light.kind {
+            crate::scene::LightKind::Spot { inner, outer } => Some([inner, outer]),
+            _ => None,
         };
         LightSummary {
             name: light.name.clone(),
-            kind,
+            kind: light.kind.name(),
             position: light.position.to_array(),
             direction: light.direction.to_array(),
             intensity: light.intensity,

@@ -136,7 +136,7 @@ pub fn camera_image(
     // Textured elements interpolate their irradiance (the rest over their
     // reflectance); each pixel multiplies it by its texture.
     for (r, e) in rest.iter_mut().zip(&mesh.elements) {
-        if scene.polygons[e.polygon as usize].texture.is_some() {
+        if mesh.polygons[e.polygon as usize].textured {
             for (x, rho) in r.iter_mut().zip(e.reflectance) {
                 *x = if rho > 1e-6 {
                     (f64::from(*x) / rho) as f32

@@ -52,6 +52,17 @@ pub struct Light {
     pub intensity: [f64; 3],
 }
 
+impl LightKind {
+    /// Its name in reports: `point`, `spot` or `directional`.
+    pub fn name(self) -> &'static str {
+        match self {
+            LightKind::Point => "point",
+            LightKind::Spot { .. } => "spot",
+            LightKind::Directional => "directional",
+        }
+    }
+}
+
 impl Light {
     /// The spot falloff (1 for a point light) toward the unit direction `d`
     /// from the light: glTF's recommended
@@ -115,9 +126,8 @@ impl Light {
     /// that changes the solution.
     pub fn describe(&self) -> String {
         let kind = match self.kind {
-            LightKind::Point => "point".to_string(),
             LightKind::Spot { inner, outer } => format!("spot {inner:?}..{outer:?}"),
-            LightKind::Directional => "directional".to_string(),
+            k => k.name().to_string(),
         };
         format!(
             "{kind} '{}' at {:?} along {:?}, {:?}",
