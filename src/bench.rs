@@ -154,7 +154,8 @@ fn run_of(path: &std::path::Path) -> Result<Run> {
     })
 }
 
-type Series = Vec<(String, Vec<(f64, f64)>)>;
+/// Named curves of (x, y) points.
+pub(crate) type Series = Vec<(String, Vec<(f64, f64)>)>;
 
 fn draw_chart<DB: plotters::prelude::DrawingBackend>(
     root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
@@ -221,7 +222,7 @@ fn draw_chart<DB: plotters::prelude::DrawingBackend>(
 }
 
 /// Writes `<stem>.svg` and `<stem>.png`.
-fn chart(
+pub(crate) fn chart(
     out: &std::path::Path,
     stem: &str,
     title: &str,

@@ -1,7 +1,7 @@
 //! MPI plumbing (rsmpi): the [`Collectives`] of a solve spread over ranks.
 //! This is the only module that calls MPI.
 
-use crate::parallel::{Collectives, Traffic};
+use crate::parallel::{process_cpu_seconds, Collectives, Traffic};
 use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
@@ -26,6 +26,15 @@ impl MpiComm {
             world,
             traffic: Cell::new(Traffic::default()),
         })
+    }
+
+    /// Counts one collective call and, when the guard drops, the process CPU
+    /// time it took (MPI polls while it waits).
+    fn call(&self) -> CallTimer<'_> {
+        CallTimer {
+            traffic: &self.traffic,
+            start: process_cpu_seconds(),
+        }
     }
 
     fn count(&self, sent: usize, received: usize) {
@@ -53,6 +62,21 @@ impl MpiComm {
     }
 }
 
+/// Adds a call's CPU time to the tally when dropped.
+struct CallTimer<'a> {
+    traffic: &'a Cell<Traffic>,
+    start: f64,
+}
+
+impl Drop for CallTimer<'_> {
+    fn drop(&mut self) {
+        let mut t = self.traffic.get();
+        t.calls += 1;
+        t.cpu_seconds += (process_cpu_seconds() - self.start).max(0.0);
+        self.traffic.set(t);
+    }
+}
+
 impl Collectives for MpiComm {
     fn rank(&self) -> usize {
         self.world.rank() as usize
@@ -63,12 +87,14 @@ impl Collectives for MpiComm {
     }
 
     fn all_gather_f64(&self, local: &[f64]) -> Vec<f64> {
+        let _call = self.call();
         let mut out = vec![0.0; local.len() * self.size()];
         self.world.all_gather_into(local, &mut out[..]);
         out
     }
 
     fn all_gather_u32(&self, local: &[u32], lengths: Option<&[usize]>) -> Vec<Vec<u32>> {
+        let _call = self.call();
         let counts = match lengths {
             Some(l) => l.iter().map(|&n| n as Count).collect(),
             None => self.all_counts(local.len()),
@@ -92,6 +118,7 @@ impl Collectives for MpiComm {
     }
 
     fn reduce_broadcast_sum(&self, data: &mut [u64]) {
+        let _call = self.call();
         let root = self.world.process_at_rank(0);
         if self.rank() == 0 {
             let mut sum = vec![0u64; data.len()];
@@ -110,6 +137,7 @@ impl Collectives for MpiComm {
     }
 
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
+        let _call = self.call();
         let n = self.size();
         // Pairs travel as two flat arrays (element ids, fixed-point values).
         let send_counts: Vec<Count> = outgoing.iter().map(|v| v.len() as Count).collect();
@@ -152,6 +180,7 @@ impl Collectives for MpiComm {
     }
 
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
+        let _call = self.call();
         let root = self.world.process_at_rank(0);
         let mut counts = vec![0 as Count; self.size()];
         self.world
@@ -206,6 +235,7 @@ impl Collectives for MpiComm {
         self.traffic.set(Traffic {
             sent: t.sent - 4 * msg.len() as u64 * (self.size() as u64 - 1),
             received: t.received - 4 * (all.iter().map(Vec::len).sum::<usize>() - msg.len()) as u64,
+            ..t
         });
         if failed.is_empty() {
             Ok(())

@@ -45,6 +45,7 @@ pub mod refine;
 pub mod render;
 pub mod report;
 pub mod sampling;
+pub mod scaling;
 pub mod scene;
 pub mod settings;
 pub mod solver;

@@ -42,6 +42,7 @@ mod accuracy;
 mod bench;
 mod receivers;
 mod regimes;
+mod scaling_report;
 
 /// Progressive radiosity with equal-angle hemisphere form factors rasterised by wgpu.
 #[derive(Parser)]
@@ -83,6 +84,10 @@ enum Command {
     Bench(bench::BenchArgs),
     /// Turn render reports (e.g. from scripts/bench-mpi.sh) into a CSV and charts.
     BenchReport(bench::ReportArgs),
+    /// Fit the performance model to calibration runs (scripts/calibrate-scaling.sh),
+    /// check it against them and redraw the paper's figures 8-12 for up to
+    /// 1024 ranks (docs/scaling.md).
+    Scaling(scaling_report::ScalingArgs),
     /// Chart error against solve time for every method option and resolution,
     /// beside a path tracer (Mitsuba 3), to docs/bench/accuracy.
     Accuracy {
@@ -405,6 +410,7 @@ fn main() {
         Command::Compare { image, reference } => compare_images(&image, &reference),
         Command::Bench(args) => bench::run(args),
         Command::BenchReport(args) => bench::report(args),
+        Command::Scaling(args) => scaling_report::run(args),
         Command::Accuracy { args, solve } => accuracy::run(args, solve),
         Command::Fuzz {
             cases,

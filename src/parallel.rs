@@ -6,13 +6,49 @@ use std::any::Any;
 use std::cell::Cell;
 use std::sync::{Arc, Barrier, Mutex};
 
-/// Bytes this rank sent and received in exchanges, summed over calls.
+/// Bytes this rank sent and received in exchanges, summed over calls, and
+/// what the calls cost.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
 pub struct Traffic {
     /// Bytes sent.
     pub sent: u64,
     /// Bytes received.
     pub received: u64,
+    /// Collective calls made.
+    pub calls: u64,
+    /// Process CPU seconds spent inside those calls, waiting included (MPI
+    /// polls while it waits, so under oversubscription this is what a
+    /// rank's CPU time must lose to count its own work).
+    pub cpu_seconds: f64,
+}
+
+impl Traffic {
+    /// What was added since `before`.
+    pub fn since(self, before: Traffic) -> Traffic {
+        Traffic {
+            sent: self.sent.saturating_sub(before.sent),
+            received: self.received.saturating_sub(before.received),
+            calls: self.calls.saturating_sub(before.calls),
+            cpu_seconds: (self.cpu_seconds - before.cpu_seconds).max(0.0),
+        }
+    }
+
+    /// The sum of two tallies.
+    pub fn plus(self, other: Traffic) -> Traffic {
+        Traffic {
+            sent: self.sent + other.sent,
+            received: self.received + other.received,
+            calls: self.calls + other.calls,
+            cpu_seconds: self.cpu_seconds + other.cpu_seconds,
+        }
+    }
+}
+
+/// CPU seconds this process (all its threads, the GPU driver's included)
+/// has used so far.
+pub fn process_cpu_seconds() -> f64 {
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
 /// Collective operations over the ranks of one solve. Every rank must make
@@ -166,6 +202,8 @@ impl ThreadComm {
         self.traffic.set(Traffic {
             sent: t.sent + sent as u64,
             received: t.received + received as u64,
+            calls: t.calls + 1,
+            ..t
         });
     }
 }

@@ -278,6 +278,9 @@ pub struct Parallel {
     pub measured_bytes_per_shot: f64,
     /// Load balance epsilon = T_min / T_max of each shot's busy time over ranks.
     pub load_balance: LoadBalance,
+    /// The same from each shot's busy CPU seconds (outside collective calls):
+    /// with more ranks than cores, the balance of the work itself.
+    pub load_balance_cpu: LoadBalance,
 }
 
 impl Parallel {
@@ -311,6 +314,7 @@ impl Parallel {
             formula_bytes_per_shot: formula,
             measured_bytes_per_shot: received / n / shots.max(1) as f64,
             load_balance,
+            load_balance_cpu: load_balance,
         }
     }
 }
@@ -349,6 +353,15 @@ pub struct RankStats {
     /// This process's peak resident memory, bytes (Linux `VmHWM`; 0 where
     /// unknown), when the solve was gathered.
     pub peak_resident_bytes: u64,
+    /// Process CPU seconds (every thread, the GPU driver's included) over
+    /// the final solve: with more ranks than cores, wall times mix in the
+    /// waits for a core and this does not.
+    pub cpu_seconds: f64,
+    /// ... of which inside collective calls (MPI polls while it waits), so
+    /// `cpu_seconds - mpi_cpu_seconds` is the rank's own work.
+    pub mpi_cpu_seconds: f64,
+    /// Collective calls in the final solve.
+    pub mpi_calls: u64,
 }
 
 /// This process's peak resident memory so far, bytes (`VmHWM` in

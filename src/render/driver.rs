@@ -172,8 +172,6 @@ pub fn render_on(
     let (mesh, refinement, factors) = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
     // The passes' solves count as solve time, below.
     timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
-    // Their exchanges are not the final solve's.
-    let before = comm.traffic();
     if comm.rank() == 0 {
         log_mesh(scene, &mesh);
     }
@@ -191,6 +189,9 @@ pub fn render_on(
         trace: Vec::new(),
         energy: [0.0; 3],
     };
+    // The passes' and the set-up's exchanges are not the final solve's.
+    let before = comm.traffic();
+    let cpu_start = crate::parallel::process_cpu_seconds();
     let solved = final_solve(
         scene,
         &mesh,
@@ -203,12 +204,12 @@ pub fn render_on(
         progress,
     )?;
     timings.solve = solved.solve;
-    let excluded = Traffic {
-        sent: solved.trace.traffic.sent + before.sent,
-        received: solved.trace.traffic.received + before.received,
-    };
+    let excluded = solved.trace.traffic.plus(before);
+    // The trace's summaries are left out of the solve's CPU as of its time.
+    let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
-    let Some(gathered) = gather_to_root(comm, opts, &solver, &solved.stats, &source, excluded)
+    let Some(gathered) =
+        gather_to_root(comm, opts, &solver, &solved.stats, &source, (excluded, cpu))
     else {
         return Ok(None);
     };
@@ -253,6 +254,8 @@ struct Gathered<'m> {
     per_rank: Vec<RankStats>,
     /// Every rank's busy time per shot.
     busy: Vec<Vec<f64>>,
+    /// ... and its busy CPU seconds per shot.
+    busy_cpu: Vec<Vec<f64>>,
 }
 
 impl<'m> Gathered<'m> {
@@ -264,7 +267,7 @@ impl<'m> Gathered<'m> {
         opts: &RenderOptions,
         mesh: &Mesh,
     ) -> (Solver<'m>, Parallel) {
-        let parallel = Parallel::new(
+        let mut parallel = Parallel::new(
             self.per_rank.len(),
             layout,
             opts.exchange,
@@ -274,6 +277,7 @@ impl<'m> Gathered<'m> {
             self.per_rank,
             LoadBalance::from_busy(&self.busy),
         );
+        parallel.load_balance_cpu = LoadBalance::from_busy(&self.busy_cpu);
         (self.whole, parallel)
     }
 }
@@ -286,7 +290,7 @@ fn gather_to_root<'m>(
     solver: &Solver<'m>,
     stats: &LoopStats,
     source: &GpuFormFactors,
-    excluded: Traffic,
+    (excluded, cpu): (Traffic, f64),
 ) -> Option<Gathered<'m>> {
     // With overshooting the unshot fraction sums elements' |unshot|.
     let extra = Extra {
@@ -294,10 +298,12 @@ fn gather_to_root<'m>(
         direct: true,
     };
     let whole = gather_whole(comm, solver, extra);
-    let mine = pack_rank_stats(&source.timings, stats, comm.traffic(), excluded);
+    let traffic = comm.traffic().since(excluded);
+    let mine = pack_rank_stats(&source.timings, stats, traffic, cpu);
     let all_stats = comm.gather_f64(&mine);
     let busy = comm.gather_f64(&source.busy);
-    let (whole, all_stats, busy) = (whole?, all_stats?, busy?);
+    let busy_cpu = comm.gather_f64(&source.busy_cpu);
+    let (whole, all_stats, busy, busy_cpu) = (whole?, all_stats?, busy?, busy_cpu?);
     Some(Gathered {
         whole,
         phases: source.timings,
@@ -307,12 +313,14 @@ fn gather_to_root<'m>(
             .map(|(r, v)| unpack_rank_stats(r, v))
             .collect(),
         busy,
+        busy_cpu,
     })
 }
 
-/// One rank's phase seconds and bytes, for the gather. The trace's gathers
-/// and the refinement passes (`excluded`) are not the solve's exchange.
-fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, all: Traffic, excluded: Traffic) -> Vec<f64> {
+/// One rank's phase seconds and bytes, for the gather: `traffic` is the
+/// final solve's exchanges (not the trace's gathers or the refinement
+/// passes'), `cpu` the process CPU seconds the final solve took.
+fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, traffic: Traffic, cpu: f64) -> Vec<f64> {
     vec![
         stats.select.as_secs_f64(),
         t.bounds.as_secs_f64(),
@@ -321,12 +329,15 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, all: Traffic, excluded: Tr
         t.exchange.as_secs_f64(),
         t.sum.as_secs_f64(),
         stats.update.as_secs_f64(),
-        (all.sent - excluded.sent.min(all.sent)) as f64,
-        (all.received - excluded.received.min(all.received)) as f64,
+        traffic.sent as f64,
+        traffic.received as f64,
         t.rects as f64,
         t.cells as f64,
         t.receivers as f64,
         crate::report::peak_resident_bytes() as f64,
+        cpu,
+        traffic.cpu_seconds,
+        traffic.calls as f64,
     ]
 }
 
@@ -347,6 +358,9 @@ fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
         cells: v[10] as u64,
         receivers: v[11] as u64,
         peak_resident_bytes: v[12] as u64,
+        cpu_seconds: v[13],
+        mpi_cpu_seconds: v[14],
+        mpi_calls: v[15] as u64,
     }
 }
 

@@ -329,8 +329,12 @@ impl<'m> ShotLoop<'m> {
     ) -> Result<Shot, RenderError> {
         source.form_factors(best.patch, region, &mut self.ff)?;
         let t = Instant::now();
+        let cpu = super::source::CpuSpan::start(self.comm);
         let shot = solver.shoot_candidate(best, region, &self.ff);
         let dt = t.elapsed();
+        if let Some(b) = source.busy_cpu.last_mut() {
+            *b += cpu.own(self.comm);
+        }
         (self.landed, self.delivered) = self.landed_here(solver, best);
         self.last_power = Some(shot.shot_power);
         self.stats.update += dt;

@@ -114,6 +114,10 @@ pub struct GpuFormFactors<'a> {
     pub timings: PhaseTimes,
     /// This rank's busy time (everything but waiting in collectives) per shot.
     pub busy: Vec<f64>,
+    /// The same spans in process CPU seconds, less the CPU inside collective
+    /// calls: the rank's own work, which more ranks than cores do not
+    /// inflate as they inflate wall times.
+    pub busy_cpu: Vec<f64>,
     /// Per patch, from its first uncached hybrid shot: this rank's receivers'
     /// penumbra and total shares (see `refine::PatchStats`).
     pub penumbra: Vec<[u64; 2]>,
@@ -162,6 +166,7 @@ impl<'a> GpuFormFactors<'a> {
             last_blocked: 0.0,
             timings: PhaseTimes::default(),
             busy: Vec::new(),
+            busy_cpu: Vec::new(),
             penumbra: vec![[0, 0]; mesh.patches.len()],
             cache: RowCache::for_ranks(opts.cache_rows, n),
             split: opts.split_shots,
@@ -508,6 +513,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
         out: &mut Vec<Transfer>,
     ) -> Result<(), RenderError> {
         let start = Instant::now();
+        let cpu = CpuSpan::start(self.comm);
         let tier = self.choice.tier_for(region.power);
         let key = RowKey::new(shooter, region.centre, tier);
         if let Some(row) = self.cache.get(&key) {
@@ -517,6 +523,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
             let spent = start.elapsed();
             self.timings.sum += spent;
             self.busy.push(spent.as_secs_f64());
+            self.busy_cpu.push(cpu.own(self.comm));
             return Ok(());
         }
         let before = self.timings.drawing();
@@ -536,6 +543,30 @@ impl FormFactorSource for GpuFormFactors<'_> {
         self.timings.exchange += exchange;
         self.timings.sum += total.saturating_sub(exchange + drawn);
         self.busy.push((total - exchange).as_secs_f64());
+        self.busy_cpu.push(cpu.own(self.comm));
         Ok(())
+    }
+}
+
+/// A span of this process's CPU time, less what collective calls used in it.
+pub struct CpuSpan {
+    cpu: f64,
+    mpi: f64,
+}
+
+impl CpuSpan {
+    /// Starts a span.
+    pub fn start(comm: &dyn Collectives) -> Self {
+        Self {
+            cpu: crate::parallel::process_cpu_seconds(),
+            mpi: comm.traffic().cpu_seconds,
+        }
+    }
+
+    /// CPU seconds since the start outside collective calls.
+    pub fn own(&self, comm: &dyn Collectives) -> f64 {
+        let cpu = crate::parallel::process_cpu_seconds() - self.cpu;
+        let mpi = comm.traffic().cpu_seconds - self.mpi;
+        (cpu - mpi).max(0.0)
     }
 }

@@ -60,6 +60,8 @@ pub struct Trace {
     next: u64,
     /// Time spent gathering and summarising (left out of the solve time).
     pub spent: Duration,
+    /// The same in process CPU seconds.
+    pub spent_cpu: f64,
     /// Bytes the trace's gathers moved (left out of the exchange's traffic).
     pub traffic: Traffic,
 }
@@ -107,6 +109,7 @@ impl Trace {
         seconds: f64,
     ) {
         let t = Instant::now();
+        let cpu = crate::parallel::process_cpu_seconds();
         let before = comm.traffic();
         let summary = if comm.size() == 1 {
             Some((
@@ -135,9 +138,9 @@ impl Trace {
             });
         }
         self.spent += t.elapsed();
+        self.spent_cpu += crate::parallel::process_cpu_seconds() - cpu;
         let after = comm.traffic();
-        self.traffic.sent += after.sent - before.sent;
-        self.traffic.received += after.received - before.received;
+        self.traffic = self.traffic.plus(after.since(before));
     }
 
     /// The trace with its last point made equal to the final result.

@@ -19,6 +19,7 @@ mod projections;
 mod real_files;
 mod reference;
 mod refine;
+mod scaling;
 mod shaders;
 mod textures;
 mod traps;

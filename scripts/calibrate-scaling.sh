@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# Measurements the performance model (docs/scaling.md, `radiosity scaling`)
+# is calibrated and validated on. Every run is the paper's: 100 shots, no
+# threshold, no image.
+#
+# - 1 rank pinned to one core (`taskset`) and 2 ranks bound one per core
+#   (`mpirun --bind-to core`), one lavapipe thread each: the per-rank phase
+#   times, bytes and counts the model is fitted to, for every exchange.
+# - 4, 8 and 16 ranks oversubscribed on the two cores: wall times mean
+#   nothing there, but each rank's process CPU seconds outside MPI calls
+#   (report: parallel.per_rank[].cpu_seconds - mpi_cpu_seconds), its bytes
+#   and its work counts do; the model's predictions are checked on them.
+#
+#   SCENES="cubes-b1 classroom-c3" BIG="cubes-b3" scripts/calibrate-scaling.sh
+#
+# Writes docs/scaling/runs/<scene>-<resolution>-n<ranks>-<exchange>.json,
+# skipping runs already there (FORCE=1 redoes them), then fits the model
+# (`radiosity scaling`: docs/scaling/*.csv and the charts).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source scripts/setup.sh
+cargo build --release --locked --bin radiosity
+# A copy, so a build during the runs cannot swap the binary under them.
+bin=$(mktemp -d)/radiosity
+cp target/release/radiosity "$bin"
+SHOTS=${SHOTS:-100}
+SCENES=${SCENES:-"cubes-b1 classroom-c1 classroom-c2 classroom-c3"}
+BIG=${BIG:-"cubes-b2 cubes-b3"}
+OVER=${OVER:-"4 8 16"}
+OVER_BIG=${OVER_BIG:-"4 8"}
+runs=${RUNS:-docs/scaling/runs}
+mkdir -p "$runs"
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 LP_NUM_THREADS=1
+export OMPI_MCA_btl=${OMPI_MCA_btl:-self,vader,tcp}
+run() { # ranks scene resolution exchange
+  local n=$1 scene=$2 res=$3 ex=$4
+  local out="$runs/$scene-$res-n$n-$ex.json"
+  if [ -f "$out" ] && [ -z "${FORCE:-}" ]; then return; fi
+  echo "calibrate: $scene $res, $n ranks, $ex" >&2
+  local args=(render "$scene" --resolution "$res" --exchange "$ex" --max-shots "$SHOTS"
+    --threshold 0 --width 0 --report "$out")
+  if [ "$n" = 1 ]; then
+    taskset -c 0 "$bin" "${args[@]}" >/dev/null 2>&1
+  elif [ "$n" = 2 ]; then
+    mpirun --bind-to core -n 2 -x LP_NUM_THREADS "$bin" "${args[@]}" >/dev/null 2>&1
+  else
+    mpirun --oversubscribe --bind-to none -n "$n" -x LP_NUM_THREADS "$bin" "${args[@]}" >/dev/null 2>&1
+  fi
+}
+for scene in $SCENES $BIG; do
+  run 1 "$scene" 128x512 hemispheres
+  for ex in hemispheres form-factors sparse; do run 2 "$scene" 128x512 "$ex"; done
+done
+for scene in $SCENES; do
+  for n in $OVER; do run "$n" "$scene" 128x512 hemispheres; done
+  run 8 "$scene" 128x512 sparse
+done
+# The paper's figure 12: B3 at a finer hemisphere.
+for n in 1 2; do run "$n" cubes-b3 192x768 hemispheres; done
+# The big scenes beyond 2 ranks (each rank holds the whole scene: 8 ranks
+# of cubes-b3 take about 8 GB).
+for scene in $BIG; do
+  for n in $OVER_BIG; do run "$n" "$scene" 128x512 hemispheres; done
+done
+"$bin" scaling --runs "$runs" --out "$(dirname "$runs")"

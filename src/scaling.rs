@@ -1,0 +1,879 @@
+//! The performance model of `docs/scaling.md`: what a shot costs on N
+//! ranks, fitted to measured runs and extrapolated to the paper's 64
+//! processors and beyond.
+//!
+//! Per shot, on N ranks,
+//!
+//! ```text
+//! T(N) = R + (D / N) (1 + u(N)) + calls L(N) alpha + bytes(N) / beta
+//! ```
+//!
+//! - `R`, the replicated seconds, and `D`, the divided ones, per phase:
+//!   from the 1-rank time T1 = R + D and the 2-rank mean over ranks
+//!   M2 = R + D / 2, both one core per rank;
+//! - `u(N)`, the imbalance: the slowest rank's divided work over the mean
+//!   less one, from the measured load balance epsilon = T_min / T_max of
+//!   each shot's busy CPU seconds at 2-16 ranks (more ranks than cores
+//!   inflate wall times, not CPU seconds), fitted as u0 N^gamma;
+//! - the exchange: `calls` collectives a shot (measured), each a tree of
+//!   L(N) = ceil(log2 N) stages of latency `alpha`, plus the bytes a rank
+//!   receives over bandwidth `beta`. Bytes by the exchange's law:
+//!   partial hemispheres B (N - 1) / N of the hemisphere's B bytes;
+//!   partial form factors one dense array per stage over ceil(log2 N) + 1
+//!   stages; sparse pairs to their owners, a rank's distinct receivers
+//!   V (1 - exp(-cells / (N V))) of V visible ones. With the paper's own
+//!   schedule (its AP1000+), a partial-hemisphere exchange takes N stages.
+//!
+//! The module reads reports as JSON and knows nothing of GPUs or MPI.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// Why runs could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum ScalingError {
+    /// A report could not be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A report lacks a figure the model needs.
+    #[error("{path}: {what}")]
+    Report {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+}
+
+/// The phases of a shot the report times per rank, in report order.
+pub const PHASES: [&str; 6] = [
+    "select_shooter",
+    "bounds",
+    "rasterise",
+    "read_back",
+    "sum_form_factors",
+    "update",
+];
+
+/// One measured run, per shot.
+#[derive(Clone, Debug)]
+pub struct Run {
+    /// File it came from.
+    pub path: PathBuf,
+    /// Scene name.
+    pub scene: String,
+    /// Hemisphere resolution, rows x columns.
+    pub resolution: [u32; 2],
+    /// Ranks.
+    pub ranks: usize,
+    /// The exchange (`hemispheres`, `form-factors` or `sparse`).
+    pub exchange: String,
+    /// Shots of the final solve.
+    pub shots: f64,
+    /// Elements of the final mesh.
+    pub elements: f64,
+    /// Seconds of the final solve (the refinement passes left out).
+    pub solve: f64,
+    /// Per rank, per phase ([`PHASES`]), seconds per shot.
+    pub phases: Vec<[f64; 6]>,
+    /// Per rank, seconds per shot in the exchange (waits included).
+    pub exchange_seconds: Vec<f64>,
+    /// Per rank, bytes received per shot.
+    pub bytes: Vec<f64>,
+    /// Per rank, collective calls per shot.
+    pub calls: Vec<f64>,
+    /// Per rank, process CPU seconds per shot outside collective calls.
+    pub cpu_own: Vec<f64>,
+    /// Per rank, hemisphere cells drawn per shot.
+    pub cells: Vec<f64>,
+    /// Cells of one whole hemisphere.
+    pub hemisphere_cells: f64,
+    /// Mean load balance of the shots' busy CPU seconds.
+    pub epsilon_cpu: f64,
+}
+
+impl Run {
+    /// Reads a `radiosity render` report.
+    pub fn read(path: &Path) -> Result<Self, ScalingError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ScalingError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let bad = |what: String| ScalingError::Report {
+            path: path.to_path_buf(),
+            what,
+        };
+        let v: Value = serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+        let num = |x: &Value, name: &str| {
+            x.as_f64()
+                .ok_or_else(|| bad(format!("no number `{name}` (a report of this version?)")))
+        };
+        let shots = num(&v["shots"], "shots")?;
+        if shots < 1.0 {
+            return Err(bad("no shots".into()));
+        }
+        let p = &v["parallel"];
+        let per_rank = p["per_rank"]
+            .as_array()
+            .filter(|a| !a.is_empty())
+            .ok_or_else(|| bad("no `parallel.per_rank`".into()))?;
+        let mut run = Run {
+            path: path.to_path_buf(),
+            scene: v["scene"].as_str().unwrap_or("?").to_string(),
+            resolution: [
+                num(&v["settings"]["resolution"]["rows"], "rows")? as u32,
+                num(&v["settings"]["resolution"]["cols"], "cols")? as u32,
+            ],
+            ranks: per_rank.len(),
+            exchange: p["exchange"].as_str().unwrap_or("?").to_string(),
+            shots,
+            elements: num(&v["counts"]["elements"], "elements")?,
+            solve: num(&v["timings"]["solve"], "solve")?
+                - num(&v["refinement"]["seconds"], "refinement.seconds")?,
+            phases: Vec::new(),
+            exchange_seconds: Vec::new(),
+            bytes: Vec::new(),
+            calls: Vec::new(),
+            cpu_own: Vec::new(),
+            cells: Vec::new(),
+            hemisphere_cells: num(&v["counts"]["cells"], "cells")?,
+            epsilon_cpu: num(&p["load_balance_cpu"]["mean"], "load_balance_cpu")?,
+        };
+        for r in per_rank {
+            let mut ph = [0.0; 6];
+            for (k, name) in PHASES.iter().enumerate() {
+                ph[k] = num(&r[*name], name)? / shots;
+            }
+            run.phases.push(ph);
+            run.exchange_seconds
+                .push(num(&r["exchange"], "exchange")? / shots);
+            run.bytes
+                .push(num(&r["bytes_received"], "bytes_received")? / shots);
+            run.calls.push(num(&r["mpi_calls"], "mpi_calls")? / shots);
+            run.cpu_own.push(
+                (num(&r["cpu_seconds"], "cpu_seconds")?
+                    - num(&r["mpi_cpu_seconds"], "mpi_cpu_seconds")?)
+                    / shots,
+            );
+            run.cells.push(num(&r["cells"], "cells")? / shots);
+        }
+        Ok(run)
+    }
+
+    /// The mean over ranks of each phase, seconds per shot.
+    pub fn mean_phases(&self) -> [f64; 6] {
+        let mut m = [0.0; 6];
+        for ph in &self.phases {
+            for k in 0..6 {
+                m[k] += ph[k] / self.ranks as f64;
+            }
+        }
+        m
+    }
+
+    /// Mean over ranks of a per-rank figure.
+    pub fn mean(v: &[f64]) -> f64 {
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    }
+
+    /// Hemispheres drawn per shot (split shots draw several, coarse ones
+    /// fewer cells).
+    pub fn hemispheres(&self) -> f64 {
+        self.cells.iter().sum::<f64>() / self.hemisphere_cells
+    }
+
+    /// Seconds per shot of the final solve.
+    pub fn seconds_per_shot(&self) -> f64 {
+        self.solve / self.shots
+    }
+}
+
+/// A network: latency per stage and bandwidth per link.
+#[derive(Clone, Copy, Debug)]
+pub struct Network {
+    /// Name for tables and charts.
+    pub name: &'static str,
+    /// Seconds per message stage.
+    pub latency: f64,
+    /// Bytes per second a rank receives.
+    pub bandwidth: f64,
+    /// Whether partial hemispheres go in the paper's N broadcast stages
+    /// (else a recursive-doubling all-gather's ceil(log2 N)).
+    pub paper_schedule: bool,
+}
+
+/// The AP1000+ of the paper: its T-net links are of the 25 MB/s class
+/// (the issue's figure); 20 us a message stage is our assumption for its
+/// put/get latency, which the paper does not give.
+pub const AP1000: Network = Network {
+    name: "AP1000+ (25 MB/s, 20 us)",
+    latency: 20e-6,
+    bandwidth: 25e6,
+    paper_schedule: true,
+};
+
+/// A current cluster interconnect (InfiniBand EDR class: 100 Gb/s, about
+/// 12 GB/s delivered, 2 us a stage through MPI).
+pub const CLUSTER: Network = Network {
+    name: "cluster (12 GB/s, 2 us)",
+    latency: 2e-6,
+    bandwidth: 12e9,
+    paper_schedule: false,
+};
+
+/// ceil(log2 n), 0 for one rank.
+fn log2_stages(n: f64) -> f64 {
+    if n <= 1.0 {
+        0.0
+    } else {
+        n.log2().ceil()
+    }
+}
+
+/// One phase's fit: seconds per shot every rank repeats, and seconds per
+/// shot divided among the ranks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseFit {
+    /// Replicated seconds per shot.
+    pub replicated: f64,
+    /// Divided seconds per shot (on one rank).
+    pub divided: f64,
+}
+
+impl PhaseFit {
+    /// From the 1-rank time and the 2-rank mean over ranks: T1 = R + D,
+    /// M2 = R + D / 2, each clamped to [0, T1] (noise can put M2 above T1
+    /// or under T1 / 2).
+    pub fn from_times(t1: f64, m2: f64) -> Self {
+        let divided = (2.0 * (t1 - m2)).clamp(0.0, t1.max(0.0));
+        Self {
+            replicated: t1.max(0.0) - divided,
+            divided,
+        }
+    }
+}
+
+/// How the exchange's bytes grow with the rank count: what a rank receives
+/// a shot is `items (N - 1) / N` (partial hemispheres: every other rank's
+/// cells), plus `dense` (partial form factors: one array per stage, over
+/// ceil(log2 N) + 1 stages), plus sparse pairs sent to their owners (the
+/// sparse exchange's sums, or the hybrid method's covered-cell counts).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct Bytes {
+    /// Bytes of every rank's cells of a shot's hemispheres.
+    pub items: f64,
+    /// Bytes of one dense array a shot.
+    pub dense: f64,
+    /// Sparse pairs, if any.
+    pub pairs: Option<Pairs>,
+}
+
+/// (element, value) pairs sent to the ranks that own the elements: a rank
+/// sends `at2 (N / 2)^-delta` pairs a shot, (N - 1) / N of them to others,
+/// of 12 bytes each, and a 4-byte count to every rank per call.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pairs {
+    /// Pairs a rank sends a shot on 2 ranks.
+    pub at2: f64,
+    /// How fast they fall with the rank count (1: as the cells).
+    pub delta: f64,
+    /// All-to-all calls a shot.
+    pub calls: f64,
+}
+
+/// Bytes a pair takes (u32 element, u64 fixed-point value).
+pub const PAIR_BYTES: f64 = 12.0;
+/// Bytes of the count an all-to-all sends each rank.
+pub const COUNT_BYTES: f64 = 4.0;
+
+impl Pairs {
+    /// Pairs a rank sends a shot on `n` ranks.
+    pub fn sent(&self, n: f64) -> f64 {
+        self.at2 * (n / 2.0).powf(-self.delta)
+    }
+
+    /// Bytes a rank receives a shot on `n` ranks.
+    pub fn received(&self, n: f64) -> f64 {
+        PAIR_BYTES * self.sent(n) * (n - 1.0) / n + COUNT_BYTES * n * self.calls
+    }
+
+    /// Pairs a rank sent a shot, from the bytes it received on `n` ranks.
+    fn from_received(bytes: f64, n: f64, calls: f64) -> f64 {
+        ((bytes - COUNT_BYTES * n * calls) * n / ((n - 1.0) * PAIR_BYTES)).max(0.0)
+    }
+}
+
+impl Bytes {
+    /// Bytes a rank receives a shot on `n` ranks.
+    pub fn received(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            return 0.0;
+        }
+        self.items * (n - 1.0) / n + self.dense + self.pairs.map_or(0.0, |p| p.received(n))
+    }
+
+    /// Bytes that cross a rank's links a shot: the dense array once per stage.
+    pub fn on_the_wire(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            return 0.0;
+        }
+        self.received(n) + self.dense * log2_stages(n)
+    }
+}
+
+/// The fitted model of one scene, resolution and exchange.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// Scene.
+    pub scene: String,
+    /// Resolution, rows x columns.
+    pub resolution: [u32; 2],
+    /// Exchange.
+    pub exchange: String,
+    /// Per phase ([`PHASES`]), from the 1- and 2-rank wall times: where the
+    /// time goes (descriptive; the law below is what predicts).
+    pub phases: [PhaseFit; 6],
+    /// One rank's compute seconds a shot (CPU, outside collectives).
+    pub serial: f64,
+    /// On two or more ranks, a rank's compute seconds a shot are
+    /// `replicated + divided / N`: what every rank repeats, the decomposition's
+    /// own work (ownership culls, the gathered hemisphere's scan) included.
+    pub replicated: f64,
+    /// ... and what the ranks share.
+    pub divided: f64,
+    /// Collective calls a shot.
+    pub calls: f64,
+    /// Hemispheres drawn a shot.
+    pub hemispheres: f64,
+    /// The bytes' law.
+    pub bytes: Bytes,
+    /// The imbalance u(N) = imbalance2 (N / 2)^gamma.
+    pub imbalance2: f64,
+    /// Growth of the imbalance with the rank count.
+    pub gamma: f64,
+    /// Shots of the runs.
+    pub shots: f64,
+}
+
+impl Model {
+    /// The imbalance u(N): the slowest rank's divided work over the mean,
+    /// less one (0 on one rank; at most 1, when one rank has twice its share).
+    pub fn imbalance(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            0.0
+        } else {
+            (self.imbalance2 * (n / 2.0).powf(self.gamma)).min(1.0)
+        }
+    }
+
+    /// A rank's mean compute seconds a shot on `n` ranks.
+    pub fn compute_mean(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            self.serial
+        } else {
+            self.replicated + self.divided / n
+        }
+    }
+
+    /// The slowest rank's compute seconds a shot.
+    pub fn compute_max(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            self.serial
+        } else {
+            self.replicated + self.divided / n * (1.0 + self.imbalance(n))
+        }
+    }
+
+    /// The load balance epsilon = T_min / T_max the model expects.
+    pub fn epsilon(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            return 1.0;
+        }
+        let q = self.divided / n;
+        let u = self.imbalance(n);
+        (self.replicated + q * (1.0 - u)) / (self.replicated + q * (1.0 + u))
+    }
+
+    /// Exchange seconds a shot on `n` ranks over `net`.
+    pub fn exchange(&self, n: f64, net: &Network) -> f64 {
+        if n <= 1.0 {
+            return 0.0;
+        }
+        let mut stages = self.calls * log2_stages(n);
+        if net.paper_schedule && self.bytes.items > 0.0 {
+            // The paper's N broadcasts instead of a tree.
+            stages += self.hemispheres * (n - log2_stages(n));
+        }
+        if let Some(p) = self.bytes.pairs {
+            // Pairs go to every other rank: N - 1 messages.
+            stages += p.calls * (n - 1.0 - log2_stages(n));
+        }
+        stages * net.latency + self.bytes.on_the_wire(n) / net.bandwidth
+    }
+
+    /// Seconds a shot on `n` ranks over `net`.
+    pub fn seconds_per_shot(&self, n: f64, net: &Network) -> f64 {
+        self.compute_max(n) + self.exchange(n, net)
+    }
+
+    /// Speedup on `n` ranks over `net` against one rank.
+    pub fn speedup(&self, n: f64, net: &Network) -> f64 {
+        self.seconds_per_shot(1.0, net) / self.seconds_per_shot(n, net)
+    }
+
+    /// The speedup no rank count passes: one rank's seconds over the
+    /// replicated ones.
+    pub fn amdahl_limit(&self) -> f64 {
+        self.serial / self.replicated
+    }
+}
+
+/// Solves epsilon = (R + q (1 - u)) / (R + q (1 + u)) for u.
+pub fn imbalance_from_epsilon(epsilon: f64, replicated: f64, divided_share: f64) -> f64 {
+    if divided_share <= 0.0 {
+        return 0.0;
+    }
+    ((replicated + divided_share) * (1.0 - epsilon) / (divided_share * (1.0 + epsilon)))
+        .clamp(0.0, 1.0)
+}
+
+/// Least squares of y = a x0 + b x1 with a, b >= 0.
+fn least_squares_2(rows: &[(f64, f64, f64)]) -> (f64, f64) {
+    let (mut s00, mut s01, mut s11, mut t0, mut t1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for &(x0, x1, y) in rows {
+        s00 += x0 * x0;
+        s01 += x0 * x1;
+        s11 += x1 * x1;
+        t0 += x0 * y;
+        t1 += x1 * y;
+    }
+    let det = s00 * s11 - s01 * s01;
+    let one = |s: f64, t: f64| if s > 0.0 { (t / s).max(0.0) } else { 0.0 };
+    if det.abs() > 1e-12 * s00 * s11 && det != 0.0 {
+        let a = (t0 * s11 - t1 * s01) / det;
+        let b = (s00 * t1 - s01 * t0) / det;
+        if a >= 0.0 && b >= 0.0 {
+            return (a, b);
+        }
+    }
+    // One of them at zero: the better of the two one-parameter fits.
+    let (a, b) = (one(s00, t0), one(s11, t1));
+    let err = |a: f64, b: f64| {
+        rows.iter()
+            .map(|&(x0, x1, y)| (y - a * x0 - b * x1).powi(2))
+            .sum::<f64>()
+    };
+    if err(a, 0.0) <= err(0.0, b) {
+        (a, 0.0)
+    } else {
+        (0.0, b)
+    }
+}
+
+/// The whole calibration: the runs, this machine's network, and a model
+/// per scene, resolution and exchange.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// Every run read.
+    pub runs: Vec<Run>,
+    /// The most ranks a run the fit used may have (the others are only
+    /// checked against).
+    pub fitted_up_to: usize,
+    /// This machine's shared-memory "network", fitted to the 2-rank
+    /// exchanges (the fastest rank's: it waited least for the others).
+    pub local: Network,
+    /// The models.
+    pub models: Vec<Model>,
+}
+
+impl Calibration {
+    /// Fits the models to every run.
+    pub fn fit(runs: Vec<Run>) -> Result<Self, ScalingError> {
+        Self::fit_up_to(runs, usize::MAX)
+    }
+
+    /// Fits the models to the runs of at most `max_ranks` ranks: every scene
+    /// and resolution needs a 1-rank run and a 2-rank run per exchange;
+    /// hemisphere runs on more ranks (CPU seconds) pin the compute law.
+    pub fn fit_up_to(runs: Vec<Run>, max_ranks: usize) -> Result<Self, ScalingError> {
+        let used = |r: &&Run| r.ranks <= max_ranks;
+        let one = |scene: &str, res: [u32; 2]| {
+            runs.iter()
+                .find(|r| r.ranks == 1 && r.scene == scene && r.resolution == res)
+        };
+        // replicated + divided / N through the mean CPU seconds of the
+        // hemisphere runs on 2 or more ranks, when there are 2 rank counts.
+        let law = |scene: &str, res: [u32; 2]| {
+            let rows: Vec<(f64, f64, f64)> = runs
+                .iter()
+                .filter(used)
+                .filter(|r| {
+                    r.ranks >= 2
+                        && r.scene == scene
+                        && r.resolution == res
+                        && r.exchange == "hemispheres"
+                })
+                .map(|r| (1.0, 1.0 / r.ranks as f64, Run::mean(&r.cpu_own)))
+                .collect();
+            (rows.len() > 1).then(|| least_squares_2(&rows))
+        };
+        let mut models = Vec::new();
+        let mut net_rows = Vec::new();
+        for two in runs.iter().filter(|r| r.ranks == 2) {
+            let Some(single) = one(&two.scene, two.resolution) else {
+                return Err(ScalingError::Report {
+                    path: two.path.clone(),
+                    what: format!(
+                        "no 1-rank run of {} at {}x{} to fit it against",
+                        two.scene, two.resolution[0], two.resolution[1]
+                    ),
+                });
+            };
+            let t1 = single.mean_phases();
+            let m2 = two.mean_phases();
+            let mut phases = [PhaseFit::from_times(0.0, 0.0); 6];
+            for k in 0..6 {
+                phases[k] = PhaseFit::from_times(t1[k], m2[k]);
+            }
+            // The compute law: the hemisphere runs on 2 and more ranks fix
+            // the divided part (the drawing and the sums a rank does are the
+            // same whatever the exchange); another exchange's own 2-rank CPU
+            // seconds fix its replicated part (its bookkeeping differs).
+            let y2 = Run::mean(&two.cpu_own);
+            let (replicated, divided) = match law(&two.scene, two.resolution) {
+                Some((a, d)) if two.exchange == "hemispheres" => (a, d),
+                Some((_, d)) => (y2 - d / 2.0, d),
+                None => {
+                    // Only 2 ranks: the phases' split.
+                    let d: f64 = phases.iter().map(|p| p.divided).sum();
+                    (y2 - d / 2.0, d)
+                }
+            };
+            let calls = Run::mean(&two.calls);
+            let hemispheres = single.hemispheres();
+            let b2 = Run::mean(&two.bytes);
+            // Every rank's cells of a shot's hemispheres, 4 bytes each.
+            let items = 4.0 * single.cells.iter().sum::<f64>();
+            let pair_calls = hemispheres;
+            let mut bytes = match two.exchange.as_str() {
+                "hemispheres" => Bytes {
+                    items,
+                    ..Bytes::default()
+                },
+                "form-factors" => Bytes {
+                    dense: b2,
+                    ..Bytes::default()
+                },
+                _ => Bytes::default(),
+            };
+            if two.exchange != "form-factors" {
+                // What the items leave of the 2-rank bytes is pairs; runs on
+                // more ranks of this exchange give their fall.
+                let pairs_at = |r: &Run| {
+                    let n = r.ranks as f64;
+                    let rest = Run::mean(&r.bytes) - bytes.items * (n - 1.0) / n;
+                    Pairs::from_received(rest, n, pair_calls)
+                };
+                let at2 = pairs_at(two);
+                let (num, den) = runs
+                    .iter()
+                    .filter(used)
+                    .filter(|r| r.ranks > 2 && key(r) == key(two))
+                    .map(|r| ((r.ranks as f64 / 2.0).ln(), pairs_at(r)))
+                    .filter(|&(_, p)| p > 0.0 && at2 > 0.0)
+                    .fold((0.0, 0.0), |(a, b), (x, p)| {
+                        (a - x * (p / at2).ln(), b + x * x)
+                    });
+                bytes.pairs = Some(Pairs {
+                    at2,
+                    delta: if den > 0.0 { num / den } else { f64::NAN },
+                    calls: pair_calls,
+                });
+            }
+            let mut model = Model {
+                scene: two.scene.clone(),
+                resolution: two.resolution,
+                exchange: two.exchange.clone(),
+                phases,
+                serial: Run::mean(&single.cpu_own),
+                replicated: replicated.max(0.0),
+                divided,
+                calls,
+                hemispheres,
+                bytes,
+                imbalance2: 0.0,
+                gamma: 0.0,
+                shots: two.shots,
+            };
+            // Imbalance: u(N) = u2 (N / 2)^gamma, least squares in logs
+            // through every run of this scene's hemispheres beyond 2 ranks.
+            let u = |r: &Run| {
+                let n = r.ranks as f64;
+                (
+                    n,
+                    imbalance_from_epsilon(r.epsilon_cpu, model.replicated, model.divided / n),
+                )
+            };
+            model.imbalance2 = u(two).1;
+            let more: Vec<(f64, f64)> = runs
+                .iter()
+                .filter(used)
+                .filter(|r| {
+                    r.ranks > 2
+                        && r.scene == two.scene
+                        && r.resolution == two.resolution
+                        && r.exchange == "hemispheres"
+                })
+                .map(u)
+                .filter(|&(_, u)| u > 0.0)
+                .collect();
+            if !more.is_empty() && model.imbalance2 > 0.0 {
+                let (num, den) = more.iter().fold((0.0, 0.0), |(a, b), &(n, u)| {
+                    let x = (n / 2.0).ln();
+                    (a + x * (u / model.imbalance2).ln(), b + x * x)
+                });
+                model.gamma = (num / den).max(0.0);
+            } else {
+                model.gamma = f64::NAN;
+            }
+            // The exchange is what the 2-rank wall time leaves over the
+            // slowest rank's compute (waits in collectives are the
+            // imbalance, already counted there).
+            net_rows.push((
+                calls,
+                model.bytes.on_the_wire(2.0),
+                two.seconds_per_shot() - model.compute_max(2.0),
+            ));
+            models.push(model);
+        }
+        // Pairs without runs beyond 2 ranks fall as the mean of those with,
+        // per exchange.
+        for ex in ["hemispheres", "sparse"] {
+            let known: Vec<f64> = models
+                .iter()
+                .filter(|m| m.exchange == ex)
+                .filter_map(|m| m.bytes.pairs.map(|p| p.delta))
+                .filter(|d| !d.is_nan())
+                .collect();
+            let mean = if known.is_empty() {
+                1.0
+            } else {
+                known.iter().sum::<f64>() / known.len() as f64
+            };
+            for m in models.iter_mut().filter(|m| m.exchange == ex) {
+                if let Some(p) = m.bytes.pairs.as_mut() {
+                    if p.delta.is_nan() {
+                        p.delta = mean;
+                    }
+                }
+            }
+        }
+        // Scenes without runs beyond 2 ranks take the mean growth of those with.
+        let known: Vec<f64> = models
+            .iter()
+            .map(|m| m.gamma)
+            .filter(|g| !g.is_nan())
+            .collect();
+        let pooled = if known.is_empty() {
+            0.5
+        } else {
+            known.iter().sum::<f64>() / known.len() as f64
+        };
+        for m in models.iter_mut().filter(|m| m.gamma.is_nan()) {
+            m.gamma = pooled;
+        }
+        let (latency, inv_bw) = least_squares_2(&net_rows);
+        let local = Network {
+            name: "this machine (shared memory)",
+            latency,
+            bandwidth: if inv_bw > 0.0 {
+                1.0 / inv_bw
+            } else {
+                f64::INFINITY
+            },
+            paper_schedule: false,
+        };
+        Ok(Self {
+            runs,
+            fitted_up_to: max_ranks,
+            local,
+            models,
+        })
+    }
+
+    /// The model of a scene, resolution and exchange.
+    pub fn model(&self, scene: &str, res: [u32; 2], exchange: &str) -> Option<&Model> {
+        self.models
+            .iter()
+            .find(|m| m.scene == scene && m.resolution == res && m.exchange == exchange)
+    }
+
+    /// Every prediction that can be set against a measurement.
+    pub fn validation(&self) -> Vec<Check> {
+        let mut out = Vec::new();
+        for r in &self.runs {
+            let exchange = if r.ranks == 1 {
+                "hemispheres"
+            } else {
+                r.exchange.as_str()
+            };
+            let Some(m) = self.model(&r.scene, r.resolution, exchange) else {
+                continue;
+            };
+            let n = r.ranks as f64;
+            let what = |quantity: &'static str, measured: f64, predicted: f64| Check {
+                scene: r.scene.clone(),
+                resolution: r.resolution,
+                exchange: r.exchange.clone(),
+                ranks: r.ranks,
+                quantity,
+                measured,
+                predicted,
+            };
+            out.push(what(
+                "mean CPU seconds a shot",
+                Run::mean(&r.cpu_own),
+                m.compute_mean(n),
+            ));
+            if r.ranks <= 2 {
+                // One core per rank: wall times.
+                out.push(what(
+                    "seconds a shot",
+                    r.seconds_per_shot(),
+                    m.seconds_per_shot(n, &self.local),
+                ));
+            } else {
+                // Oversubscribed: the balance of the CPU seconds.
+                out.push(what("load balance (CPU)", r.epsilon_cpu, m.epsilon(n)));
+            }
+            if r.ranks > 1 {
+                out.push(what(
+                    "bytes a shot",
+                    Run::mean(&r.bytes),
+                    m.bytes.received(n),
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// Keys runs by scene, resolution and exchange.
+fn key(r: &Run) -> (&str, [u32; 2], &str) {
+    (&r.scene, r.resolution, &r.exchange)
+}
+
+/// A prediction set against a measurement.
+#[derive(Clone, Debug)]
+pub struct Check {
+    /// Scene.
+    pub scene: String,
+    /// Resolution.
+    pub resolution: [u32; 2],
+    /// Exchange.
+    pub exchange: String,
+    /// Ranks.
+    pub ranks: usize,
+    /// What is compared.
+    pub quantity: &'static str,
+    /// Measured.
+    pub measured: f64,
+    /// Predicted.
+    pub predicted: f64,
+}
+
+impl Check {
+    /// (predicted - measured) / measured.
+    pub fn relative_error(&self) -> f64 {
+        (self.predicted - self.measured) / self.measured
+    }
+}
+
+/// Reads every `*.json` report in `dir`, sorted by name.
+pub fn read_runs(dir: &Path) -> Result<Vec<Run>, ScalingError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| ScalingError::Read {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
+    paths.sort();
+    paths.iter().map(|p| Run::read(p)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_phase_splits_into_replicated_and_divided() {
+        let f = PhaseFit::from_times(10.0, 6.0);
+        assert!((f.replicated - 2.0).abs() < 1e-12 && (f.divided - 8.0).abs() < 1e-12);
+        // Noise above T1 is all replicated; below T1 / 2 all divided.
+        assert_eq!(PhaseFit::from_times(1.0, 1.1).divided, 0.0);
+        assert_eq!(PhaseFit::from_times(1.0, 0.4).replicated, 0.0);
+    }
+
+    #[test]
+    fn imbalance_inverts_epsilon() {
+        let zero = PhaseFit {
+            replicated: 0.0,
+            divided: 0.0,
+        };
+        let m = Model {
+            scene: "s".into(),
+            resolution: [128, 512],
+            exchange: "hemispheres".into(),
+            phases: [zero; 6],
+            serial: 0.1,
+            replicated: 0.01,
+            divided: 0.095,
+            calls: 4.0,
+            hemispheres: 1.0,
+            bytes: Bytes {
+                items: 262144.0,
+                ..Bytes::default()
+            },
+            imbalance2: 0.05,
+            gamma: 0.5,
+            shots: 100.0,
+        };
+        for n in [2.0, 8.0, 64.0] {
+            let u = imbalance_from_epsilon(m.epsilon(n), m.replicated, m.divided / n);
+            assert!((u - m.imbalance(n)).abs() < 1e-9, "{n}: {u}");
+        }
+        // Amdahl's limit: one rank's seconds over the replicated ones.
+        assert!(m.speedup(1e9, &CLUSTER) < m.amdahl_limit() + 1e-6);
+        assert!(m.speedup(2.0, &CLUSTER) > 1.7);
+    }
+
+    #[test]
+    fn pairs_round_trip_through_their_bytes() {
+        let p = Pairs {
+            at2: 5000.0,
+            delta: 0.8,
+            calls: 1.2,
+        };
+        for n in [2.0, 8.0] {
+            let back = Pairs::from_received(p.received(n), n, p.calls);
+            assert!((back - p.sent(n)).abs() < 1e-6, "{n}");
+        }
+    }
+
+    #[test]
+    fn least_squares_recovers_latency_and_bandwidth() {
+        let rows: Vec<(f64, f64, f64)> = [(3.0, 1e5), (5.0, 2e6), (4.0, 5e5)]
+            .iter()
+            .map(|&(c, b)| (c, b, c * 3e-6 + b / 2e9))
+            .collect();
+        let (a, inv) = least_squares_2(&rows);
+        assert!((a - 3e-6).abs() < 1e-12 && (1.0 / inv - 2e9).abs() < 1e3);
+    }
+}

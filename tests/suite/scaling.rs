@@ -1,0 +1,70 @@
+//! The performance model (docs/scaling.md) against the committed runs it was
+//! calibrated on (docs/scaling/runs, made by scripts/calibrate-scaling.sh):
+//! its predictions of the measured seconds, CPU seconds and bytes a shot
+//! at 1 to 16 ranks within 15 %. The runs are measurements, not outputs of
+//! this build: the test checks the model, not the renderer's speed.
+
+use radiosity::scaling::{read_runs, Calibration, AP1000, CLUSTER};
+use std::path::Path;
+
+fn calibration() -> Calibration {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scaling/runs");
+    let runs = read_runs(&dir).expect("the committed calibration runs");
+    assert!(runs.len() >= 20, "{} runs in {}", runs.len(), dir.display());
+    Calibration::fit(runs).expect("every scene has its 1- and 2-rank runs")
+}
+
+#[test]
+fn the_model_reproduces_its_calibration_within_15_percent() {
+    let cal = calibration();
+    let checks = cal.validation();
+    let timed: Vec<_> = checks
+        .iter()
+        .filter(|c| c.quantity != "load balance (CPU)")
+        .collect();
+    // 1- and 2-rank wall times, 4-16-rank CPU seconds, bytes.
+    assert!(timed
+        .iter()
+        .any(|c| c.ranks == 2 && c.quantity == "seconds a shot"));
+    assert!(timed
+        .iter()
+        .any(|c| c.ranks == 16 && c.quantity.contains("CPU")));
+    let bad: Vec<String> = timed
+        .iter()
+        .filter(|c| c.relative_error().abs() > 0.15)
+        .map(|c| {
+            format!(
+                "{} {} {} ranks, {}: measured {:.4e}, predicted {:.4e} ({:+.1} %)",
+                c.scene,
+                c.exchange,
+                c.ranks,
+                c.quantity,
+                c.measured,
+                c.predicted,
+                c.relative_error() * 100.0
+            )
+        })
+        .collect();
+    assert!(bad.is_empty(), "off by more than 15 %:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn the_model_keeps_the_papers_orderings() {
+    let cal = calibration();
+    for scene in ["cubes-b1", "cubes-b3"] {
+        let hem = cal.model(scene, [128, 512], "hemispheres").expect(scene);
+        let ff = cal.model(scene, [128, 512], "form-factors").expect(scene);
+        // Partial form factors move the scene's size each stage: over the
+        // paper's network they lose at 64 ranks (its figure 8).
+        assert!(
+            hem.speedup(64.0, &AP1000) > ff.speedup(64.0, &AP1000),
+            "{scene}"
+        );
+        // A faster network never slows a shot.
+        for n in [2.0, 64.0, 1024.0] {
+            assert!(hem.seconds_per_shot(n, &CLUSTER) <= hem.seconds_per_shot(n, &AP1000));
+        }
+        // Amdahl: the speedup never passes (R + D) / R.
+        assert!(hem.speedup(1024.0, &CLUSTER) <= hem.amdahl_limit() * (1.0 + 1e-9));
+    }
+}
