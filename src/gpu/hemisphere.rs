@@ -67,8 +67,8 @@ struct Tessellation {
 pub struct RasterStats {
     /// Finding the cell rectangles on the CPU.
     pub bounds: Duration,
-    /// Rectangles drawn (seam copies included), or triangles with the
-    /// tessellated projection.
+    /// Rectangles drawn (seam copies included; one cut into pieces at a
+    /// rank's tiles counts once), or triangles with the tessellated projection.
     pub rects: u32,
     /// Uploading, drawing and waiting for the GPU.
     pub rasterise: Duration,
@@ -356,7 +356,7 @@ impl HemisphereRasterizer {
         layout: &TileLayout,
         own: (u32, u32),
         lattice: bool,
-    ) {
+    ) -> Result<(), GpuError> {
         let u = ShotUniform {
             res: [self.res.rows, self.res.cols, 0, 0],
             tiles: [
@@ -391,10 +391,29 @@ impl HemisphereRasterizer {
             }
         } else {
             let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
+            let need = bytes.len() as u64;
+            if need > self.instance_buf.size() {
+                // Rectangles cut to a rank's tiles can outnumber the proxies
+                // twice over: grow to the largest shot, then reuse.
+                let most = device.limits().max_buffer_size;
+                if need > most {
+                    return Err(GpuError::TooLarge(format!(
+                        "{} rectangles need {need} bytes, over the device's {most}",
+                        self.instances.len()
+                    )));
+                }
+                self.instance_buf = buffer(
+                    device,
+                    "rectangles",
+                    need.next_power_of_two().min(most),
+                    wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                );
+            }
             if !bytes.is_empty() {
                 queue.write_buffer(&self.instance_buf, 0, bytes);
             }
         }
+        Ok(())
     }
 
     /// Records and submits the drawing and the copies out.
@@ -540,12 +559,14 @@ impl HemisphereRasterizer {
             grid: [layout.px as f32, layout.py as f32],
             own: [own.0 as f32, own.1 as f32],
             cells: [self.res.cols as f32, self.res.rows as f32],
+            clip: !lattice,
         });
         self.find_outside(shooter);
+        let mut rects = 0;
         if self.tess.is_some() {
             self.collect_triangles(shooter);
         } else {
-            self.proxies.collect_rects(
+            rects = self.proxies.collect_rects(
                 shooter,
                 &self.outside,
                 self.res,
@@ -555,7 +576,7 @@ impl HemisphereRasterizer {
             );
         }
         let bounds = start.elapsed();
-        self.upload(device, queue, layout, own, lattice);
+        self.upload(device, queue, layout, own, lattice)?;
         let submission = self.submit(device, queue);
         let waited = self.read_items(device, submission.clone(), layout, own, lattice, items)?;
         self.read_coverage(device, submission)?;
@@ -565,7 +586,7 @@ impl HemisphereRasterizer {
             bounds,
             rects: match &self.tess {
                 Some(t) => (t.vertices.len() / 3) as u32,
-                None => self.instances.len() as u32,
+                None => rects as u32,
             },
             rasterise,
             readback: read_start.elapsed(),

@@ -181,7 +181,7 @@ impl Proxies {
         far: f32,
         ownership: Option<Ownership>,
         instances: &mut Vec<Instance>,
-    ) {
+    ) -> usize {
         instances.clear();
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
@@ -191,7 +191,9 @@ impl Proxies {
                 .min(8)
         };
         let (corners, element, quads) = (&self.corners, &self.element, &self.quads);
+        // Returns the rectangles drawn (each cut to a rank's tiles counts once).
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
+            let mut rects = 0;
             for (k, poly) in polys.iter().enumerate() {
                 if !in_view(first + k, poly, corners, outside, shooter) {
                     continue;
@@ -202,7 +204,7 @@ impl Proxies {
                 });
                 for i in poly.proxies.clone() {
                     let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                    push_piece(
+                    rects += push_piece(
                         out,
                         &d,
                         n,
@@ -214,10 +216,10 @@ impl Proxies {
                     );
                 }
             }
+            rects
         };
         if threads <= 1 {
-            visit(&self.polygons, 0, instances);
-            return;
+            return visit(&self.polygons, 0, instances);
         }
         // Contiguous runs of polygons with about equal proxy counts.
         let per = self.corners.len().div_ceil(threads) as u32;
@@ -230,15 +232,15 @@ impl Proxies {
         bounds.push(self.polygons.len());
         bounds.dedup();
         let polygons = &self.polygons;
-        let parts: Vec<Vec<Instance>> = std::thread::scope(|scope| {
+        let parts: Vec<(Vec<Instance>, usize)> = std::thread::scope(|scope| {
             let handles: Vec<_> = bounds
                 .windows(2)
                 .map(|w| {
                     let (lo, hi) = (w[0], w[1]);
                     scope.spawn(move || {
                         let mut out = Vec::new();
-                        visit(&polygons[lo..hi], lo, &mut out);
-                        out
+                        let rects = visit(&polygons[lo..hi], lo, &mut out);
+                        (out, rects)
                     })
                 })
                 .collect();
@@ -248,9 +250,12 @@ impl Proxies {
                 .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
                 .collect()
         });
-        for part in parts {
+        let mut rects = 0;
+        for (part, n) in parts {
             instances.extend_from_slice(&part);
+            rects += n;
         }
+        rects
     }
 }
 
@@ -310,9 +315,43 @@ pub(super) struct Ownership {
     pub(super) grid: [f32; 2],
     pub(super) own: [f32; 2],
     pub(super) cells: [f32; 2],
+    /// Whether to clip each rectangle to the rank's tiles (one instance per
+    /// tile it meets), so the rasteriser makes fragments only for this
+    /// rank's cells instead of discarding the others' (off in lattice mode,
+    /// whose 1 x 1 tiles are packed instead).
+    pub(super) clip: bool,
 }
 
 impl Ownership {
+    /// The spans of `[lo, hi]` along `axis` that lie in this rank's tiles.
+    fn spans(&self, lo: f32, hi: f32, axis: usize) -> impl Iterator<Item = [f32; 2]> {
+        let (tile, grid, own) = (self.tile[axis], self.grid[axis], self.own[axis]);
+        let c0 = (lo - 0.5).ceil().max(0.0);
+        let c1 = (hi - 0.5).floor().min(self.cells[axis] - 1.0);
+        let (t0, t1) = ((c0 / tile).floor(), (c1 / tile).floor());
+        // The first of this rank's tiles at or after t0.
+        let first = t0 + (own - t0).rem_euclid(grid);
+        let count = if c0 <= c1 && first <= t1 {
+            ((t1 - first) / grid).floor() as usize + 1
+        } else {
+            0
+        };
+        (0..count).map(move |k| {
+            let t = first + k as f32 * grid;
+            [lo.max(t * tile), hi.min((t + 1.0) * tile)]
+        })
+    }
+
+    /// `rect` ([x0, x1, y0, y1] in cells) cut to each of this rank's tiles
+    /// it meets. Tile edges fall on whole cells and cell centres on halves,
+    /// so the pieces hold exactly the rank's cells of the rectangle.
+    fn pieces(&self, rect: [f32; 4]) -> impl Iterator<Item = [f32; 4]> + '_ {
+        self.spans(rect[0], rect[1], 0).flat_map(move |x| {
+            self.spans(rect[2], rect[3], 1)
+                .map(move |y| [x[0], x[1], y[0], y[1]])
+        })
+    }
+
     /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
     fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
         let any = |lo: f32, hi: f32, axis: usize| {
@@ -335,7 +374,8 @@ impl Ownership {
 
 /// Adds the rectangle(s) of one planar quad `d` (corners in the shooter's frame)
 /// of element `element` on a plane with normal `n`; with an `ownership`, only
-/// rectangles that hold a cell of one of this rank's tiles.
+/// rectangles that hold a cell of one of this rank's tiles, cut to them.
+/// Returns how many rectangles (uncut) it drew: 0, 1 or 2 (the seam copy).
 #[allow(clippy::too_many_arguments)]
 fn push_piece(
     out: &mut Vec<Instance>,
@@ -346,9 +386,9 @@ fn push_piece(
     res: Resolution,
     far: f32,
     ownership: Option<Ownership>,
-) {
+) -> usize {
     let Some(r) = cell_bounds(d, res, far) else {
-        return;
+        return 0;
     };
     let cols = res.cols as f32;
     let mine = |x0: f32, x1: f32| ownership.is_none_or(|o| o.holds_own(x0, x1, r.y0, r.y1));
@@ -357,7 +397,7 @@ fn push_piece(
         r.x1 > cols && mine(r.x0 - cols, r.x1 - cols),
     );
     if !primary && !wrapped {
-        return;
+        return 0;
     }
     // The shooter is in front when it is on the side n points to.
     let offset = n.dot(d[0]);
@@ -377,13 +417,17 @@ fn push_piece(
         bilinear: lookup.bilinear,
         grid: lookup.grid,
     };
+    // Pieces of one rectangle go out together, in order, so every cell
+    // sees the same fragments in the same order as if it were drawn whole.
+    let mut push = |rect: [f32; 4]| match ownership {
+        Some(o) if o.clip => out.extend(o.pieces(rect).map(|rect| Instance { rect, ..inst })),
+        _ => out.push(Instance { rect, ..inst }),
+    };
     if primary {
-        out.push(inst);
+        push(inst.rect);
     }
     if wrapped {
-        out.push(Instance {
-            rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
-            ..inst
-        });
+        push([r.x0 - cols, r.x1 - cols, r.y0, r.y1]);
     }
+    primary as usize + wrapped as usize
 }
