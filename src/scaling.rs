@@ -501,14 +501,15 @@ impl Calibration {
     /// and resolution needs a 1-rank run and a 2-rank run per exchange;
     /// hemisphere runs on more ranks (CPU seconds) pin the compute law.
     pub fn fit_up_to(runs: Vec<Run>, max_ranks: usize) -> Result<Self, ScalingError> {
+        let runs = fastest_of_repeats(runs);
         let used = |r: &&Run| r.ranks <= max_ranks;
         let one = |scene: &str, res: [u32; 2]| {
             runs.iter()
                 .find(|r| r.ranks == 1 && r.scene == scene && r.resolution == res)
         };
-        // replicated + divided / N through the mean CPU seconds of the
-        // hemisphere runs on 2 or more ranks, when there are 2 rank counts.
-        let law = |scene: &str, res: [u32; 2]| {
+        // replicated + divided / N through the mean CPU seconds of an
+        // exchange's runs on 2 or more ranks, when there are 2 rank counts.
+        let law = |scene: &str, res: [u32; 2], exchange: &str| {
             let rows: Vec<(f64, f64, f64)> = runs
                 .iter()
                 .filter(used)
@@ -516,7 +517,7 @@ impl Calibration {
                     r.ranks >= 2
                         && r.scene == scene
                         && r.resolution == res
-                        && r.exchange == "hemispheres"
+                        && r.exchange == exchange
                 })
                 .map(|r| (1.0, 1.0 / r.ranks as f64, Run::mean(&r.cpu_own)))
                 .collect();
@@ -540,13 +541,16 @@ impl Calibration {
             for k in 0..6 {
                 phases[k] = PhaseFit::from_times(t1[k], m2[k]);
             }
-            // The compute law: the hemisphere runs on 2 and more ranks fix
-            // the divided part (the drawing and the sums a rank does are the
-            // same whatever the exchange); another exchange's own 2-rank CPU
-            // seconds fix its replicated part (its bookkeeping differs).
+            // The compute law: an exchange's own runs on 2 and more ranks
+            // when there are two rank counts; else the hemisphere runs' divided
+            // part (the drawing and the sums a rank does are the same whatever
+            // the exchange) and the exchange's own 2-rank CPU seconds for the
+            // replicated part (its bookkeeping differs).
             let y2 = Run::mean(&two.cpu_own);
-            let (replicated, divided) = match law(&two.scene, two.resolution) {
-                Some((a, d)) if two.exchange == "hemispheres" => (a, d),
+            let own = law(&two.scene, two.resolution, &two.exchange);
+            let (replicated, divided) = match own.or(law(&two.scene, two.resolution, "hemispheres"))
+            {
+                Some((a, d)) if own.is_some() => (a, d),
                 Some((_, d)) => (y2 - d / 2.0, d),
                 None => {
                     // Only 2 ranks: the phases' split.
@@ -749,7 +753,7 @@ impl Calibration {
                 ));
             } else {
                 // Oversubscribed: the balance of the CPU seconds.
-                out.push(what("load balance (CPU)", r.epsilon_cpu, m.epsilon(n)));
+                out.push(what(LOAD_BALANCE, r.epsilon_cpu, m.epsilon(n)));
             }
             if r.ranks > 1 {
                 out.push(what(
@@ -761,6 +765,24 @@ impl Calibration {
         }
         out
     }
+}
+
+/// Of runs repeated (same scene, resolution, exchange and ranks), the one
+/// with the fewest seconds a shot: these machines are shared, and a run
+/// only ever gets slower from its neighbours.
+pub fn fastest_of_repeats(runs: Vec<Run>) -> Vec<Run> {
+    let mut kept: Vec<Run> = Vec::new();
+    for r in runs {
+        match kept
+            .iter_mut()
+            .find(|k| key(k) == key(&r) && k.ranks == r.ranks)
+        {
+            Some(k) if r.seconds_per_shot() < k.seconds_per_shot() => *k = r,
+            Some(_) => {}
+            None => kept.push(r),
+        }
+    }
+    kept
 }
 
 /// Keys runs by scene, resolution and exchange.
@@ -792,7 +814,33 @@ impl Check {
     pub fn relative_error(&self) -> f64 {
         (self.predicted - self.measured) / self.measured
     }
+
+    /// Whether it checks seconds or bytes (not a load balance, which the
+    /// model only describes).
+    pub fn is_cost(&self) -> bool {
+        self.quantity != LOAD_BALANCE
+    }
+
+    /// A Markdown table row: scene, resolution, exchange, ranks, quantity,
+    /// measured, predicted, error.
+    pub fn row(&self) -> String {
+        format!(
+            "| {} | {}x{} | {} | {} | {} | {:.4e} | {:.4e} | {:+.1} % |",
+            self.scene,
+            self.resolution[0],
+            self.resolution[1],
+            self.exchange,
+            self.ranks,
+            self.quantity,
+            self.measured,
+            self.predicted,
+            self.relative_error() * 100.0
+        )
+    }
 }
+
+/// The quantity of a load-balance check.
+pub const LOAD_BALANCE: &str = "load balance (CPU)";
 
 /// Reads every `*.json` report in `dir`, sorted by name.
 pub fn read_runs(dir: &Path) -> Result<Vec<Run>, ScalingError> {
@@ -851,7 +899,9 @@ mod tests {
         }
         // Amdahl's limit: one rank's seconds over the replicated ones.
         assert!(m.speedup(1e9, &CLUSTER) < m.amdahl_limit() + 1e-6);
-        assert!(m.speedup(2.0, &CLUSTER) > 1.7);
+        // T(2) = R + D / 2 (1 + u2) + calls alpha + items / 2 / beta.
+        let t2 = 0.01 + 0.095 / 2.0 * 1.05 + 4.0 * 2e-6 + 131072.0 / 12e9;
+        assert!((m.speedup(2.0, &CLUSTER) - 0.1 / t2).abs() < 1e-9);
     }
 
     #[test]

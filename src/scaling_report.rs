@@ -126,7 +126,7 @@ fn model_csv(cal: &Calibration) -> Result<String> {
             for n in RANKS {
                 writeln!(
                     s,
-                    "{},{},{},{},{},{:.6e},{:.3},{:.4},{:.0}",
+                    "{},{},{},\"{}\",{},{:.6e},{:.3},{:.4},{:.0}",
                     m.scene,
                     res_name(m.resolution),
                     m.exchange,
@@ -288,22 +288,11 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
     )?;
     writeln!(s, "|---|---|---|---|---|---|---|---|")?;
     for c in checks {
-        writeln!(
-            s,
-            "| {} | {} | {} | {} | {} | {:.4e} | {:.4e} | {:+.1} % |",
-            c.scene,
-            res_name(c.resolution),
-            c.exchange,
-            c.ranks,
-            c.quantity,
-            c.measured,
-            c.predicted,
-            c.relative_error() * 100.0
-        )?;
+        writeln!(s, "{}", c.row())?;
     }
     let worst = checks
         .iter()
-        .filter(|c| c.quantity != "load balance (CPU)")
+        .filter(|c| c.is_cost())
         .map(|c| c.relative_error().abs())
         .fold(0.0, f64::max);
     writeln!(s, "\nworst time/bytes error: {:.1} %", worst * 100.0)?;

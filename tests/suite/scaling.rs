@@ -18,10 +18,7 @@ fn calibration() -> Calibration {
 fn the_model_reproduces_its_calibration_within_15_percent() {
     let cal = calibration();
     let checks = cal.validation();
-    let timed: Vec<_> = checks
-        .iter()
-        .filter(|c| c.quantity != "load balance (CPU)")
-        .collect();
+    let timed: Vec<_> = checks.iter().filter(|c| c.is_cost()).collect();
     // 1- and 2-rank wall times, 4-16-rank CPU seconds, bytes.
     assert!(timed
         .iter()
@@ -32,18 +29,7 @@ fn the_model_reproduces_its_calibration_within_15_percent() {
     let bad: Vec<String> = timed
         .iter()
         .filter(|c| c.relative_error().abs() > 0.15)
-        .map(|c| {
-            format!(
-                "{} {} {} ranks, {}: measured {:.4e}, predicted {:.4e} ({:+.1} %)",
-                c.scene,
-                c.exchange,
-                c.ranks,
-                c.quantity,
-                c.measured,
-                c.predicted,
-                c.relative_error() * 100.0
-            )
-        })
+        .map(|c| c.row())
         .collect();
     assert!(bad.is_empty(), "off by more than 15 %:\n{}", bad.join("\n"));
 }
