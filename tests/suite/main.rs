@@ -4,6 +4,7 @@
 mod analytic;
 mod bad_input;
 mod bake;
+mod big_scenes;
 mod checkpoint;
 mod common;
 mod determinism;
