@@ -163,6 +163,7 @@ fn draw_chart<DB: plotters::prelude::DrawingBackend>(
     axes: (&str, &str),
     series: &Series,
     log_y: bool,
+    legend: plotters::chart::SeriesLabelPosition,
 ) -> Result<(), String> {
     use plotters::prelude::*;
     let e = |x: &dyn std::fmt::Display| x.to_string();
@@ -203,6 +204,7 @@ fn draw_chart<DB: plotters::prelude::DrawingBackend>(
             }
             chart
                 .configure_series_labels()
+                .position(legend.clone())
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .draw()
@@ -230,11 +232,37 @@ pub(crate) fn chart(
     series: &Series,
     log_y: bool,
 ) -> Result<()> {
+    chart_at(
+        out,
+        stem,
+        title,
+        axes,
+        series,
+        log_y,
+        plotters::chart::SeriesLabelPosition::UpperRight,
+    )
+}
+
+/// [`chart`] with the legend at `legend` (where the curves leave room).
+pub(crate) fn chart_at(
+    out: &std::path::Path,
+    stem: &str,
+    title: &str,
+    axes: (&str, &str),
+    series: &Series,
+    log_y: bool,
+    legend: plotters::chart::SeriesLabelPosition,
+) -> Result<()> {
     if series.iter().all(|s| s.1.is_empty()) {
         return Ok(());
     }
     svg_and_png!(out, stem, (900, 540), |root| draw_chart(
-        root, title, axes, series, log_y
+        root,
+        title,
+        axes,
+        series,
+        log_y,
+        legend.clone()
     ));
     Ok(())
 }

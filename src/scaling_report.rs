@@ -5,6 +5,7 @@
 
 use anyhow::Result;
 use clap::Args;
+use plotters::chart::SeriesLabelPosition;
 use radiosity::output;
 use radiosity::scaling::{self, Calibration, Model, Network, AP1000, CLUSTER, PHASES};
 use std::fmt::Write as _;
@@ -176,13 +177,14 @@ fn charts(out: &std::path::Path, cal: &Calibration) -> Result<()> {
             ("fig8", &benchmark, "benchmark scenes"),
             ("fig9", &classroom, "classrooms"),
         ] {
-            crate::bench::chart(
+            crate::bench::chart_at(
                 out,
                 &format!("{fig}-{tag}"),
                 &format!("Speedup, {what}, model over {}", net.name),
                 ("log2 ranks", "speedup (100 shots)"),
                 &speedup_series(cal, scenes, &net),
                 false,
+                SeriesLabelPosition::UpperLeft,
             )?;
         }
     }
@@ -203,13 +205,14 @@ fn charts(out: &std::path::Path, cal: &Calibration) -> Result<()> {
             eps.push((format!("{scene} measured (CPU)"), measured));
         }
     }
-    crate::bench::chart(
+    crate::bench::chart_at(
         out,
         "fig10",
         "Mean load balance epsilon against ranks",
         ("log2 ranks", "epsilon = T_min / T_max"),
         &eps,
         false,
+        SeriesLabelPosition::LowerRight,
     )?;
     // Figure 12: B3's seconds a shot at two resolutions, cluster network.
     let mut res = Vec::new();
