@@ -38,7 +38,7 @@ run_set "$new" "$dir/new"
 python3 - "$dir/old" "$dir/new" <<'PY'
 import hashlib, json, os, struct, sys
 a_dir, b_dir = sys.argv[1], sys.argv[2]
-VARIES = {"path", "timings", "device", "seconds", "per_rank", "load_balance", "measured_bytes_per_shot"}
+VARIES = {"path", "timings", "device", "seconds", "per_rank", "load_balance", "load_balance_cpu", "measured_bytes_per_shot"}
 def strip(v):
     if isinstance(v, dict):
         return {k: strip(x) for k, x in v.items() if k not in VARIES}
