@@ -51,6 +51,29 @@ pub fn process_cpu_seconds() -> f64 {
     t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
+/// A span of this process's CPU time, less what collective calls used in it.
+pub struct CpuSpan {
+    cpu: f64,
+    mpi: f64,
+}
+
+impl CpuSpan {
+    /// Starts a span.
+    pub fn start(comm: &dyn Collectives) -> Self {
+        Self {
+            cpu: process_cpu_seconds(),
+            mpi: comm.traffic().cpu_seconds,
+        }
+    }
+
+    /// CPU seconds since the start outside collective calls.
+    pub fn own(&self, comm: &dyn Collectives) -> f64 {
+        let cpu = process_cpu_seconds() - self.cpu;
+        let mpi = comm.traffic().cpu_seconds - self.mpi;
+        (cpu - mpi).max(0.0)
+    }
+}
+
 /// Collective operations over the ranks of one solve. Every rank must make
 /// the same calls in the same order.
 pub trait Collectives {

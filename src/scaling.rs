@@ -75,14 +75,10 @@ pub struct Run {
     pub exchange: String,
     /// Shots of the final solve.
     pub shots: f64,
-    /// Elements of the final mesh.
-    pub elements: f64,
     /// Seconds of the final solve (the refinement passes left out).
     pub solve: f64,
     /// Per rank, per phase ([`PHASES`]), seconds per shot.
     pub phases: Vec<[f64; 6]>,
-    /// Per rank, seconds per shot in the exchange (waits included).
-    pub exchange_seconds: Vec<f64>,
     /// Per rank, bytes received per shot.
     pub bytes: Vec<f64>,
     /// Per rank, collective calls per shot.
@@ -132,11 +128,9 @@ impl Run {
             ranks: per_rank.len(),
             exchange: p["exchange"].as_str().unwrap_or("?").to_string(),
             shots,
-            elements: num(&v["counts"]["elements"], "elements")?,
             solve: num(&v["timings"]["solve"], "solve")?
                 - num(&v["refinement"]["seconds"], "refinement.seconds")?,
             phases: Vec::new(),
-            exchange_seconds: Vec::new(),
             bytes: Vec::new(),
             calls: Vec::new(),
             cpu_own: Vec::new(),
@@ -150,8 +144,6 @@ impl Run {
                 ph[k] = num(&r[*name], name)? / shots;
             }
             run.phases.push(ph);
-            run.exchange_seconds
-                .push(num(&r["exchange"], "exchange")? / shots);
             run.bytes
                 .push(num(&r["bytes_received"], "bytes_received")? / shots);
             run.calls.push(num(&r["mpi_calls"], "mpi_calls")? / shots);
@@ -356,8 +348,6 @@ pub struct Model {
     pub imbalance2: f64,
     /// Growth of the imbalance with the rank count.
     pub gamma: f64,
-    /// Shots of the runs.
-    pub shots: f64,
 }
 
 impl Model {
@@ -484,8 +474,8 @@ pub struct Calibration {
     /// The most ranks a run the fit used may have (the others are only
     /// checked against).
     pub fitted_up_to: usize,
-    /// This machine's shared-memory "network", fitted to the 2-rank
-    /// exchanges (the fastest rank's: it waited least for the others).
+    /// This machine's shared-memory "network", fitted to what the 2-rank
+    /// wall times leave over the slowest rank's compute.
     pub local: Network,
     /// The models.
     pub models: Vec<Model>,
@@ -612,7 +602,6 @@ impl Calibration {
                 bytes,
                 imbalance2: 0.0,
                 gamma: 0.0,
-                shots: two.shots,
             };
             // Imbalance: u(N) = u2 (N / 2)^gamma, least squares in logs
             // through every run of this scene's hemispheres beyond 2 ranks.
@@ -664,11 +653,7 @@ impl Calibration {
                 .filter_map(|m| m.bytes.pairs.map(|p| p.delta))
                 .filter(|d| !d.is_nan())
                 .collect();
-            let mean = if known.is_empty() {
-                1.0
-            } else {
-                known.iter().sum::<f64>() / known.len() as f64
-            };
+            let mean = mean_or(&known, 1.0);
             for m in models.iter_mut().filter(|m| m.exchange == ex) {
                 if let Some(p) = m.bytes.pairs.as_mut() {
                     if p.delta.is_nan() {
@@ -683,11 +668,7 @@ impl Calibration {
             .map(|m| m.gamma)
             .filter(|g| !g.is_nan())
             .collect();
-        let pooled = if known.is_empty() {
-            0.5
-        } else {
-            known.iter().sum::<f64>() / known.len() as f64
-        };
+        let pooled = mean_or(&known, 0.5);
         for m in models.iter_mut().filter(|m| m.gamma.is_nan()) {
             m.gamma = pooled;
         }
@@ -764,6 +745,15 @@ impl Calibration {
             }
         }
         out
+    }
+}
+
+/// The mean of `values`, or `default` when there are none.
+fn mean_or(values: &[f64], default: f64) -> f64 {
+    if values.is_empty() {
+        default
+    } else {
+        Run::mean(values)
     }
 }
 
@@ -891,7 +881,6 @@ mod tests {
             },
             imbalance2: 0.05,
             gamma: 0.5,
-            shots: 100.0,
         };
         for n in [2.0, 8.0, 64.0] {
             let u = imbalance_from_epsilon(m.epsilon(n), m.replicated, m.divided / n);

@@ -354,21 +354,7 @@ impl Ownership {
 
     /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
     fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
-        let any = |lo: f32, hi: f32, axis: usize| {
-            // Cells whose centres are inside, then the tiles holding them.
-            let (c0, c1) = (
-                (lo - 0.5).ceil().max(0.0),
-                (hi - 0.5).floor().min(self.cells[axis] - 1.0),
-            );
-            let (t0, t1) = (
-                (c0 / self.tile[axis]).floor(),
-                (c1 / self.tile[axis]).floor(),
-            );
-            c0 <= c1
-                && ((t0 - self.own[axis]) / self.grid[axis]).ceil()
-                    <= ((t1 - self.own[axis]) / self.grid[axis]).floor()
-        };
-        any(x0, x1, 0) && any(y0, y1, 1)
+        self.spans(x0, x1, 0).next().is_some() && self.spans(y0, y1, 1).next().is_some()
     }
 }
 

@@ -329,7 +329,7 @@ impl<'m> ShotLoop<'m> {
     ) -> Result<Shot, RenderError> {
         source.form_factors(best.patch, region, &mut self.ff)?;
         let t = Instant::now();
-        let cpu = super::source::CpuSpan::start(self.comm);
+        let cpu = crate::parallel::CpuSpan::start(self.comm);
         let shot = solver.shoot_candidate(best, region, &self.ff);
         let dt = t.elapsed();
         if let Some(b) = source.busy_cpu.last_mut() {

@@ -513,7 +513,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
         out: &mut Vec<Transfer>,
     ) -> Result<(), RenderError> {
         let start = Instant::now();
-        let cpu = CpuSpan::start(self.comm);
+        let cpu = parallel::CpuSpan::start(self.comm);
         let tier = self.choice.tier_for(region.power);
         let key = RowKey::new(shooter, region.centre, tier);
         if let Some(row) = self.cache.get(&key) {
@@ -545,28 +545,5 @@ impl FormFactorSource for GpuFormFactors<'_> {
         self.busy.push((total - exchange).as_secs_f64());
         self.busy_cpu.push(cpu.own(self.comm));
         Ok(())
-    }
-}
-
-/// A span of this process's CPU time, less what collective calls used in it.
-pub struct CpuSpan {
-    cpu: f64,
-    mpi: f64,
-}
-
-impl CpuSpan {
-    /// Starts a span.
-    pub fn start(comm: &dyn Collectives) -> Self {
-        Self {
-            cpu: crate::parallel::process_cpu_seconds(),
-            mpi: comm.traffic().cpu_seconds,
-        }
-    }
-
-    /// CPU seconds since the start outside collective calls.
-    pub fn own(&self, comm: &dyn Collectives) -> f64 {
-        let cpu = crate::parallel::process_cpu_seconds() - self.cpu;
-        let mpi = comm.traffic().cpu_seconds - self.mpi;
-        (cpu - mpi).max(0.0)
     }
 }
