@@ -1,8 +1,9 @@
 //! Direct light with exact visibility, for the camera image: at a point, each
 //! emitter's unoccluded form factor (Lambert's contour integral, exact) times
 //! the share of the emitter the point sees, estimated by shadow rays to
-//! stratified points on the emitter (a ratio estimator: exact where the point
-//! sees all or none of the emitter, noisy only in penumbrae); and each point,
+//! stratified points on the emitter (a ratio estimator pooled over a pixel's
+//! samples or an element's points, see [`Pool`]: exact where they see all or
+//! none of the emitter, noisy only in penumbrae); and each point,
 //! spot or directional light's irradiance with its one shadow ray
 //! ([`crate::lights::irradiance`]).
 //!
@@ -76,6 +77,47 @@ impl Strata {
     }
 }
 
+/// What a set of points (an image pixel's samples, an element's points)
+/// gathers of the direct light, weighted per point. Each emitter's visible
+/// share is one ratio over all the points' shadow rays (their
+/// cos cos / r^2 seen over all of it): exact where the points see all of
+/// the emitter or none, and over many rays spread across the emitter
+/// (each point's strata are a block of one stratification) right in
+/// penumbrae too. A ratio per point, from the one ray an image sample
+/// casts, counted the emitter's visible *area*: under a large emitter seen
+/// through an opening its near part weighs more, and the penumbra was
+/// 25-40 % too bright.
+struct Pool {
+    /// Point, spot and directional lights' weighted irradiance.
+    lights: [f64; 3],
+    /// Per emitter, the points' weighted unoccluded irradiance.
+    unoccluded: Vec<[f64; 3]>,
+    /// Per emitter, its shadow rays' (seen, all) weights.
+    rays: Vec<[f64; 2]>,
+}
+
+impl Pool {
+    fn new(emitters: usize) -> Self {
+        Pool {
+            lights: [0.0; 3],
+            unoccluded: vec![[0.0; 3]; emitters],
+            rays: vec![[0.0; 2]; emitters],
+        }
+    }
+
+    /// The weighted sum of the points' direct irradiance.
+    fn total(&self) -> [f64; 3] {
+        let mut out = self.lights;
+        for (u, [seen, all]) in self.unoccluded.iter().zip(&self.rays) {
+            let share = if *all > 0.0 { seen / all } else { 1.0 };
+            for c in 0..3 {
+                out[c] += u[c] * share;
+            }
+        }
+        out
+    }
+}
+
 /// What [`DirectLight::image`] gives: per pixel the direct radiance and the
 /// texture multiplier, and which polygons the pixels saw.
 #[derive(Clone, Debug)]
@@ -130,16 +172,33 @@ impl<'a> DirectLight<'a> {
     /// [`DirectLight::irradiance`] with shadow rays to the cells `strata`
     /// says of each emitter's (u, v) square.
     fn irradiance_in(&self, x: Vec3, polygon: u32, rng: &mut Rng, strata: Strata) -> [f64; 3] {
+        let mut pool = Pool::new(self.emitters.len());
+        self.gather(&mut pool, x, polygon, [1.0; 3], rng, strata);
+        pool.total()
+    }
+
+    /// Adds point `x` on polygon `polygon` to `pool`, its irradiance
+    /// weighted by `weight` per channel: the lights' at once, and per
+    /// emitter its unoccluded part and its shadow rays (to the cells
+    /// `strata` says of the emitter's (u, v) square).
+    fn gather(
+        &self,
+        pool: &mut Pool,
+        x: Vec3,
+        polygon: u32,
+        weight: [f64; 3],
+        rng: &mut Rng,
+        strata: Strata,
+    ) {
         let n = self.normals[polygon as usize];
         let origin = x + n * self.eps;
-        let mut out = [0.0; 3];
         for light in &self.lights {
             let d = crate::lights::irradiance(light, self.bvh, x, n, polygon, self.eps);
-            for (o, d) in out.iter_mut().zip(d) {
-                *o += d;
+            for c in 0..3 {
+                pool.lights[c] += weight[c] * d[c];
             }
         }
-        for e in &self.emitters {
+        for (k, e) in self.emitters.iter().enumerate() {
             if e.polygon == polygon || (x - e.centre).dot(e.normal) <= 0.0 {
                 continue;
             }
@@ -147,18 +206,19 @@ impl<'a> DirectLight<'a> {
             if f <= 0.0 {
                 continue;
             }
-            let seen = self.seen_share(e, origin, n, polygon, rng, strata);
-            for (o, x) in out.iter_mut().zip(&e.exitance) {
-                *o += x * f * seen;
+            let (seen, all) = self.shadow_rays(e, origin, n, polygon, rng, strata);
+            for c in 0..3 {
+                pool.unoccluded[k][c] += weight[c] * e.exitance[c] * f;
             }
+            pool.rays[k][0] += seen;
+            pool.rays[k][1] += all;
         }
-        out
     }
 
-    /// The share of emitter `e`'s unoccluded form factor that `origin` sees:
-    /// its shadow rays' visibility weighted by cos cos / r^2 and the
-    /// sampling density.
-    fn seen_share(
+    /// Emitter `e`'s shadow rays from `origin`: the visible ones' and all
+    /// of them's cos cos / r^2 over the sampling density (their ratio is the
+    /// share of the unoccluded form factor `origin` sees).
+    fn shadow_rays(
         &self,
         e: &Emitter,
         origin: Vec3,
@@ -166,7 +226,7 @@ impl<'a> DirectLight<'a> {
         polygon: u32,
         rng: &mut Rng,
         strata: Strata,
-    ) -> f64 {
+    ) -> (f64, f64) {
         let (mut all, mut seen) = (0.0f64, 0.0f64);
         let g = strata.grid as f32;
         for i in 0..strata.side * strata.side {
@@ -187,11 +247,7 @@ impl<'a> DirectLight<'a> {
                 seen += w;
             }
         }
-        if all > 0.0 {
-            seen / all
-        } else {
-            1.0
-        }
+        (seen, all)
     }
 
     /// Each element's mean direct irradiance over its area (jittered
@@ -210,7 +266,8 @@ impl<'a> DirectLight<'a> {
                 &e.corners
             };
             let mut rng = Rng(0x5eed_0000_0000 ^ j as u64);
-            let (mut sum, mut weight) = ([0.0; 3], 0.0);
+            let mut pool = Pool::new(self.emitters.len());
+            let mut weight = 0.0;
             let (side, rays) = (ELEMENT_POINTS, ELEMENT_RAYS);
             for q in 0..side * side {
                 let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
@@ -222,13 +279,13 @@ impl<'a> DirectLight<'a> {
                     first: [q % side * rays, q / side * rays],
                     side: rays,
                 };
-                let d = self.irradiance_in(x, e.polygon, &mut rng, strata);
-                for c in 0..3 {
-                    sum[c] += d[c] * jac as f64;
-                }
-                weight += jac as f64;
+                let jac = f64::from(jac);
+                self.gather(&mut pool, x, e.polygon, [jac; 3], &mut rng, strata);
+                weight += jac;
             }
-            *out = sum.map(|s| if weight > 0.0 { s / weight } else { 0.0 });
+            *out = pool
+                .total()
+                .map(|s| if weight > 0.0 { s / weight } else { 0.0 });
         };
         let mut out = vec![[0.0; 3]; mesh.elements.len()];
         in_parallel(&mut out, work);
@@ -260,7 +317,7 @@ impl<'a> DirectLight<'a> {
             for k in (1..order.len()).rev() {
                 order.swap(k, rng.below(k + 1));
             }
-            let mut sum = [0.0f64; 3];
+            let mut pool = Pool::new(self.emitters.len());
             let mut texture = [0.0f64; 3];
             for k in 0..ss * ss {
                 let (sx, sy) = ((px + k % ss) as f32 + 0.5, (py + k / ss) as f32 + 0.5);
@@ -294,13 +351,11 @@ impl<'a> DirectLight<'a> {
                     first: [block % ss * self.strata, block / ss * self.strata],
                     side: self.strata,
                 };
-                let e = self.irradiance_in(x, hit.polygon, &mut rng, strata);
                 let rho = textured.unwrap_or(self.reflectance[hit.polygon as usize]);
-                for c in 0..3 {
-                    sum[c] += rho[c] as f64 * e[c] / std::f64::consts::PI;
-                }
+                let weight = rho.map(|r| f64::from(r) / std::f64::consts::PI);
+                self.gather(&mut pool, x, hit.polygon, weight, &mut rng, strata);
             }
-            out.0 = sum.map(|s| (s / per_pixel) as f32);
+            out.0 = pool.total().map(|s| (s / per_pixel) as f32);
             out.2 = texture.map(|t| (t / per_pixel) as f32);
         };
         let mut pixels = vec![([0.0f32; 3], 0u32, [1.0f32; 3]); (width * height) as usize];
@@ -359,6 +414,57 @@ mod tests {
         let f = 2.0 / std::f64::consts::PI * (2.0 * x * (x).atan());
         let want = std::f64::consts::PI * f;
         assert!((e[0] - want).abs() < 1e-4 * want, "{} vs {want}", e[0]);
+    }
+
+    #[test]
+    fn image_pixels_weigh_a_large_emitters_parts_by_their_form_factor() {
+        // A 2 x 2 m emitter 3 m above the floor, half hidden by a screen at
+        // 1.5 m whose edge runs over x = 0: the floor at x sees the emitter
+        // where its x > -x. Seen from the floor under the lit side, the near
+        // part of the emitter (above the point) weighs most; one shadow ray
+        // per image sample, each sample's ray ratio on its own, counted the
+        // visible area instead.
+        let s = scene(vec![
+            square(Vec3::ZERO, 4.0, true, 0.0),
+            square(Vec3::Y * 3.0, 1.0, false, 1.0),
+            square(Vec3::new(-3.0, 1.5, 0.0), 3.0, false, 0.0),
+        ]);
+        let bvh = Bvh::new(&s.polygons);
+        let d = DirectLight::new(&s, &bvh, 1);
+        let camera = Camera {
+            position: Vec3::Y,
+            rotation: glam::Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2),
+            yfov: 2.0 * 0.6f32.atan(),
+            aspect: None,
+            znear: 0.01,
+        };
+        let (size, ss) = (16u32, 4u32);
+        let image = d.image(&camera, [size, size], ss, 0.01, 10.0);
+        // The same samples' light from 24 x 24 rays each, per side of x = 0.
+        let fine = DirectLight::new(&s, &bvh, 24);
+        let mut rng = Rng(7);
+        let (mut got, mut want) = ([0.0f64; 2], [0.0f64; 2]);
+        for p in 0..size * size {
+            let (px, py) = (p % size, p / size);
+            let mut sum = 0.0;
+            for k in 0..ss * ss {
+                let w = (size * ss) as f32;
+                let sx = (px * ss + k % ss) as f32 + 0.5;
+                let sy = (py * ss + k / ss) as f32 + 0.5;
+                let dir = camera.rotation
+                    * Vec3::new((2.0 * sx / w - 1.0) * 0.6, (1.0 - 2.0 * sy / w) * 0.6, -1.0);
+                let x = camera.position + dir * (1.0 / -dir.y);
+                sum += fine.irradiance(x, 0, &mut rng)[0] * 0.5 / std::f64::consts::PI;
+            }
+            let side = usize::from(px >= size / 2);
+            want[side] += sum / (ss * ss) as f64;
+            got[side] += f64::from(image.direct[p as usize][0]);
+        }
+        for side in 0..2 {
+            let err = got[side] / want[side] - 1.0;
+            // Pooled: +2.2 % (dark side) and +0.6 %; per sample: +11.8 % and -4.0 %.
+            assert!(err.abs() < 0.04, "side {side}: {:.2} %", 100.0 * err);
+        }
     }
 
     #[test]

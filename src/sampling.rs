@@ -16,7 +16,9 @@ pub fn point_in(c: &[Vec3], u: f32, v: f32) -> (Vec3, f32) {
             (u, v)
         };
         let (e1, e2) = (c[1] - c[0], c[2] - c[0]);
-        (c[0] + e1 * u + e2 * v, e1.cross(e2).length())
+        // The folded square covers the triangle once: area per unit (u, v)
+        // is the triangle's area.
+        (c[0] + e1 * u + e2 * v, 0.5 * e1.cross(e2).length())
     } else {
         let p = c[0] * (1.0 - u) * (1.0 - v)
             + c[1] * u * (1.0 - v)
