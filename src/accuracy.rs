@@ -90,8 +90,8 @@ pub struct AccuracyArgs {
     regimes: bool,
     /// Chart refinement by need against uniform meshes instead (the camera
     /// image's SMAPE against its path-traced reference, and the node errors,
-    /// against elements and solve time): the default, shooters only, a finer
-    /// receiver tolerance and six uniform patch sizes, on the scenes given
+    /// against elements and solve time): the default, without the shading
+    /// criterion, shooters only and six uniform patch sizes, on the scenes given
     /// with --scenes (default: the family scenes with image references), to
     /// docs/bench/receivers (or --out).
     #[arg(long)]
@@ -799,8 +799,11 @@ fn solver_curves(
         // Refinement by need with and without the receivers' criterion.
         let mut o = base.clone();
         o.mesh.receiver_tol = 0.0;
+        o.mesh.shading_tol = 0.0;
         eprintln!("accuracy: {} hybrid, shooters refined only", scene.name);
-        let label = "hybrid 128x512, shooters refined only (--refine-receivers 0)".to_string();
+        let label =
+            "hybrid 128x512, shooters refined only (--refine-receivers 0 --refine-shading 0)"
+                .to_string();
         let mut curve = run_curve(gpu, scene, &o, label, reference)?;
         curve.key = true;
         curves.push(curve);

@@ -157,8 +157,9 @@ pub struct SolveArgs {
     /// automatic rule's (or at the scene's own subdivision), each pass solves
     /// it roughly and doubles the patch grid of polygons whose shooters cast
     /// penumbrae onto a noticeable share of the light, or whose receivers
-    /// hold their light unevenly (see --refine-receivers; README "Refinement
-    /// by need"). 0: the mesh as given. Hybrid form factors only;
+    /// hold their light unevenly or would be shaded badly (see
+    /// --refine-receivers and --refine-shading; README "Refinement by
+    /// need"). 0: the mesh as given. Hybrid form factors only;
     /// `--patch-size` fixes the mesh.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=6))]
     refine: u32,
@@ -168,6 +169,12 @@ pub struct SolveArgs {
     /// this fraction of the emitted power; 0: only shooters ask.
     #[arg(long, default_value_t = radiosity::mesh::DEFAULT_RECEIVER_TOL, value_parser = fraction)]
     refine_receivers: f64,
+    /// Refinement by need also doubles the patch grid of a polygon where the
+    /// image's smooth shading of the indirect light would stray from the
+    /// solution by more than this fraction of the light there (its curvature
+    /// over the element size); 0: never.
+    #[arg(long, default_value_t = radiosity::mesh::DEFAULT_SHADING_TOL, value_parser = fraction)]
+    refine_shading: f64,
     /// Cap on patches along one polygon edge (automatic subdivision).
     #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(1..=4096))]
     max_patches_per_edge: u32,
@@ -227,6 +234,7 @@ impl SolveArgs {
                 max_patches_per_edge: self.max_patches_per_edge,
                 refine: self.refine,
                 receiver_tol: self.refine_receivers,
+                shading_tol: self.refine_shading,
                 ..MeshSettings::default()
             },
             raster_pieces: self.raster_pieces,

@@ -43,6 +43,10 @@ pub struct MeshSettings {
     /// misplace more than this fraction of the emitted power
     /// (`crate::refine`); 0: receivers never ask.
     pub receiver_tol: f64,
+    /// Refinement by need also doubles the patch grid of a polygon one of
+    /// whose patches the camera image would shade with a relative error
+    /// above this (`crate::refine::shading_error`); 0: never.
+    pub shading_tol: f64,
 }
 
 /// The default of [`MeshSettings::receiver_tol`]: chosen on the Cornell box
@@ -50,6 +54,9 @@ pub struct MeshSettings {
 /// refined too few receivers; 0.0002 cost 1.5-3x the solve time for little
 /// more), judged on seed 2 (README, "Refinement by need").
 pub const DEFAULT_RECEIVER_TOL: f64 = 5e-4;
+
+/// The default of [`MeshSettings::shading_tol`].
+pub const DEFAULT_SHADING_TOL: f64 = 0.08;
 
 impl Default for MeshSettings {
     fn default() -> Self {
@@ -61,6 +68,7 @@ impl Default for MeshSettings {
             max_elements_per_edge: 16,
             refine: 1,
             receiver_tol: DEFAULT_RECEIVER_TOL,
+            shading_tol: DEFAULT_SHADING_TOL,
         }
     }
 }

@@ -1,8 +1,8 @@
 //! `radiosity accuracy --receivers`: refinement by need against uniform
 //! meshes, on scenes with path-traced references (the camera image and the
-//! nodes, `docs/references/`). Per scene: the default (shooters and uneven
-//! receivers refined), shooters only (`--refine-receivers 0`), a finer
-//! receiver tolerance, and uniform meshes (`--refine 0 --patch-size P` for
+//! nodes, `docs/references/`). Per scene: the default (shooters, uneven
+//! receivers and badly shaded polygons refined), without the shading
+//! criterion (`--refine-shading 0`), shooters only, and uniform meshes (`--refine 0 --patch-size P` for
 //! P = extent / 6 .. extent / 32), each with its element count, solve time,
 //! image SMAPE and node errors; charted as image error against elements
 //! and against solve seconds.
@@ -86,13 +86,18 @@ fn study(gpu: &Gpu, name: &str, base: &RenderOptions) -> Result<Vec<Run>> {
     o.width = w;
     o.height = Some(h);
     configs.push(("by need (default)".into(), false, o.clone()));
-    let mut fine = o.clone();
-    fine.mesh.receiver_tol = 2e-4;
-    configs.push(("by need, --refine-receivers 2e-4".into(), false, fine));
+    let mut unshaded = o.clone();
+    unshaded.mesh.shading_tol = 0.0;
+    configs.push((
+        "by need, no shading criterion (--refine-shading 0)".into(),
+        false,
+        unshaded,
+    ));
     let mut shooters = o.clone();
     shooters.mesh.receiver_tol = 0.0;
+    shooters.mesh.shading_tol = 0.0;
     configs.push((
-        "shooters only (--refine-receivers 0)".into(),
+        "shooters only (--refine-receivers 0 --refine-shading 0)".into(),
         false,
         shooters,
     ));

@@ -208,6 +208,13 @@ pub struct Refinement {
     /// both reasons counts in both), over all polygons and passes.
     #[serde(default)]
     pub receiver_refinements: u32,
+    /// Polygons refined because the image would shade their indirect
+    /// light badly (`refine::shading_error`).
+    #[serde(default)]
+    pub shading_polygons: u32,
+    /// Doublings of patch grids for that reason, over all polygons and passes.
+    #[serde(default)]
+    pub shading_refinements: u32,
     /// Patches and elements of the final mesh.
     #[serde(default)]
     pub end: [usize; 2],

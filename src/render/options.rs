@@ -246,11 +246,15 @@ fn subdivision_text(s: &Subdivision) -> String {
 
 fn mesh_text(m: &MeshSettings) -> String {
     // Checkpoints from before receivers were refined resume with it off.
-    let receivers = if m.receiver_tol > 0.0 {
+    let mut receivers = if m.receiver_tol > 0.0 {
         format!(", receivers: {:?}", m.receiver_tol)
     } else {
         String::new()
     };
+    // Likewise the shading criterion.
+    if m.shading_tol > 0.0 {
+        receivers += &format!(", shading: {:?}", m.shading_tol);
+    }
     format!(
         "MeshSettings {{ patch_size: {}, element_size: {}, near_field_ratio: {:?}, max_patches_per_edge: {}, max_elements_per_edge: {}, refine: {}{receivers} }}",
         option_text(m.patch_size.map(|x| format!("{x:?}"))),
@@ -289,12 +293,13 @@ mod tests {
             // the receivers' criterion off, the text is theirs.
             let off = MeshSettings {
                 receiver_tol: 0.0,
+                shading_tol: 0.0,
                 ..m
             };
-            let old = format!("{off:?}").replace(", receiver_tol: 0.0", "");
+            let old = format!("{off:?}").replace(", receiver_tol: 0.0, shading_tol: 0.0", "");
             assert_eq!(mesh_text(&off), old);
             assert!(
-                mesh_text(&m).ends_with(", receivers: 0.0005 }"),
+                mesh_text(&m).ends_with(", receivers: 0.0005, shading: 0.08 }"),
                 "{}",
                 mesh_text(&m)
             );

@@ -6,6 +6,7 @@ use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
 use super::shoot::{shoot_until, AfterShot};
 use super::source::GpuFormFactors;
+use super::trace::{gather_whole, Extra};
 use crate::gpu::Gpu;
 use crate::mesh::Mesh;
 use crate::parallel::Collectives;
@@ -14,6 +15,9 @@ use crate::report::Refinement;
 use crate::scene::Scene;
 use crate::solver::Solver;
 use std::time::Instant;
+
+/// Shading errors are summed over ranks in fixed point up to this.
+const SHADING_CAP: f64 = 16.0;
 
 /// The mesh a render solves: refinement by need (`crate::refine`), i.e.
 /// coarse solves, each followed by a decision that doubles some polygons'
@@ -34,6 +38,7 @@ pub fn refined_mesh(
     let levels = settings.refine;
     let mut shooters = vec![false; n];
     let mut receivers = vec![false; n];
+    let mut shading = vec![false; n];
     // The last pass's mesh, when it asked for nothing more (the final
     // mesh would be built the same: building it again costs its light field).
     let mut last = None;
@@ -52,18 +57,21 @@ pub fn refined_mesh(
                 factors[i] *= 2;
                 changed += 1;
             }
+            shading[i] |= d.shading;
+            summary.shading_refinements += d.shading as u32;
             shooters[i] |= d.shooter;
             receivers[i] |= d.receiver;
             summary.shooter_refinements += d.shooter as u32;
             summary.receiver_refinements += d.receiver as u32;
         }
         if comm.rank() == 0 {
-            let (s, r) = (
+            let (s, r, sh) = (
                 decided.iter().filter(|d| d.shooter).count(),
                 decided.iter().filter(|d| d.receiver).count(),
+                decided.iter().filter(|d| d.shading).count(),
             );
             log::info!(
-                "refinement pass {}: {} patches, {} shots; {changed} polygons refined ({s} for their shooters, {r} for uneven receivers)",
+                "refinement pass {}: {} patches, {} shots; {changed} polygons refined ({s} for their shooters, {r} for uneven receivers, {sh} for their shading)",
                 pass + 1,
                 mesh.patches.len(),
                 shots,
@@ -76,6 +84,7 @@ pub fn refined_mesh(
     }
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
     summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
+    summary.shading_polygons = shading.iter().filter(|&&x| x).count() as u32;
     let mesh = last.unwrap_or_else(|| Mesh::build_refined(scene, &settings, &factors));
     summary.end = [mesh.patches.len(), mesh.elements.len()];
     Ok((mesh, summary, factors))
@@ -124,19 +133,52 @@ fn one_pass(
         let share = if emitted > 0.0 { w / emitted } else { 0.0 };
         (share.clamp(0.0, 1.0) * one).round() as u64
     }));
+    let settings = opts.mesh_settings();
+    // The shading error needs neighbours' values across patches (and
+    // ranks): rank 0 judges the whole solution; the others add zeros.
+    let mut shading = vec![0u64; mesh.patches.len()];
+    if settings.shading_tol > 0.0 {
+        let whole = gather_whole(
+            comm,
+            &solver,
+            Extra {
+                direct: true,
+                ..Extra::default()
+            },
+        );
+        if let Some(whole) = whole {
+            let zeros = vec![[0.0; 3]; mesh.elements.len()];
+            let direct = whole.direct().unwrap_or(&zeros);
+            let radiosity = whole.display_radiosity(false);
+            let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
+            for (s, e) in shading.iter_mut().zip(errors) {
+                *s = (e.clamp(0.0, SHADING_CAP) * one).round() as u64;
+            }
+        }
+    }
+    sums.extend(shading);
     comm.reduce_broadcast_sum(&mut sums);
-    let (penumbra, uneven) = sums.split_at(2 * mesh.patches.len());
+    let n = mesh.patches.len();
+    let (penumbra, rest) = sums.split_at(2 * n);
+    let (uneven, shading) = rest.split_at(n);
     let patches: Vec<PatchStats> = stats
         .patch_power
         .iter()
         .zip(penumbra.chunks_exact(2))
-        .zip(uneven)
-        .map(|((&power, p), &u)| PatchStats {
+        .zip(uneven.iter().zip(shading))
+        .map(|((&power, p), (&u, &s))| PatchStats {
             power,
             penumbra: [p[0], p[1]],
             uneven: u as f64 / one * emitted,
+            shading: s as f64 / one,
         })
         .collect();
-    let decided = refine::decide(mesh, &patches, emitted, opts.mesh_settings().receiver_tol);
+    let decided = refine::decide(
+        mesh,
+        &patches,
+        emitted,
+        settings.receiver_tol,
+        settings.shading_tol,
+    );
     Ok((decided, solver.shots(), started.elapsed().as_secs_f64()))
 }

@@ -74,7 +74,14 @@ fn default_images_are_within_two_and_a_half_percent_of_path_traced_images() {
 /// Seed 2 of the family: images nobody chose a default on.
 #[test]
 fn held_out_images_are_within_two_and_a_half_percent() {
-    for scene in ["family-floor-2", "family-boxes-2", "family-stacked-2"] {
+    // family-opening-2: 3.74 % before the pooled shadow rays and the
+    // shading criterion (both chosen on seed 1).
+    for scene in [
+        "family-floor-2",
+        "family-boxes-2",
+        "family-stacked-2",
+        "family-opening-2",
+    ] {
         let s = score(scene, radiosity::render::image::DEFAULT_SHADOW_RAYS);
         assert!(s <= 0.025, "{scene}: SMAPE {:.2} % > 2.5 %", s * 100.0);
     }
@@ -100,10 +107,30 @@ fn traced_direct_light_beats_interpolating_it() {
 #[test]
 fn refining_uneven_receivers_beats_refining_shooters_only() {
     let on = score_with("family-floor-1", |_| {});
-    let off = score_with("family-floor-1", |o| o.mesh.receiver_tol = 0.0);
+    let off = score_with("family-floor-1", |o| {
+        o.mesh.receiver_tol = 0.0;
+        o.mesh.shading_tol = 0.0;
+    });
     assert!(
         on < 0.75 * off,
         "receivers refined {:.2} % vs shooters only {:.2} %",
+        on * 100.0,
+        off * 100.0
+    );
+}
+
+/// The room lit through a small opening needs the shading criterion (a
+/// finer mesh where the image would shade its indirect light badly, however
+/// little of the emitted power that light is): 2.93 % without it, over the
+/// 2.5 % bound, 1.90 % with it.
+#[test]
+fn the_shading_criterion_brings_the_room_lit_through_an_opening_within_bounds() {
+    let on = score_with("family-opening-1", |_| {});
+    let off = score_with("family-opening-1", |o| o.mesh.shading_tol = 0.0);
+    assert!(on <= 0.025, "SMAPE {:.2} % > 2.5 %", on * 100.0);
+    assert!(
+        on < 0.8 * off,
+        "with the shading criterion {:.2} % vs without {:.2} %",
         on * 100.0,
         off * 100.0
     );
