@@ -207,8 +207,8 @@ impl<'a> DirectLight<'a> {
                 continue;
             }
             let (seen, all) = self.shadow_rays(e, origin, n, polygon, rng, strata);
-            for c in 0..3 {
-                pool.unoccluded[k][c] += weight[c] * e.exitance[c] * f;
+            for ((u, w), x) in pool.unoccluded[k].iter_mut().zip(weight).zip(e.exitance) {
+                *u += w * x * f;
             }
             pool.rays[k][0] += seen;
             pool.rays[k][1] += all;
