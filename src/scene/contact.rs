@@ -1,7 +1,11 @@
 //! Polygons split where another polygon stands on them (a box on a floor, a
 //! box on a box, a wall on a floor that runs under it): along the line of
 //! each edge of a non-coplanar polygon that lies in a polygon's plane and
-//! crosses its inside. Without the split, an element straddling the line
+//! crosses its inside, and along the outline of a parallel polygon hovering
+//! just in front of it (a light panel hung 1 cm under a ceiling: its
+//! edges dropped onto the ceiling, within [`HOVER`] of the scene's size and
+//! [`HOVER_OWN`] of the panel's).
+//! Without the split, an element straddling the line
 //! averages the light of both sides (the floor under a box is lit by the
 //! floor beside it, a room's floor by the hall outside its walls), and a
 //! hemisphere standing on it may stand inside the box. The split keeps
@@ -20,16 +24,27 @@ const MAX_CUTS: usize = 24;
 /// stays whole.
 const MAX_PIECES: usize = 256;
 
+/// A polygon parallel to another and in front of it by at most this
+/// fraction of the scene's size, and of its own size (a light panel hung
+/// under a ceiling), cuts it along its outline dropped onto it (see the
+/// module docs).
+pub const HOVER: f32 = 1e-2;
+
+/// The hovering polygon's own bound: at most this fraction of its size
+/// (the diagonal of its bounding box) in front.
+pub const HOVER_OWN: f32 = 0.05;
+
 /// Splits `polygons` at their contact lines (see the module docs); returns
 /// the new list and how many polygons were split. `extent` is the scene's
 /// size (tolerances are a hundred-thousandth of it).
 pub fn split_at_contacts(polygons: Vec<Polygon>, extent: f32) -> (Vec<Polygon>, usize) {
     let eps = 1e-5 * extent.max(1e-6);
+    let hover = HOVER * extent.max(1e-6);
     let grid = EdgeGrid::new(&polygons, extent);
     let mut out = Vec::with_capacity(polygons.len());
     let mut split = 0;
     for (i, p) in polygons.iter().enumerate() {
-        let cuts = grid.cuts(&polygons, i, eps);
+        let cuts = grid.cuts(&polygons, i, eps, hover);
         if cuts.is_empty() {
             out.push(p.clone());
             continue;
@@ -136,6 +151,8 @@ fn cut(piece: &[Vec3], m: Vec3, c: f32, eps: f32) -> Vec<Vec<Vec3>> {
 struct EdgeGrid {
     cell: f32,
     edges: Vec<(Vec3, Vec3, u32)>,
+    /// Per polygon, the diagonal of its bounding box.
+    sizes: Vec<f32>,
     cells: HashMap<[i32; 3], Vec<u32>>,
 }
 
@@ -163,7 +180,20 @@ impl EdgeGrid {
                 }
             }
         }
-        EdgeGrid { cell, edges, cells }
+        let sizes = polygons
+            .iter()
+            .map(|p| {
+                let lo = p.vertices.iter().fold(Vec3::splat(f32::INFINITY), |m, v| m.min(*v));
+                let hi = p.vertices.iter().fold(Vec3::splat(f32::NEG_INFINITY), |m, v| m.max(*v));
+                (hi - lo).length()
+            })
+            .collect();
+        EdgeGrid {
+            cell,
+            edges,
+            sizes,
+            cells,
+        }
     }
 
     fn key(p: Vec3, cell: f32) -> [i32; 3] {
@@ -171,8 +201,16 @@ impl EdgeGrid {
     }
 
     /// The cut lines (in-plane normal m, offset c) of polygon `i`: edges of
-    /// other, non-coplanar polygons that lie in its plane and cross it.
-    fn cuts(&self, polygons: &[Polygon], i: usize, eps: f32) -> Vec<(Vec3, f32, Vec3, Vec3)> {
+    /// other, non-coplanar polygons that lie in its plane and cross it, and
+    /// edges of parallel polygons in front of it by at most `hover`,
+    /// dropped onto its plane.
+    fn cuts(
+        &self,
+        polygons: &[Polygon],
+        i: usize,
+        eps: f32,
+        hover: f32,
+    ) -> Vec<(Vec3, f32, Vec3, Vec3)> {
         let p = &polygons[i];
         let n = p.normal;
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
@@ -180,6 +218,8 @@ impl EdgeGrid {
             lo = lo.min(*v);
             hi = hi.max(*v);
         }
+        // The box reaches `hover` in front of the plane.
+        let (lo, hi) = (lo.min(lo + n * hover), hi.max(hi + n * hover));
         let (klo, khi) = (
             Self::key(lo - eps, self.cell),
             Self::key(hi + eps, self.cell),
@@ -197,9 +237,11 @@ impl EdgeGrid {
                     };
                     seen.extend(list.iter().copied().filter(|&e| {
                         let (a, b, q) = self.edges[e as usize];
-                        q as usize != i
-                            && (n.dot(a) - plane).abs() <= eps
-                            && (n.dot(b) - plane).abs() <= eps
+                        let (da, db) = (n.dot(a) - plane, n.dot(b) - plane);
+                        let in_plane = da.abs() <= eps && db.abs() <= eps;
+                        let hover = hover.min(HOVER_OWN * self.sizes[q as usize]);
+                        let hovering = (eps..=hover).contains(&da) && (eps..=hover).contains(&db);
+                        q as usize != i && (in_plane || hovering)
                     }));
                 }
             }
@@ -209,9 +251,14 @@ impl EdgeGrid {
         let mut out: Vec<(Vec3, f32, Vec3, Vec3)> = Vec::new();
         for e in seen {
             let (a, b, q) = self.edges[e as usize];
-            if polygons[q as usize].normal.dot(n).abs() > 0.99 {
+            let parallel = polygons[q as usize].normal.dot(n).abs() > 0.99;
+            let in_plane = (n.dot(a) - plane).abs() <= eps;
+            // A coplanar neighbour does not cut; a parallel polygon hovering
+            // in front cuts along its edges' shadow, a slanted one never.
+            if parallel == in_plane {
                 continue;
             }
+            let (a, b) = (a - n * (n.dot(a) - plane), b - n * (n.dot(b) - plane));
             let u = b - a;
             if u.length() <= 10.0 * eps {
                 continue;
@@ -286,6 +333,46 @@ mod tests {
         assert_eq!(pieces.len(), 2);
         let area: f32 = pieces.iter().map(|p| p.area()).sum();
         assert!((area - floor.area()).abs() < 1e-4, "{area}");
+    }
+
+    #[test]
+    fn a_panel_hung_under_a_ceiling_splits_it_along_its_outline() {
+        // A 4 x 4 m ceiling facing down, a 1 x 1 m panel 1 cm under it
+        // (facing down too): the ceiling is cut along the panel's four
+        // edges, and one piece lies exactly over the panel.
+        let ceiling = Polygon::square(Vec3::Y * 3.0, 2.0, Vec3::X, Vec3::Z, [0.5; 3], [0.0; 3]);
+        assert!(ceiling.normal.y < 0.0);
+        let panel = Polygon::square(
+            Vec3::new(0.5, 2.99, 0.25),
+            0.5,
+            Vec3::X,
+            Vec3::Z,
+            [0.8; 3],
+            [1.0; 3],
+        );
+        let (out, split) = split_at_contacts(vec![ceiling.clone(), panel.clone()], 6.0);
+        assert_eq!(split, 1);
+        let pieces: Vec<_> = out.iter().filter(|p| p.vertices[0].y == 3.0).collect();
+        let area: f32 = pieces.iter().map(|p| p.area()).sum();
+        assert!((area - ceiling.area()).abs() < 1e-3, "{area}");
+        let over = pieces.iter().filter(|p| {
+            let c = p.centre();
+            (c.x - 0.5).abs() < 0.5 && (c.z - 0.25).abs() < 0.5
+        });
+        let over: f32 = over.map(|p| p.area()).sum();
+        assert!((over - 1.0).abs() < 1e-3, "{over}");
+        // Nothing hovers in front of the panel: it stays whole. Farther
+        // than the hover distance (6 cm here), the ceiling stays whole too.
+        assert_eq!(out.iter().filter(|p| p.emission[0] > 0.0).count(), 1);
+        let low = Polygon::square(
+            Vec3::new(0.5, 2.9, 0.25),
+            0.5,
+            Vec3::X,
+            Vec3::Z,
+            [0.8; 3],
+            [1.0; 3],
+        );
+        assert_eq!(split_at_contacts(vec![ceiling, low], 6.0).1, 0);
     }
 
     #[test]
