@@ -183,8 +183,14 @@ impl EdgeGrid {
         let sizes = polygons
             .iter()
             .map(|p| {
-                let lo = p.vertices.iter().fold(Vec3::splat(f32::INFINITY), |m, v| m.min(*v));
-                let hi = p.vertices.iter().fold(Vec3::splat(f32::NEG_INFINITY), |m, v| m.max(*v));
+                let lo = p
+                    .vertices
+                    .iter()
+                    .fold(Vec3::splat(f32::INFINITY), |m, v| m.min(*v));
+                let hi = p
+                    .vertices
+                    .iter()
+                    .fold(Vec3::splat(f32::NEG_INFINITY), |m, v| m.max(*v));
                 (hi - lo).length()
             })
             .collect();
