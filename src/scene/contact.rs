@@ -348,15 +348,11 @@ mod tests {
         // edges, and one piece lies exactly over the panel.
         let ceiling = Polygon::square(Vec3::Y * 3.0, 2.0, Vec3::X, Vec3::Z, [0.5; 3], [0.0; 3]);
         assert!(ceiling.normal.y < 0.0);
-        let panel = Polygon::square(
-            Vec3::new(0.5, 2.99, 0.25),
-            0.5,
-            Vec3::X,
-            Vec3::Z,
-            [0.8; 3],
-            [1.0; 3],
-        );
-        let (out, split) = split_at_contacts(vec![ceiling.clone(), panel.clone()], 6.0);
+        let panel_at = |y: f32| {
+            let c = Vec3::new(0.5, y, 0.25);
+            Polygon::square(c, 0.5, Vec3::X, Vec3::Z, [0.8; 3], [1.0; 3])
+        };
+        let (out, split) = split_at_contacts(vec![ceiling.clone(), panel_at(2.99)], 6.0);
         assert_eq!(split, 1);
         let pieces: Vec<_> = out.iter().filter(|p| p.vertices[0].y == 3.0).collect();
         let area: f32 = pieces.iter().map(|p| p.area()).sum();
@@ -370,15 +366,7 @@ mod tests {
         // Nothing hovers in front of the panel: it stays whole. Farther
         // than the hover distance (6 cm here), the ceiling stays whole too.
         assert_eq!(out.iter().filter(|p| p.emission[0] > 0.0).count(), 1);
-        let low = Polygon::square(
-            Vec3::new(0.5, 2.9, 0.25),
-            0.5,
-            Vec3::X,
-            Vec3::Z,
-            [0.8; 3],
-            [1.0; 3],
-        );
-        assert_eq!(split_at_contacts(vec![ceiling, low], 6.0).1, 0);
+        assert_eq!(split_at_contacts(vec![ceiling, panel_at(2.9)], 6.0).1, 0);
     }
 
     #[test]
