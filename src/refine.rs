@@ -106,7 +106,7 @@ impl PatchStats {
     }
 }
 
-/// Per polygon: how much to grow its patch grid, and why (`receiver_tol`
+/// Per polygon: whether to double its patch grid, and why (`receiver_tol`
 /// and `shading_tol`: see the module docs; 0 turns that criterion off).
 pub fn decide(
     mesh: &Mesh,
@@ -174,13 +174,14 @@ pub fn shading_error(
                 }
                 let e = &mesh.elements[j];
                 let distinct = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
+                let corners = &e.vertices[..distinct];
                 for c in 0..3 {
-                    let corners: f64 = e.vertices[..distinct]
+                    let shown = corners
                         .iter()
                         .map(|&v| f64::from(shaded[v as usize][c]))
                         .sum::<f64>()
                         / distinct as f64;
-                    err += e.area * (f64::from(indirect[j][c]) - corners).abs();
+                    err += e.area * (f64::from(indirect[j][c]) - shown).abs();
                     light += e.area * radiosity[j][c];
                 }
             }

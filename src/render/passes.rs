@@ -146,9 +146,8 @@ fn one_pass(
                 ..Extra::default()
             },
         );
-        if let Some(whole) = whole {
-            let zeros = vec![[0.0; 3]; mesh.elements.len()];
-            let direct = whole.direct().unwrap_or(&zeros);
+        // (A pass's solver always knows its direct part.)
+        if let Some((whole, direct)) = whole.as_ref().and_then(|w| Some((w, w.direct()?))) {
             let radiosity = whole.display_radiosity(false);
             let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
             for (s, e) in shading.iter_mut().zip(errors) {

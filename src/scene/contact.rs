@@ -183,14 +183,7 @@ impl EdgeGrid {
         let sizes = polygons
             .iter()
             .map(|p| {
-                let lo = p
-                    .vertices
-                    .iter()
-                    .fold(Vec3::splat(f32::INFINITY), |m, v| m.min(*v));
-                let hi = p
-                    .vertices
-                    .iter()
-                    .fold(Vec3::splat(f32::NEG_INFINITY), |m, v| m.max(*v));
+                let (lo, hi) = p.bounds();
                 (hi - lo).length()
             })
             .collect();
@@ -219,11 +212,7 @@ impl EdgeGrid {
     ) -> Vec<(Vec3, f32, Vec3, Vec3)> {
         let p = &polygons[i];
         let n = p.normal;
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for v in &p.vertices {
-            lo = lo.min(*v);
-            hi = hi.max(*v);
-        }
+        let (lo, hi) = p.bounds();
         // The box reaches `hover` in front of the plane.
         let (lo, hi) = (lo.min(lo + n * hover), hi.max(hi + n * hover));
         let (klo, khi) = (

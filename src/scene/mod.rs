@@ -59,6 +59,16 @@ impl Polygon {
         }
     }
 
+    /// Axis-aligned bounds (min, max) of its vertices.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let lo = self.vertices.iter().fold(Vec3::INFINITY, |m, v| m.min(*v));
+        let hi = self
+            .vertices
+            .iter()
+            .fold(Vec3::NEG_INFINITY, |m, v| m.max(*v));
+        (lo, hi)
+    }
+
     /// Vertex average (equal to the centroid for parallelograms and triangles).
     pub fn centre(&self) -> Vec3 {
         self.vertices.iter().copied().sum::<Vec3>() / self.vertices.len() as f32
@@ -158,13 +168,12 @@ pub struct Scene {
 impl Scene {
     /// Axis-aligned bounds (min, max) of all vertices.
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        for v in self.polygons.iter().flat_map(|p| p.vertices.iter()) {
-            lo = lo.min(*v);
-            hi = hi.max(*v);
-        }
-        (lo, hi)
+        self.polygons
+            .iter()
+            .map(Polygon::bounds)
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), (a, b)| {
+                (lo.min(a), hi.max(b))
+            })
     }
 
     /// Length of the bounding-box diagonal.
