@@ -194,6 +194,46 @@ impl Bvh {
         hit
     }
 
+    /// [`Bvh::occluded`], trying first the leaf `hint` (the one that
+    /// occluded an earlier ray: rays to neighbouring points are mostly
+    /// stopped by the same occluder) and leaving in it the leaf that
+    /// occluded this ray. The answer is `occluded`'s whatever the hint: a
+    /// leaf whose box the segment passes lies inside every ancestor's box,
+    /// which the segment then passes too (the box test rounds monotonically),
+    /// so the full walk would reach the same triangle.
+    pub fn occluded_hinted(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        skip: [u32; 2],
+        hint: &mut Option<u32>,
+    ) -> bool {
+        let inv = dir.recip();
+        let blocks = |tri: &Tri| {
+            !skip.contains(&tri.polygon) && intersect(tri, origin, dir, t_min, t_max).is_some()
+        };
+        if let Some(node) = hint.and_then(|h| self.nodes.get(h as usize)) {
+            let (a, b) = (node.first as usize, (node.first + node.count) as usize);
+            if node.count > 0
+                && slab(node, origin, inv, t_min, t_max).is_some()
+                && self.tris[a..b].iter().any(blocks)
+            {
+                return true;
+            }
+        }
+        let mut hit = false;
+        self.walk_leaves(origin, dir, t_min, t_max, |leaf, tri, _| {
+            if blocks(tri) {
+                hit = true;
+                *hint = Some(leaf);
+            }
+            (hit, t_max)
+        });
+        hit
+    }
+
     /// Visits the triangles of every leaf the ray's box test passes, nearest
     /// child first; `visit` returns (stop, the current far limit).
     fn walk(
@@ -204,6 +244,18 @@ impl Bvh {
         t_max: f32,
         mut visit: impl FnMut(&Tri, f32) -> (bool, f32),
     ) {
+        self.walk_leaves(origin, dir, t_min, t_max, |_, tri, t| visit(tri, t));
+    }
+
+    /// [`Bvh::walk`], telling `visit` the leaf each triangle is in.
+    fn walk_leaves(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        mut visit: impl FnMut(u32, &Tri, f32) -> (bool, f32),
+    ) {
         if self.nodes.is_empty() {
             return;
         }
@@ -213,14 +265,15 @@ impl Bvh {
         let mut top = 1;
         while top > 0 {
             top -= 1;
-            let node = &self.nodes[stack[top] as usize];
+            let at = stack[top];
+            let node = &self.nodes[at as usize];
             if slab(node, origin, inv, t_min, far).is_none() {
                 continue;
             }
             if node.count > 0 {
                 let (a, b) = (node.first as usize, (node.first + node.count) as usize);
                 for tri in &self.tris[a..b] {
-                    let (stop, f) = visit(tri, t_min);
+                    let (stop, f) = visit(at, tri, t_min);
                     far = f;
                     if stop {
                         return;
@@ -333,6 +386,44 @@ mod tests {
                 assert!(bvh.occluded(o, d, 0.0, t * 1.001, [u32::MAX; 2]));
             }
         }
+    }
+
+    #[test]
+    fn a_hinted_shadow_ray_answers_as_the_full_walk_does() {
+        // Squares scattered over a slab; segments to neighbouring points, in
+        // order, so the hint is often right and sometimes stale: the verdict
+        // is the plain walk's every time, and the hint does the work.
+        let mut rng = crate::fuzz::Rng(11);
+        let mut unit = || (rng.next_u64() >> 11) as f32 / (1u64 << 53) as f32;
+        let polys: Vec<Polygon> = (0..300)
+            .map(|_| {
+                let c = Vec3::new(unit() * 8.0 - 4.0, unit() * 8.0 - 4.0, unit() * 4.0 + 1.0);
+                quad(c, 0.1 + unit() * 0.4, unit() < 0.7)
+            })
+            .collect();
+        let bvh = Bvh::new(&polys);
+        let mut hint = None;
+        let (mut hidden, mut hinted) = (0, 0);
+        for i in 0..4000 {
+            let o = Vec3::new(unit() * 0.2, unit() * 0.2, 0.0);
+            let to = Vec3::new(
+                (i % 64) as f32 * 0.12 - 3.8 + unit() * 0.05,
+                (i / 64) as f32 * 0.12 - 3.8,
+                6.0,
+            );
+            let skip = [(i % 300) as u32, u32::MAX];
+            let want = bvh.occluded(o, to - o, 0.0, 1.0, skip);
+            let before = hint;
+            let got = bvh.occluded_hinted(o, to - o, 0.0, 1.0, skip, &mut hint);
+            assert_eq!(got, want, "segment {i}");
+            hidden += want as u32;
+            hinted += (want && hint == before && before.is_some()) as u32;
+        }
+        assert!(hidden > 1000, "the scene hides {hidden} of 4000 segments");
+        assert!(
+            hinted > hidden / 4,
+            "the hint answered {hinted} of {hidden}"
+        );
     }
 
     #[test]

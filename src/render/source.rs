@@ -130,6 +130,9 @@ pub struct GpuFormFactors<'a> {
     split: bool,
     /// Per patch, whether the last hemisphere's cells covered it.
     seen: Vec<bool>,
+    /// The far receivers of the last shot (see
+    /// [`GpuFormFactors::add_far_receivers`]).
+    far: Vec<(u32, u64)>,
     /// Where the last unsplit hemisphere stood.
     last_centre: glam::Vec3,
 }
@@ -171,6 +174,7 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
+            far: Vec::new(),
             last_centre: glam::Vec3::ZERO,
         })
     }
@@ -252,9 +256,12 @@ impl<'a> GpuFormFactors<'a> {
     /// corridor's far end was 30 % too dark). Each of this rank's patches
     /// that no cell covered, in front of the shooter at `centre`, facing it
     /// and subtending less than [`FAR_CELLS`] of the largest cells, gets its
-    /// elements' visibility from one ray each from `centre` (visible: one
-    /// visible of one covered cell). Deterministic and per rank, so the row
-    /// is the same on any rank count.
+    /// elements' visibility from rays from `centre` (visible: one visible of
+    /// one covered cell): one to its centre, and, when that one is clear and
+    /// the patch subtends more than one cell, one to each element (a patch
+    /// under a cell takes its centre's answer). Deterministic and per rank,
+    /// so the row is the same on any rank count. The pairs added are kept in
+    /// `self.far` for [`GpuFormFactors::reuse_far_receivers`].
     fn add_far_receivers(&mut self, shooter: u32, centre: glam::Vec3, tier: usize) {
         let mesh = self.mesh;
         let res = self.tiers[tier].cells.resolution;
@@ -264,11 +271,11 @@ impl<'a> GpuFormFactors<'a> {
         let sp = &mesh.patches[shooter as usize];
         let n = mesh.polygons[sp.polygon as usize].normal;
         let origin = centre + n * mesh.ray_offset;
-        self.seen.iter_mut().for_each(|s| *s = false);
-        for &(j, _) in &self.pairs {
-            self.seen[mesh.elements[j as usize].patch as usize] = true;
-        }
-        let before = self.pairs.len();
+        self.mark_seen();
+        self.far.clear();
+        // Most candidates in a cluttered scene are hidden, by the same
+        // occluder as the patch before them (see `Bvh::occluded_hinted`).
+        let mut hint = None;
         let (rank, ranks) = (self.comm.rank(), self.comm.size());
         for k in parallel::owned_patches(rank, ranks, mesh.patches.len()) {
             let p = &mesh.patches[k];
@@ -282,7 +289,8 @@ impl<'a> GpuFormFactors<'a> {
             if n.dot(d) <= 0.0 || cos_r <= 0.0 {
                 continue;
             }
-            if (p.area as f32) * cos_r / (dist2 * dist2.sqrt()) > FAR_CELLS * cell {
+            let solid_angle = (p.area as f32) * cos_r / (dist2 * dist2.sqrt());
+            if solid_angle > FAR_CELLS * cell {
                 continue;
             }
             // One ray to the patch's centre first: most such patches are
@@ -290,21 +298,56 @@ impl<'a> GpuFormFactors<'a> {
             // as hidden whole.
             let to = p.centre + rn * mesh.ray_offset - origin;
             let skip = [sp.polygon, p.polygon];
-            if mesh.occluders.occluded(origin, to, 0.0, 1.0, skip) {
+            if mesh
+                .occluders
+                .occluded_hinted(origin, to, 0.0, 1.0, skip, &mut hint)
+            {
                 continue;
             }
+            let one_cell = solid_angle <= cell;
             for j in p.elements.clone() {
                 let e = &mesh.elements[j as usize];
                 let to = e.centre + rn * mesh.ray_offset - origin;
                 if n.dot(to) > 0.0
-                    && !mesh
-                        .occluders
-                        .occluded(origin, to, 0.0, 1.0, [sp.polygon, p.polygon])
+                    && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
                 {
-                    self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
+                    self.far.push((j, formfactor::VISIBLE_ONE + 1));
                 }
             }
         }
+        self.append_far();
+    }
+
+    /// The far receivers of the shot's first hemisphere (see
+    /// [`GpuFormFactors::add_far_receivers`]), added to a split group's
+    /// pairs where its own hemisphere did not cover their patches: a
+    /// receiver that small is as far from every group's centre, and its
+    /// rays cost more than the group's drawing in a cluttered scene.
+    fn reuse_far_receivers(&mut self) {
+        self.mark_seen();
+        self.append_far();
+    }
+
+    /// Marks in `self.seen` the patches the last hemisphere's cells covered.
+    fn mark_seen(&mut self) {
+        let mesh = self.mesh;
+        self.seen.iter_mut().for_each(|s| *s = false);
+        for &(j, _) in &self.pairs {
+            self.seen[mesh.elements[j as usize].patch as usize] = true;
+        }
+    }
+
+    /// Appends to the pairs the far receivers whose patches are not in
+    /// `self.seen`, keeping the pairs sorted by element.
+    fn append_far(&mut self) {
+        let mesh = self.mesh;
+        let before = self.pairs.len();
+        let seen = &self.seen;
+        self.pairs.extend(
+            self.far
+                .iter()
+                .filter(|(j, _)| !seen[mesh.elements[*j as usize].patch as usize]),
+        );
         if self.pairs.len() > before {
             self.pairs.sort_unstable_by_key(|p| p.0);
         }
@@ -393,7 +436,7 @@ impl<'a> GpuFormFactors<'a> {
         };
         for (group, at) in formfactor::split_groups(self.mesh, shooter, columns) {
             exchange += self.hemisphere(shooter, at, tier)?;
-            self.add_far_receivers(shooter, at, tier);
+            self.reuse_far_receivers();
             self.timings.receivers += self.pairs.len() as u64;
             let mut part = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, group.clone());
             let mut parts = self.view.to_vec();
