@@ -160,6 +160,21 @@ impl Row {
         self.total += other.total;
     }
 
+    /// Keeps only the receivers `keep` accepts (the decision statistics stay).
+    pub fn retain(&mut self, keep: impl Fn(u32) -> bool) {
+        let m = self.columns.max(1);
+        let mut n = 0;
+        for k in 0..self.ids.len() {
+            if keep(self.ids[k]) {
+                self.ids[n] = self.ids[k];
+                self.values.copy_within(k * m..(k + 1) * m, n * m);
+                n += 1;
+            }
+        }
+        self.ids.truncate(n);
+        self.values.truncate(n * m);
+    }
+
     /// Each column's sum over this row's receivers, every value rounded to
     /// [`SHARE_ONE`] fixed point on its own (so sums over ranks are exact).
     pub fn column_totals(&self) -> Vec<u64> {
@@ -453,6 +468,22 @@ pub fn needs_split(near_hidden: u64, total: u64) -> bool {
     near_hidden as f64 > SPLIT_SHARE * (near_hidden + total) as f64
 }
 
+/// Whether element `j` is a near receiver of shooter patch `shooter`: its
+/// centre within [`NEAR_FIELD`] times the distance from the patch's centre
+/// to its farthest corner (the receivers [`Row::near_hidden`] counts).
+/// Returns the test and that distance.
+pub fn near_receivers(mesh: &Mesh, shooter: u32) -> (impl Fn(u32) -> bool + '_, f64) {
+    let geo = ShooterGeometry::new(mesh, shooter);
+    let (origin, near) = (geo.origin, NEAR_FIELD * geo.radius);
+    let test = move |j: u32| {
+        element_centre(&mesh.elements[j as usize])
+            .as_dvec3()
+            .distance(origin)
+            < near
+    };
+    (test, near)
+}
+
 /// Form factor from a differential area at `x` with unit normal `n` to the
 /// planar polygon `poly` (any winding), the polygon first clipped to the
 /// half-space in front of the receiver (n . (p - x) >= 0):
@@ -585,6 +616,21 @@ mod tests {
         assert!((out[1].radiosity[0] - 0.6).abs() < 1e-12);
         assert!((out[1].radiosity[1] - 0.3).abs() < 1e-12);
         assert_eq!(out[1].radiosity[2], 0.0);
+    }
+
+    #[test]
+    fn a_row_keeps_the_receivers_asked_for_with_their_columns() {
+        let mut row = Row {
+            columns: 2,
+            ids: vec![1, 4, 9],
+            values: vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+            total: 7,
+            ..Row::default()
+        };
+        row.retain(|j| j != 4);
+        assert_eq!(row.ids, vec![1, 9]);
+        assert_eq!(row.values, vec![0.1, 0.2, 0.5, 0.6]);
+        assert_eq!(row.total, 7, "the decision statistics stay");
     }
 
     #[test]

@@ -925,6 +925,9 @@ pub struct ShooterFrame {
     pub normal: Vec3,
     /// The shooter's polygon, which must not see itself.
     pub polygon: u32,
+    /// Only polygons within this distance of the centre are drawn (infinite
+    /// but for a split shot's groups, which look only at near receivers).
+    pub reach: f32,
 }
 
 impl ShooterFrame {
@@ -943,7 +946,13 @@ impl ShooterFrame {
             bitangent: normal.cross(tangent),
             normal,
             polygon,
+            reach: f32::INFINITY,
         }
+    }
+
+    /// This frame drawing only polygons within `reach` of its centre.
+    pub fn within(self, reach: f32) -> Self {
+        Self { reach, ..self }
     }
 }
 

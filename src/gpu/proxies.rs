@@ -262,8 +262,8 @@ impl Proxies {
 /// Whether polygon `k` (`poly`) can show in the shooter's hemisphere: the
 /// shooter never sees its own polygon, polygons wholly below its plane,
 /// polygons whose plane passes through the shooter (edge-on: no solid
-/// angle), or the hidden back faces of solids it is outside of. The one
-/// cull both projections use.
+/// angle), the hidden back faces of solids it is outside of, or polygons
+/// wholly beyond the frame's reach. The one cull both projections use.
 pub(super) fn in_view(
     k: usize,
     poly: &PolygonProxies,
@@ -273,6 +273,7 @@ pub(super) fn in_view(
 ) -> bool {
     k as u32 != shooter.polygon
         && (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius > 0.0
+        && (poly.centre - shooter.centre).length() - poly.radius <= shooter.reach
         && !edge_on(poly, shooter)
         && !hidden_back_face(poly, corners, outside, shooter)
 }

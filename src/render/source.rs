@@ -9,7 +9,7 @@ use super::options::{RenderError, RenderOptions};
 use super::tiers::{layout_for, TierCells, TierChoice};
 use crate::formfactor::{self, Row};
 use crate::gpu::{Gpu, GpuError, HemisphereRasterizer};
-use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, FIXED_ONE};
+use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, EMPTY, FIXED_ONE};
 use crate::mesh::{Mesh, ShooterFrame};
 use crate::parallel::{self, Collectives};
 use crate::settings::{FormFactorMethod, Projection};
@@ -130,6 +130,11 @@ pub struct GpuFormFactors<'a> {
     split: bool,
     /// Per patch, whether the last hemisphere's cells covered it.
     seen: Vec<bool>,
+    /// Per tile this rank drew, the item buffer of the last whole (not
+    /// reach-limited) hemisphere (see [`GpuFormFactors::view_of`]).
+    whole_items: Vec<Vec<u32>>,
+    /// A split group's items with the whole hemisphere's beyond its reach.
+    composite: Vec<u32>,
     /// The far receivers of the last shot (see
     /// [`GpuFormFactors::add_far_receivers`]).
     far: Vec<(u32, u64)>,
@@ -175,6 +180,8 @@ impl<'a> GpuFormFactors<'a> {
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
             far: Vec::new(),
+            whole_items: Vec::new(),
+            composite: Vec::new(),
             last_centre: glam::Vec3::ZERO,
         })
     }
@@ -215,30 +222,33 @@ impl<'a> GpuFormFactors<'a> {
         shooter: u32,
         centre: glam::Vec3,
         tier: usize,
+        reach: f32,
     ) -> Result<Duration, RenderError> {
-        let frame = self.mesh.shooter_frame_at(shooter, centre);
+        let frame = self.mesh.shooter_frame_at(shooter, centre).within(reach);
         self.last_tier = tier;
         self.last_centre = centre;
         let layout = self.tiers[tier].cells.layout;
         let mut exchange = Duration::ZERO;
         self.view = [0; 3];
+        let cut = reach.is_finite();
         if self.comm.size() == 1 {
             // One process, perhaps standing in for a rank grid: draw every
             // rank's tiles in turn.
-            for ry in 0..layout.py {
-                for rx in 0..layout.px {
-                    self.draw(&frame, (rx, ry))?;
-                    let Tier { raster, cells } = &self.tiers[tier];
-                    let v = cells.view_shares(&self.items, (rx, ry));
-                    self.view = [0, 1, 2].map(|i| self.view[i] + v[i]);
-                    Exchanger::add_own(&mut self.acc, cells, &self.items, raster.coverage_pairs());
-                }
+            for (t, own) in (0..layout.py)
+                .flat_map(|ry| (0..layout.px).map(move |rx| (rx, ry)))
+                .enumerate()
+            {
+                self.draw(&frame, own)?;
+                let v = self.view_of(tier, t, own, cut);
+                self.view = [0, 1, 2].map(|i| self.view[i] + v[i]);
+                let Tier { raster, cells } = &self.tiers[tier];
+                Exchanger::add_own(&mut self.acc, cells, &self.items, raster.coverage_pairs());
             }
         } else {
             let own = self.tiers[tier].cells.grid_position(self.comm.rank());
             self.draw(&frame, own)?;
+            self.view = self.view_of(tier, 0, own, cut);
             let Tier { raster, cells } = &mut self.tiers[tier];
-            self.view = cells.view_shares(&self.items, own);
             exchange =
                 self.exchanger
                     .exchange(&mut self.acc, cells, &self.items, raster.coverage_pairs());
@@ -248,6 +258,33 @@ impl<'a> GpuFormFactors<'a> {
         }
         self.acc.drain_fixed(&mut self.pairs);
         Ok(exchange)
+    }
+
+    /// What the hemisphere just drawn in this rank's tile `t` (drawing order)
+    /// at grid position `own` shows, as [`TierCells::view_shares`]. A whole
+    /// hemisphere's items are kept; one `cut` short at a reach (a split
+    /// group's) takes, where it shows nothing, what the kept one showed:
+    /// beyond its reach the group sees what the shot's centre saw.
+    fn view_of(&mut self, tier: usize, t: usize, own: (u32, u32), cut: bool) -> [u64; 3] {
+        let cells = &self.tiers[tier].cells;
+        if !cut {
+            if self.whole_items.len() <= t {
+                self.whole_items.resize_with(t + 1, Vec::new);
+            }
+            self.whole_items[t].clone_from(&self.items);
+            return cells.view_shares(&self.items, own);
+        }
+        let Some(whole) = self.whole_items.get(t) else {
+            return cells.view_shares(&self.items, own);
+        };
+        self.composite.clear();
+        self.composite.extend(
+            self.items
+                .iter()
+                .zip(whole)
+                .map(|(&g, &w)| if g == EMPTY { w } else { g }),
+        );
+        cells.view_shares(&self.composite, own)
     }
 
     /// Receivers too small to cover a hemisphere cell from the shooter (the
@@ -315,7 +352,7 @@ impl<'a> GpuFormFactors<'a> {
                 }
             }
         }
-        self.append_far();
+        self.append_far(|_| true);
     }
 
     /// The far receivers of the shot's first hemisphere (see
@@ -323,9 +360,9 @@ impl<'a> GpuFormFactors<'a> {
     /// pairs where its own hemisphere did not cover their patches: a
     /// receiver that small is as far from every group's centre, and its
     /// rays cost more than the group's drawing in a cluttered scene.
-    fn reuse_far_receivers(&mut self) {
+    fn reuse_far_receivers(&mut self, keep: impl Fn(u32) -> bool) {
         self.mark_seen();
-        self.append_far();
+        self.append_far(keep);
     }
 
     /// Marks in `self.seen` the patches the last hemisphere's cells covered.
@@ -337,16 +374,16 @@ impl<'a> GpuFormFactors<'a> {
         }
     }
 
-    /// Appends to the pairs the far receivers whose patches are not in
-    /// `self.seen`, keeping the pairs sorted by element.
-    fn append_far(&mut self) {
+    /// Appends to the pairs the far receivers that `keep` accepts and whose
+    /// patches are not in `self.seen`, keeping the pairs sorted by element.
+    fn append_far(&mut self, keep: impl Fn(u32) -> bool) {
         let mesh = self.mesh;
         let before = self.pairs.len();
         let seen = &self.seen;
         self.pairs.extend(
             self.far
                 .iter()
-                .filter(|(j, _)| !seen[mesh.elements[*j as usize].patch as usize]),
+                .filter(|&&(j, _)| keep(j) && !seen[mesh.elements[j as usize].patch as usize]),
         );
         if self.pairs.len() > before {
             self.pairs.sort_unstable_by_key(|p| p.0);
@@ -379,7 +416,7 @@ impl<'a> GpuFormFactors<'a> {
         centre: glam::Vec3,
         tier: usize,
     ) -> Result<(Row, Duration), RenderError> {
-        let exchange = self.hemisphere(shooter, centre, tier)?;
+        let exchange = self.hemisphere(shooter, centre, tier, f32::INFINITY)?;
         match self.method {
             FormFactorMethod::Hemisphere => {
                 self.timings.receivers += self.pairs.len() as u64;
@@ -429,30 +466,49 @@ impl<'a> GpuFormFactors<'a> {
             row.blocked = vec![sums[3] as f64 / formfactor::SHARE_ONE; columns];
             return Ok((row, exchange));
         }
-        let mut merged = Row {
-            columns,
-            blocked: vec![0.0; columns],
-            ..Row::default()
-        };
-        for (group, at) in formfactor::split_groups(self.mesh, shooter, columns) {
-            exchange += self.hemisphere(shooter, at, tier)?;
-            self.reuse_far_receivers();
+        // Only near receivers look again, each group of the shooter's
+        // elements from its own point: a segment from a point of the shooter
+        // to a near receiver stays within `near` of the shooter's centre, so
+        // only polygons that close can hide it, and each group draws only
+        // those (in a big scene, a small part of it). Farther receivers
+        // keep the first hemisphere's visibility.
+        let (is_near, near) = formfactor::near_receivers(self.mesh, shooter);
+        let stats = (row.near_hidden, row.total, row.partial);
+        row.retain(|j| !is_near(j));
+        let patch_centre = self.mesh.patches[shooter as usize].centre;
+        let groups = formfactor::split_groups(self.mesh, shooter, columns);
+        let mut views = Vec::with_capacity(3 * groups.len());
+        for (group, at) in &groups {
+            let reach = near as f32 + at.distance(patch_centre);
+            exchange += self.hemisphere(shooter, *at, tier, reach)?;
+            self.reuse_far_receivers(&is_near);
             self.timings.receivers += self.pairs.len() as u64;
             let mut part = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, group.clone());
-            let mut parts = self.view.to_vec();
-            parts.extend(part.column_totals());
-            let (sums, spent) = self.sum_over_ranks(parts);
-            exchange += spent;
-            let scales = self.normalisers(shooter, group.clone(), [sums[0], sums[2]], &sums[3..]);
-            part.scale_columns(&scales);
-            // Each group's hemisphere says what its elements' light meets.
-            for k in group {
-                merged.blocked[k] = sums[1] as f64 / formfactor::SHARE_ONE;
-            }
-            merged.merge(&part);
+            part.retain(&is_near);
+            row.merge(&part);
+            views.extend(self.view);
         }
+        (row.near_hidden, row.total, row.partial) = stats;
+        // Each group's columns normalised to what its hemisphere (beyond its
+        // reach, the first one) saw, as the row of an unsplit shot is.
+        let mut parts = row.column_totals();
+        let n = parts.len();
+        parts.extend(views);
+        let (sums, spent) = self.sum_over_ranks(parts);
+        exchange += spent;
+        let (totals, views) = sums.split_at(n);
+        row.blocked = vec![0.0; columns];
+        let mut scales = vec![1.0; columns];
+        for ((group, _), v) in groups.iter().zip(views.chunks_exact(3)) {
+            let s = self.normalisers(shooter, group.clone(), [v[0], v[2]], totals);
+            for k in group.clone() {
+                scales[k] = s[k];
+                row.blocked[k] = v[1] as f64 / formfactor::SHARE_ONE;
+            }
+        }
+        row.scale_columns(&scales);
         self.timings.split += 1;
-        Ok((merged, exchange))
+        Ok((row, exchange))
     }
 
     /// Where the hemisphere is closed (every cell shows an element or a

@@ -162,6 +162,27 @@ fn small_far_polygon_near_the_pole_is_still_found() {
 }
 
 #[test]
+fn a_frame_with_a_reach_draws_only_the_polygons_within_it() {
+    // A split shot's groups look again only at the near receivers, and
+    // draw only what lies within reach of them: a polygon wholly beyond the
+    // reach is not drawn; one within it, or reaching into it, is drawn whole.
+    let near = rect(2, 0.5, [-0.2, -0.2], [0.2, 0.2], false);
+    let far = rect(2, 3.0, [0.5, -0.5], [1.5, 0.5], false);
+    let long = rect(0, 0.8, [-0.3, 0.1], [0.3, 3.0], false);
+    let polys = [near.clone(), far, long];
+    let whole = TileLayout::whole(RES);
+    let all = look(&polys, RES, origin_frame(), 4, whole);
+    let cut = look(&polys, RES, origin_frame().within(1.0), 4, whole);
+    assert!(rel(cut.per_polygon[0], lambert(&as_f64(&near))) < 0.01);
+    assert!(all.per_polygon[1] > 0.01, "the far polygon shows unlimited");
+    assert_eq!(cut.per_polygon[1], 0.0, "the far polygon is beyond reach");
+    assert!(all.per_polygon[2] > 0.01, "the long polygon shows");
+    for k in [0, 2] {
+        assert_eq!(cut.per_polygon[k], all.per_polygon[k], "polygon {k}");
+    }
+}
+
+#[test]
 fn back_face_blocks_but_receives_nothing() {
     // A receiver behind a blocker whose back faces the shooter.
     let receiver = rect(2, 1.0, [-0.3, -0.3], [0.3, 0.3], false);
