@@ -255,6 +255,9 @@ pub struct Timings {
     pub exchange: f64,
     /// Summing delta form factors per element (summed over shots).
     pub sum_form_factors: f64,
+    /// Of `sum_form_factors`: the shadow rays to receivers smaller than a
+    /// hemisphere cell that no cell covered (summed over shots).
+    pub far_receivers: f64,
     /// Distributing radiosity (summed over shots).
     pub update: f64,
     /// Rendering and writing the image.

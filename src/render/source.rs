@@ -29,6 +29,9 @@ pub struct PhaseTimes {
     pub exchange: Duration,
     /// Summing delta form factors.
     pub sum: Duration,
+    /// Of `sum`: the far receivers' shadow rays (see
+    /// `GpuFormFactors::add_far_receivers`).
+    pub far: Duration,
     /// Rectangles drawn.
     pub rects: u64,
     /// Hemisphere cells this rank drew (its tiles' cells, summed over the
@@ -300,6 +303,7 @@ impl<'a> GpuFormFactors<'a> {
     /// so the row is the same on any rank count. The pairs added are kept in
     /// `self.far` for [`GpuFormFactors::reuse_far_receivers`].
     fn add_far_receivers(&mut self, shooter: u32, centre: glam::Vec3, tier: usize) {
+        let start = Instant::now();
         let mesh = self.mesh;
         let res = self.tiers[tier].cells.resolution;
         // The largest cells are at the horizon: dtheta times dphi.
@@ -353,6 +357,7 @@ impl<'a> GpuFormFactors<'a> {
             }
         }
         self.append_far(|_| true);
+        self.timings.far += start.elapsed();
     }
 
     /// The far receivers of the shot's first hemisphere (see

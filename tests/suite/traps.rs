@@ -167,7 +167,8 @@ fn a_frame_with_a_reach_draws_only_the_polygons_within_it() {
     // draw only what lies within reach of them: a polygon wholly beyond the
     // reach is not drawn; one within it, or reaching into it, is drawn whole.
     let near = rect(2, 0.5, [-0.2, -0.2], [0.2, 0.2], false);
-    let far = rect(2, 3.0, [0.5, -0.5], [1.5, 0.5], false);
+    // Off to the side, where neither of the others hides it.
+    let far = rect(2, 3.0, [-4.0, -1.0], [-2.0, 1.0], false);
     let long = rect(0, 0.8, [-0.3, 0.1], [0.3, 3.0], false);
     let polys = [near.clone(), far, long];
     let whole = TileLayout::whole(RES);
