@@ -49,6 +49,45 @@ pub struct LightField {
     pub emitted: f64,
     /// The power delivered to the elements, W (sum over RGB).
     pub delivered: f64,
+    /// Of `direct`, the directional lights' part per element (sum over RGB).
+    pub directional: Vec<f64>,
+}
+
+/// A light field kept from a mesh to be reused by another mesh of the same
+/// scene (a refinement pass's next mesh, see [`element_field_reusing`]):
+/// the field and where each polygon's elements were.
+#[derive(Clone, Debug, Default)]
+pub struct KeptField {
+    field: LightField,
+    /// Per polygon: its elements, patch grid and element grid.
+    polygons: Vec<(std::ops::Range<u32>, [u32; 2], [u32; 2])>,
+}
+
+impl KeptField {
+    /// Takes `mesh`'s light field (leaving it empty) to reuse.
+    pub fn take(mesh: &mut Mesh) -> Self {
+        Self {
+            field: std::mem::take(&mut mesh.light_field),
+            polygons: mesh
+                .polygons
+                .iter()
+                .map(|p| (p.elements.clone(), p.patch_grid, p.element_grid))
+                .collect(),
+        }
+    }
+
+    /// Where element `j` of `mesh` (of polygon `polygon`) was, if its
+    /// polygon was subdivided alike.
+    fn find(&self, mesh: &Mesh, j: usize) -> Option<usize> {
+        let polygon = mesh.elements[j].polygon as usize;
+        let p = &mesh.polygons[polygon];
+        let (was, patches, elements) = self.polygons.get(polygon)?;
+        let alike = *patches == p.patch_grid
+            && *elements == p.element_grid
+            && was.len() == p.elements.len()
+            && !self.field.direct.is_empty();
+        alike.then(|| was.start as usize + (j - p.elements.start as usize))
+    }
 }
 
 impl LightField {
@@ -144,6 +183,21 @@ fn frame(n: Vec3) -> (Vec3, Vec3) {
 /// [`ELEMENT_POINTS`]^2 jittered points of each element. Empty when there
 /// are no lights and no sky.
 pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Option<[f64; 3]>) -> LightField {
+    element_field_reusing(mesh, lights, sky, None)
+}
+
+/// [`element_field`], copying from `kept` (the field of another mesh of the
+/// same scene) the values of every polygon subdivided alike in both. An
+/// element's values depend only on the scene, its polygon and its place in
+/// it (its random numbers too), so the field is the one [`element_field`]
+/// gives, bit for bit, and a refinement pass's next mesh casts rays only
+/// for the polygons it refined.
+pub fn element_field_reusing(
+    mesh: &Mesh,
+    lights: &[Light],
+    sky: Option<[f64; 3]>,
+    kept: Option<&KeptField>,
+) -> LightField {
     let sky = sky.filter(|s| s.iter().any(|&l| l > 0.0));
     if lights.is_empty() && sky.is_none() {
         return LightField::default();
@@ -153,6 +207,10 @@ pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Option<[f64; 3]>) -> Li
     // Per element: the lights' irradiance, the sky's, and the part of the
     // first from directional lights (sum over RGB).
     let work = |j: usize, out: &mut ([f64; 3], [f64; 3], f64)| {
+        if let Some((k, f)) = kept.and_then(|f| Some((f.find(mesh, j)?, &f.field))) {
+            *out = (f.direct[k], f.sky[k], f.directional[k]);
+            return;
+        }
         let e = &mesh.elements[j];
         let n = mesh.polygons[e.polygon as usize].normal;
         let corners: &[Vec3] = if e.corners[3] == e.corners[2] {
@@ -160,7 +218,10 @@ pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Option<[f64; 3]>) -> Li
         } else {
             &e.corners
         };
-        let mut rng = Rng(0x119b_7000_0000 ^ j as u64);
+        // Seeded by the element's polygon and place in it, not its index in
+        // the mesh, so that another mesh's field can be reused.
+        let local = j as u64 - u64::from(mesh.polygons[e.polygon as usize].elements.start);
+        let mut rng = Rng(0x119b_7000_0000 ^ (u64::from(e.polygon) << 32) ^ local);
         let (side, rays) = (ELEMENT_POINTS, SKY_RAYS);
         let (mut direct, mut parallel, mut open, mut weight) = ([0.0; 3], 0.0, 0.0, 0.0);
         for q in 0..side * side {
@@ -210,5 +271,42 @@ pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Option<[f64; 3]>) -> Li
         sky: values.iter().map(|v| v.1).collect(),
         emitted,
         delivered,
+        directional: values.iter().map(|v| v.2).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{Mesh, MeshSettings};
+
+    #[test]
+    fn a_refined_mesh_reuses_the_field_of_its_unrefined_polygons_bit_for_bit() {
+        // The Cornell box under a sun and a sky: refine every other polygon.
+        let mut scene = crate::scene::open("cornell").expect("built-in");
+        scene.lights.push(Light {
+            name: "sun".into(),
+            kind: LightKind::Directional,
+            position: Vec3::ZERO,
+            direction: Vec3::new(0.3, -1.0, 0.2).normalize(),
+            intensity: [500.0; 3],
+        });
+        scene.sky = Some([3.0; 3]);
+        let settings = MeshSettings::default();
+        let mut coarse = Mesh::build(&scene, &settings);
+        let factors: Vec<u32> = (0..scene.polygons.len())
+            .map(|i| 1 + i as u32 % 2)
+            .collect();
+        let fresh = Mesh::build_refined(&scene, &settings, &factors);
+        let kept = KeptField::take(&mut coarse);
+        let reused = Mesh::build_refined_from(&scene, &settings, &factors, Some(&kept));
+        assert!(fresh.light_field.sky.iter().any(|s| s[0] > 0.0));
+        assert!(fresh.light_field.direct.iter().any(|d| d[0] > 0.0));
+        assert_eq!(reused.light_field, fresh.light_field);
+        // Every element of an unrefined polygon was copied, none of a refined one.
+        for (j, e) in reused.elements.iter().enumerate() {
+            let refined = factors[e.polygon as usize] > 1;
+            assert_eq!(kept.find(&reused, j).is_some(), !refined, "element {j}");
+        }
     }
 }

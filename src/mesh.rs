@@ -348,6 +348,18 @@ impl Mesh {
     /// by `factors[i]` along each edge (within the cap; each patch keeps its
     /// element grid); missing factors are 1.
     pub fn build_refined(scene: &Scene, settings: &MeshSettings, factors: &[u32]) -> Mesh {
+        Self::build_refined_from(scene, settings, factors, None)
+    }
+
+    /// [`Mesh::build_refined`], reusing the light field `kept` from another
+    /// mesh of `scene` for the polygons subdivided alike (the same mesh, bit
+    /// for bit: see [`crate::lights::element_field_reusing`]).
+    pub fn build_refined_from(
+        scene: &Scene,
+        settings: &MeshSettings,
+        factors: &[u32],
+        kept: Option<&crate::lights::KeptField>,
+    ) -> Mesh {
         let sizes = patch_sizes(scene, settings);
         let mut mesh = Mesh::default();
         for (pi, (poly, &size)) in scene.polygons.iter().zip(&sizes).enumerate() {
@@ -357,7 +369,8 @@ impl Mesh {
         (mesh.solids, mesh.solid_of) = find_solids(&scene.polygons);
         mesh.occluders = crate::raytrace::Bvh::new(&scene.polygons);
         mesh.ray_offset = 1e-5 * scene.extent().max(1e-6);
-        mesh.light_field = crate::lights::element_field(&mesh, &scene.lights, scene.sky);
+        mesh.light_field =
+            crate::lights::element_field_reusing(&mesh, &scene.lights, scene.sky, kept);
         mesh
     }
 

@@ -8,6 +8,7 @@ use super::shoot::{shoot_until, AfterShot};
 use super::source::GpuFormFactors;
 use super::trace::{gather_whole, Extra};
 use crate::gpu::Gpu;
+use crate::lights::KeptField;
 use crate::mesh::Mesh;
 use crate::parallel::Collectives;
 use crate::refine::{self, PatchStats};
@@ -42,8 +43,11 @@ pub fn refined_mesh(
     // The last pass's mesh, when it asked for nothing more (the final
     // mesh would be built the same: building it again costs its light field).
     let mut last = None;
+    // The last pass's light field: the next mesh casts rays only for the
+    // polygons refined since.
+    let mut kept = None;
     for pass in 0..levels {
-        let mesh = Mesh::build_refined(scene, &settings, &factors);
+        let mut mesh = Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref());
         if pass == 0 {
             summary.start = [mesh.patches.len(), mesh.elements.len()];
         }
@@ -81,11 +85,13 @@ pub fn refined_mesh(
             last = Some(mesh);
             break;
         }
+        kept = Some(KeptField::take(&mut mesh));
     }
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
     summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
     summary.shading_polygons = shading.iter().filter(|&&x| x).count() as u32;
-    let mesh = last.unwrap_or_else(|| Mesh::build_refined(scene, &settings, &factors));
+    let mesh =
+        last.unwrap_or_else(|| Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref()));
     summary.end = [mesh.patches.len(), mesh.elements.len()];
     Ok((mesh, summary, factors))
 }
