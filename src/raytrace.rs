@@ -44,9 +44,22 @@ pub struct Bvh {
 /// Triangles per leaf, at most.
 const LEAF: usize = 4;
 
+/// Bins per axis of the surface area heuristic's split search.
+const SAH_BINS: usize = 16;
+
+/// The empty box (every point extends it).
+const NO_BOX: (Vec3, Vec3) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+
+impl Tri {
+    fn centre(&self) -> Vec3 {
+        self.v0 + (self.e1 + self.e2) / 3.0
+    }
+}
+
 impl Bvh {
-    /// Builds the hierarchy over `polygons` (median splits along the longest
-    /// axis of the centroids: deterministic, and good enough for shadow rays).
+    /// Builds the hierarchy over `polygons`: binned surface-area-heuristic
+    /// splits of the centroids (median splits where they do not spread).
+    /// Deterministic.
     pub fn new(polygons: &[Polygon]) -> Self {
         let mut tris = Vec::new();
         for (i, p) in polygons.iter().enumerate() {
@@ -96,23 +109,10 @@ impl Bvh {
             self.nodes[at].count = (end - start) as u32;
             return;
         }
-        let centre = |t: &Tri| t.v0 + (t.e1 + t.e2) / 3.0;
-        let (clo, chi) = self.tris[start..end].iter().fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(l, h), t| (l.min(centre(t)), h.max(centre(t))),
-        );
-        let ext = chi - clo;
-        let axis = if ext.x >= ext.y && ext.x >= ext.z {
-            0
-        } else if ext.y >= ext.z {
-            1
-        } else {
-            2
+        let mid = match self.sah_split(start, end) {
+            Some(mid) => mid,
+            None => self.median_split(start, end),
         };
-        let mid = (start + end) / 2;
-        self.tris[start..end].select_nth_unstable_by(mid - start, |a, b| {
-            centre(a)[axis].total_cmp(&centre(b)[axis])
-        });
         let first = self.nodes.len();
         let blank = Node {
             lo,
@@ -125,6 +125,99 @@ impl Bvh {
         self.nodes[at].count = 0;
         self.split(first, start, mid);
         self.split(first + 1, mid, end);
+    }
+
+    /// Sorts `start..end` so that the split with the least surface area
+    /// heuristic cost (over [`SAH_BINS`] bins of the centroids along each
+    /// axis) puts the left child first; returns where the right one starts,
+    /// or `None` when the centroids do not spread (all in one bin).
+    /// Deterministic: ties keep the lower axis and bin.
+    fn sah_split(&mut self, start: usize, end: usize) -> Option<usize> {
+        let tris = &self.tris[start..end];
+        let (clo, chi) = tris.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(l, h), t| (l.min(t.centre()), h.max(t.centre())),
+        );
+        let ext = chi - clo;
+        let bin_of = |t: &Tri, axis: usize| {
+            let b = (t.centre()[axis] - clo[axis]) / ext[axis] * SAH_BINS as f32;
+            (b.max(0.0) as usize).min(SAH_BINS - 1)
+        };
+        let area = |lo: Vec3, hi: Vec3| {
+            let d = (hi - lo).max(Vec3::ZERO);
+            d.x * d.y + d.y * d.z + d.z * d.x
+        };
+        let mut best: Option<(f32, usize, usize)> = None;
+        for axis in 0..3 {
+            if ext[axis] <= 0.0 || !ext[axis].is_finite() {
+                continue;
+            }
+            let mut boxes = [NO_BOX; SAH_BINS];
+            let mut counts = [0usize; SAH_BINS];
+            for t in tris {
+                let b = bin_of(t, axis);
+                let (lo, hi) = Self::bounds(std::slice::from_ref(t));
+                boxes[b] = (boxes[b].0.min(lo), boxes[b].1.max(hi));
+                counts[b] += 1;
+            }
+            // Right-hand sweeps: the cost of bins k.. on the right.
+            let mut right = [0.0f32; SAH_BINS];
+            let ((mut lo, mut hi), mut n) = (NO_BOX, 0);
+            for k in (1..SAH_BINS).rev() {
+                (lo, hi, n) = (lo.min(boxes[k].0), hi.max(boxes[k].1), n + counts[k]);
+                right[k] = if n > 0 { area(lo, hi) * n as f32 } else { 0.0 };
+            }
+            let ((mut lo, mut hi), mut n) = (NO_BOX, 0);
+            for k in 1..SAH_BINS {
+                (lo, hi, n) = (
+                    lo.min(boxes[k - 1].0),
+                    hi.max(boxes[k - 1].1),
+                    n + counts[k - 1],
+                );
+                if n == 0 || n == tris.len() {
+                    continue;
+                }
+                let cost = area(lo, hi) * n as f32 + right[k];
+                if best.is_none_or(|(c, _, _)| cost < c) {
+                    best = Some((cost, axis, k));
+                }
+            }
+        }
+        let (_, axis, k) = best?;
+        // Partition in place: bins below k first.
+        let tris = &mut self.tris[start..end];
+        let (mut a, mut b) = (0, tris.len());
+        while a < b {
+            if bin_of(&tris[a], axis) < k {
+                a += 1;
+            } else {
+                b -= 1;
+                tris.swap(a, b);
+            }
+        }
+        Some(start + a)
+    }
+
+    /// Sorts `start..end` about the median centroid along the axis they
+    /// spread most on; returns the middle.
+    fn median_split(&mut self, start: usize, end: usize) -> usize {
+        let (clo, chi) = self.tris[start..end].iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(l, h), t| (l.min(t.centre()), h.max(t.centre())),
+        );
+        let ext = chi - clo;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        let mid = (start + end) / 2;
+        self.tris[start..end].select_nth_unstable_by(mid - start, |a, b| {
+            a.centre()[axis].total_cmp(&b.centre()[axis])
+        });
+        mid
     }
 
     /// Number of triangles held.
@@ -424,6 +517,18 @@ mod tests {
             hinted > hidden / 4,
             "the hint answered {hinted} of {hidden}"
         );
+    }
+
+    #[test]
+    fn coinciding_polygons_build_and_answer() {
+        // Centroids that do not spread give the surface area heuristic
+        // nothing to split: the build falls back to the median.
+        let polys: Vec<Polygon> = (0..50).map(|_| quad(Vec3::ZERO, 1.0, true)).collect();
+        let bvh = Bvh::new(&polys);
+        assert_eq!(bvh.triangles(), 100);
+        let hit = bvh.nearest(Vec3::new(0.2, 0.3, 1.0), -Vec3::Z, 0.0, 10.0);
+        assert!(hit.is_some_and(|h| (h.t - 1.0).abs() < 1e-6));
+        assert!(!bvh.occluded(Vec3::new(2.0, 0.0, 1.0), -Vec3::Z, 0.0, 10.0, [u32::MAX; 2]));
     }
 
     #[test]
