@@ -138,6 +138,8 @@ pub struct GpuFormFactors<'a> {
     whole_items: Vec<Vec<u32>>,
     /// A split group's items with the whole hemisphere's beyond its reach.
     composite: Vec<u32>,
+    /// The largest distance from a patch's centre to its corners.
+    max_patch_radius: f32,
     /// The far receivers of the last shot (see
     /// [`GpuFormFactors::add_far_receivers`]).
     far: Vec<(u32, u64)>,
@@ -183,6 +185,11 @@ impl<'a> GpuFormFactors<'a> {
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
             far: Vec::new(),
+            max_patch_radius: mesh
+                .patches
+                .iter()
+                .flat_map(|p| p.corners.iter().map(|c| c.distance(p.centre)))
+                .fold(0.0, f32::max),
             whole_items: Vec::new(),
             composite: Vec::new(),
             last_centre: glam::Vec3::ZERO,
@@ -299,10 +306,18 @@ impl<'a> GpuFormFactors<'a> {
     /// elements' visibility from rays from `centre` (visible: one visible of
     /// one covered cell): one to its centre, and, when that one is clear and
     /// the patch subtends more than one cell, one to each element (a patch
-    /// under a cell takes its centre's answer). Deterministic and per rank,
-    /// so the row is the same on any rank count. The pairs added are kept in
-    /// `self.far` for [`GpuFormFactors::reuse_far_receivers`].
-    fn add_far_receivers(&mut self, shooter: u32, centre: glam::Vec3, tier: usize) {
+    /// under a cell takes its centre's answer). Only elements `keep` accepts
+    /// of patches whose centres lie `within` of `centre` (a split group's
+    /// near receivers) are looked at. Deterministic and per
+    /// rank, so the row is the same on any rank count.
+    fn add_far_receivers(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+        within: f32,
+        keep: impl Fn(u32) -> bool,
+    ) {
         let start = Instant::now();
         let mesh = self.mesh;
         let res = self.tiers[tier].cells.resolution;
@@ -325,13 +340,16 @@ impl<'a> GpuFormFactors<'a> {
             }
             let d = p.centre - centre;
             let dist2 = d.length_squared();
+            if dist2 > within * within {
+                continue;
+            }
             let rn = mesh.polygons[p.polygon as usize].normal;
             let cos_r = -rn.dot(d);
             if n.dot(d) <= 0.0 || cos_r <= 0.0 {
                 continue;
             }
             let solid_angle = (p.area as f32) * cos_r / (dist2 * dist2.sqrt());
-            if solid_angle > FAR_CELLS * cell {
+            if solid_angle > FAR_CELLS * cell || !p.elements.clone().any(&keep) {
                 continue;
             }
             // One ray to the patch's centre first: most such patches are
@@ -349,25 +367,16 @@ impl<'a> GpuFormFactors<'a> {
             for j in p.elements.clone() {
                 let e = &mesh.elements[j as usize];
                 let to = e.centre + rn * mesh.ray_offset - origin;
-                if n.dot(to) > 0.0
+                if keep(j)
+                    && n.dot(to) > 0.0
                     && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
                 {
                     self.far.push((j, formfactor::VISIBLE_ONE + 1));
                 }
             }
         }
-        self.append_far(|_| true);
+        self.append_far();
         self.timings.far += start.elapsed();
-    }
-
-    /// The far receivers of the shot's first hemisphere (see
-    /// [`GpuFormFactors::add_far_receivers`]), added to a split group's
-    /// pairs where its own hemisphere did not cover their patches: a
-    /// receiver that small is as far from every group's centre, and its
-    /// rays cost more than the group's drawing in a cluttered scene.
-    fn reuse_far_receivers(&mut self, keep: impl Fn(u32) -> bool) {
-        self.mark_seen();
-        self.append_far(keep);
     }
 
     /// Marks in `self.seen` the patches the last hemisphere's cells covered.
@@ -379,16 +388,15 @@ impl<'a> GpuFormFactors<'a> {
         }
     }
 
-    /// Appends to the pairs the far receivers that `keep` accepts and whose
-    /// patches are not in `self.seen`, keeping the pairs sorted by element.
-    fn append_far(&mut self, keep: impl Fn(u32) -> bool) {
+    /// Appends the far receivers to the pairs, keeping them sorted by element.
+    fn append_far(&mut self) {
         let mesh = self.mesh;
         let before = self.pairs.len();
         let seen = &self.seen;
         self.pairs.extend(
             self.far
                 .iter()
-                .filter(|&&(j, _)| keep(j) && !seen[mesh.elements[j as usize].patch as usize]),
+                .filter(|&&(j, _)| !seen[mesh.elements[j as usize].patch as usize]),
         );
         if self.pairs.len() > before {
             self.pairs.sort_unstable_by_key(|p| p.0);
@@ -452,7 +460,7 @@ impl<'a> GpuFormFactors<'a> {
             1
         };
         let centre = self.last_centre;
-        self.add_far_receivers(shooter, centre, tier);
+        self.add_far_receivers(shooter, centre, tier, f32::INFINITY, |_| true);
         self.timings.receivers += self.pairs.len() as u64;
         let mut row = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
         if let Some(p) = self.penumbra.get_mut(shooter as usize) {
@@ -486,7 +494,9 @@ impl<'a> GpuFormFactors<'a> {
         for (group, at) in &groups {
             let reach = near as f32 + at.distance(patch_centre);
             exchange += self.hemisphere(shooter, *at, tier, reach)?;
-            self.reuse_far_receivers(&is_near);
+            // Its own far receivers, near ones only (few rays).
+            let within = reach + self.max_patch_radius;
+            self.add_far_receivers(shooter, *at, tier, within, &is_near);
             self.timings.receivers += self.pairs.len() as u64;
             let mut part = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, group.clone());
             part.retain(&is_near);
