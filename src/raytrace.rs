@@ -446,18 +446,42 @@ mod tests {
         Polygon::square(centre, half, a, b, [0.5; 3], [0.0; 3])
     }
 
+    /// A number in [0, 1).
+    fn unit(rng: &mut crate::fuzz::Rng) -> f32 {
+        (rng.next_u64() >> 11) as f32 / (1u64 << 53) as f32
+    }
+
+    /// `n` squares: centres with x and y within `box_[0]` / 2 of 0 and z
+    /// from `box_[1]` to `box_[1] + box_[2]`, half-sizes from `size[0]` to
+    /// `size[0] + size[1]`, the share `facing_z` of them facing +z (the rest
+    /// +x).
+    fn scattered(
+        rng: &mut crate::fuzz::Rng,
+        n: usize,
+        box_: [f32; 3],
+        size: [f32; 2],
+        facing_z: f32,
+    ) -> Vec<Polygon> {
+        (0..n)
+            .map(|_| {
+                let [w, z0, dz] = box_;
+                let c = Vec3::new(
+                    unit(rng) * w - w / 2.0,
+                    unit(rng) * w - w / 2.0,
+                    z0 + unit(rng) * dz,
+                );
+                quad(c, size[0] + unit(rng) * size[1], unit(rng) < facing_z)
+            })
+            .collect()
+    }
+
     #[test]
     fn nearest_hit_matches_a_brute_force_scan() {
         // A stack of squares at random heights and offsets: the hierarchy's
         // nearest hit is the one a scan of every polygon finds.
         let mut rng = crate::fuzz::Rng(7);
-        let mut unit = || (rng.next_u64() >> 11) as f32 / (1u64 << 53) as f32;
-        let polys: Vec<Polygon> = (0..200)
-            .map(|_| {
-                let c = Vec3::new(unit() * 4.0 - 2.0, unit() * 4.0 - 2.0, unit() * 10.0);
-                quad(c, 0.2 + unit() * 0.5, unit() < 0.5)
-            })
-            .collect();
+        let polys = scattered(&mut rng, 200, [4.0, 0.0, 10.0], [0.2, 0.5], 0.5);
+        let mut unit = || unit(&mut rng);
         let bvh = Bvh::new(&polys);
         assert_eq!(bvh.triangles(), 400);
         for _ in 0..2000 {
@@ -487,13 +511,8 @@ mod tests {
         // order, so the hint is often right and sometimes stale: the verdict
         // is the plain walk's every time, and the hint does the work.
         let mut rng = crate::fuzz::Rng(11);
-        let mut unit = || (rng.next_u64() >> 11) as f32 / (1u64 << 53) as f32;
-        let polys: Vec<Polygon> = (0..300)
-            .map(|_| {
-                let c = Vec3::new(unit() * 8.0 - 4.0, unit() * 8.0 - 4.0, unit() * 4.0 + 1.0);
-                quad(c, 0.1 + unit() * 0.4, unit() < 0.7)
-            })
-            .collect();
+        let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
+        let mut unit = || unit(&mut rng);
         let bvh = Bvh::new(&polys);
         let mut hint = None;
         let (mut hidden, mut hinted) = (0, 0);
