@@ -277,14 +277,7 @@ impl Bvh {
         t_max: f32,
         skip: [u32; 2],
     ) -> bool {
-        let mut hit = false;
-        self.walk(origin, dir, t_min, t_max, |tri, t_min| {
-            if !skip.contains(&tri.polygon) && intersect(tri, origin, dir, t_min, t_max).is_some() {
-                hit = true;
-            }
-            (hit, t_max)
-        });
-        hit
+        self.occluded_hinted(origin, dir, t_min, t_max, skip, &mut None)
     }
 
     /// [`Bvh::occluded`], trying first the leaf `hint` (the one that

@@ -140,9 +140,6 @@ pub struct GpuFormFactors<'a> {
     composite: Vec<u32>,
     /// The largest distance from a patch's centre to its corners.
     max_patch_radius: f32,
-    /// The far receivers of the last shot (see
-    /// [`GpuFormFactors::add_far_receivers`]).
-    far: Vec<(u32, u64)>,
     /// Where the last unsplit hemisphere stood.
     last_centre: glam::Vec3,
 }
@@ -184,7 +181,6 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
-            far: Vec::new(),
             max_patch_radius: mesh
                 .patches
                 .iter()
@@ -328,7 +324,7 @@ impl<'a> GpuFormFactors<'a> {
         let n = mesh.polygons[sp.polygon as usize].normal;
         let origin = centre + n * mesh.ray_offset;
         self.mark_seen();
-        self.far.clear();
+        let before = self.pairs.len();
         // Most candidates in a cluttered scene are hidden, by the same
         // occluder as the patch before them (see `Bvh::occluded_hinted`).
         let mut hint = None;
@@ -371,11 +367,13 @@ impl<'a> GpuFormFactors<'a> {
                     && n.dot(to) > 0.0
                     && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
                 {
-                    self.far.push((j, formfactor::VISIBLE_ONE + 1));
+                    self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
                 }
             }
         }
-        self.append_far();
+        if self.pairs.len() > before {
+            self.pairs.sort_unstable_by_key(|p| p.0);
+        }
         self.timings.far += start.elapsed();
     }
 
@@ -385,21 +383,6 @@ impl<'a> GpuFormFactors<'a> {
         self.seen.iter_mut().for_each(|s| *s = false);
         for &(j, _) in &self.pairs {
             self.seen[mesh.elements[j as usize].patch as usize] = true;
-        }
-    }
-
-    /// Appends the far receivers to the pairs, keeping them sorted by element.
-    fn append_far(&mut self) {
-        let mesh = self.mesh;
-        let before = self.pairs.len();
-        let seen = &self.seen;
-        self.pairs.extend(
-            self.far
-                .iter()
-                .filter(|&&(j, _)| !seen[mesh.elements[j as usize].patch as usize]),
-        );
-        if self.pairs.len() > before {
-            self.pairs.sort_unstable_by_key(|p| p.0);
         }
     }
 
