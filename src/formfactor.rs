@@ -199,9 +199,18 @@ impl Row {
         }
     }
 
-    /// Bytes this row holds.
+    /// Bytes this row holds (its allocations, not only what it uses).
     pub fn bytes(&self) -> usize {
-        4 * self.ids.len() + 8 * self.values.len()
+        std::mem::size_of::<Self>()
+            + 4 * self.ids.capacity()
+            + 8 * (self.values.capacity() + self.blocked.capacity())
+    }
+
+    /// Gives back what the row's vectors hold beyond their lengths.
+    pub fn shrink_to_fit(&mut self) {
+        self.ids.shrink_to_fit();
+        self.values.shrink_to_fit();
+        self.blocked.shrink_to_fit();
     }
 }
 

@@ -191,6 +191,11 @@ pub struct SolveArgs {
     /// results are identical, only the time changes).
     #[arg(long)]
     no_cache: bool,
+    /// The memory each rank aims to stay within, GB: the form-factor row
+    /// cache takes only what the scene, the mesh and the drawing leave of it
+    /// (at most 1 GiB a rank). It changes no number, only the time.
+    #[arg(long, default_value_t = radiosity::settings::DEFAULT_MEMORY_BUDGET as f32 / 1e9, value_parser = positive)]
+    memory: f32,
     /// Do not split hybrid shots: by default, when a receiver near the
     /// shooter is partly hidden from its centre, each group of the shooter's
     /// elements takes visibility from a hemisphere of its own.
@@ -241,6 +246,7 @@ impl SolveArgs {
             projection: self.projection,
             tessellation_tolerance: self.tessellation_tolerance,
             cache_rows: !self.no_cache,
+            memory_budget: (f64::from(self.memory) * 1e9) as u64,
             split_shots: !self.no_split,
             overshoot: self.overshoot,
             coarse: self.coarse_resolution,

@@ -241,6 +241,9 @@ pub struct Timings {
     pub rects_per_shot: f64,
     /// Shots whose form factors came from the row cache (a patch shooting again).
     pub cached_shots: u64,
+    /// The row cache each rank could hold, bytes: what its memory budget
+    /// (`--memory`) left after the scene, the mesh and the drawing, at most 1 GiB.
+    pub row_cache_bytes: u64,
     /// Shots split into one hemisphere per group of shooter elements
     /// (visibility varied across the shooter).
     pub split_shots: u64,
@@ -377,14 +380,34 @@ pub struct RankStats {
 /// This process's peak resident memory so far, bytes (`VmHWM` in
 /// `/proc/self/status`; 0 where there is none).
 pub fn peak_resident_bytes() -> u64 {
+    proc_status_bytes("VmHWM:")
+}
+
+/// This process's resident memory now, bytes (`VmRSS`; 0 where there is none).
+pub fn resident_bytes() -> u64 {
+    proc_status_bytes("VmRSS:")
+}
+
+/// A `kB` line of `/proc/self/status`, in bytes.
+fn proc_status_bytes(key: &str) -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
         .and_then(|s| {
             s.lines()
-                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .find_map(|l| l.strip_prefix(key))
                 .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
         })
         .map_or(0, |kb| kb * 1024)
+}
+
+/// Logs (at debug level) the resident and peak memory after `stage`: where
+/// a big scene's memory goes (`RUST_LOG=radiosity=debug`).
+pub fn log_memory(stage: &str) {
+    log::debug!(
+        "memory after {stage}: {:.0} MB resident, {:.0} MB peak",
+        resident_bytes() as f64 / 1e6,
+        peak_resident_bytes() as f64 / 1e6
+    );
 }
 
 /// Statistics of epsilon = T_min / T_max over shots (1 is perfect balance).

@@ -54,6 +54,10 @@ impl Projection {
 /// (chosen by `radiosity bench`; see README "Performance").
 pub const DEFAULT_RASTER_PIECES: u32 = 1;
 
+/// The memory each rank aims to stay within by default, bytes (`--memory`):
+/// issue 19's bound for a 100 000-polygon scene on one rank.
+pub const DEFAULT_MEMORY_BUDGET: u64 = 2_000_000_000;
+
 /// Shooters below this fraction of the emitted power draw the coarse
 /// hemisphere (`--coarse-below`; README "Coarse hemispheres for weak shooters").
 pub const DEFAULT_COARSE_BELOW: f64 = 3e-3;

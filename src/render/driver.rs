@@ -175,10 +175,13 @@ pub fn render_on(
     if comm.rank() == 0 {
         log_mesh(scene, &mesh);
     }
+    crate::report::log_memory("the mesh");
     let t = Instant::now();
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
     timings.setup = t.elapsed().as_secs_f64();
+    crate::report::log_memory("the rasteriser's set-up");
     let (mut solver, trace, so_far) = start_solver(&mesh, opts, comm, &refinement)?;
+    crate::report::log_memory("the solver's set-up");
     let header = Header {
         scene: scene.name.clone(),
         fingerprint,
@@ -204,6 +207,7 @@ pub fn render_on(
         progress,
     )?;
     timings.solve = solved.solve;
+    source.release_cache();
     let excluded = solved.trace.traffic.plus(before);
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
@@ -213,6 +217,7 @@ pub fn render_on(
     else {
         return Ok(None);
     };
+    crate::report::log_memory("the solve");
     drop((solver, source));
     let shots = gathered.whole.shots();
     phase_timings(&mut timings, &gathered.phases, &solved.stats, shots);
@@ -371,6 +376,7 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.bounds = t.bounds.as_secs_f64();
     timings.rects_per_shot = t.rects as f64 / shots.max(1) as f64;
     timings.cached_shots = t.cached;
+    timings.row_cache_bytes = t.cache_budget;
     timings.split_shots = t.split;
     timings.coarse_shots = t.coarse;
     timings.rasterise = t.rasterise.as_secs_f64();

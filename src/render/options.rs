@@ -8,8 +8,8 @@ use crate::mesh::MeshSettings;
 use crate::parallel::Exchange;
 use crate::scene::{Scene, Subdivision};
 pub use crate::settings::{
-    FormFactorMethod, Projection, DEFAULT_COARSE_BELOW, DEFAULT_RASTER_PIECES,
-    DEFAULT_TESSELLATION_TOLERANCE,
+    FormFactorMethod, Projection, DEFAULT_COARSE_BELOW, DEFAULT_MEMORY_BUDGET,
+    DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
 };
 use crate::solver::StopRule;
 use std::sync::atomic::AtomicBool;
@@ -59,6 +59,10 @@ pub struct RenderOptions {
     /// Keep form-factor rows of patches that have shot, so a patch that
     /// shoots again costs no rasterisation (results are identical either way).
     pub cache_rows: bool,
+    /// The memory each rank aims to stay within, bytes: the row cache takes
+    /// only what the scene, the mesh and the drawing leave of it (at most
+    /// 1 GiB). It changes no number, only the time.
+    pub memory_budget: u64,
     /// Split a hybrid shot into one hemisphere per group of shooter elements
     /// where a near receiver is partly hidden from the shooter's centre.
     pub split_shots: bool,
@@ -111,6 +115,7 @@ impl Default for RenderOptions {
             shadow_rays: crate::render::image::DEFAULT_SHADOW_RAYS,
             ambient: true,
             cache_rows: true,
+            memory_budget: DEFAULT_MEMORY_BUDGET,
             split_shots: true,
             overshoot: false,
             coarse: None,

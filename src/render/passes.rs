@@ -51,7 +51,9 @@ pub fn refined_mesh(
         if pass == 0 {
             summary.start = [mesh.patches.len(), mesh.elements.len()];
         }
+        crate::report::log_memory("a pass's mesh");
         let (decided, shots, seconds) = one_pass(gpu, scene, &mesh, opts, comm, progress)?;
+        crate::report::log_memory("a pass's solve");
         summary.passes += 1;
         summary.shots += shots;
         summary.seconds += seconds;

@@ -46,6 +46,8 @@ pub struct PhaseTimes {
     pub split: u64,
     /// Shots drawn at the coarse resolution (weak shooters).
     pub coarse: u64,
+    /// The row cache a rank may hold, bytes (what its memory budget left).
+    pub cache_budget: u64,
 }
 
 impl PhaseTimes {
@@ -160,6 +162,7 @@ impl<'a> GpuFormFactors<'a> {
             .map(|res| Tier::new(gpu, mesh, opts, res, n, extent))
             .collect::<Result<Vec<_>, _>>()?;
         let patches = mesh.elements.iter().map(|e| e.patch);
+        let per_rank_cache = cache_budget(opts, comm);
         Ok(Self {
             gpu,
             mesh,
@@ -174,11 +177,14 @@ impl<'a> GpuFormFactors<'a> {
             pairs: Vec::new(),
             view: [0; 3],
             last_blocked: 0.0,
-            timings: PhaseTimes::default(),
+            timings: PhaseTimes {
+                cache_budget: if opts.cache_rows { per_rank_cache } else { 0 },
+                ..PhaseTimes::default()
+            },
             busy: Vec::new(),
             busy_cpu: Vec::new(),
             penumbra: vec![[0, 0]; mesh.patches.len()],
-            cache: RowCache::for_ranks(opts.cache_rows, n),
+            cache: RowCache::for_ranks(opts.cache_rows, per_rank_cache, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
             max_patch_radius: mesh
@@ -190,6 +196,12 @@ impl<'a> GpuFormFactors<'a> {
             composite: Vec::new(),
             last_centre: glam::Vec3::ZERO,
         })
+    }
+
+    /// Drops the row cache (once the solve is over: what comes next, the
+    /// gather and the image, needs the memory more).
+    pub fn release_cache(&mut self) {
+        self.cache = RowCache::new(0);
     }
 
     /// Bytes of the row computed by the last shot that the cache has not
@@ -574,6 +586,31 @@ impl<'a> GpuFormFactors<'a> {
         }
         (sum, t.elapsed())
     }
+}
+
+/// The row cache each rank may hold: the least that any rank's memory
+/// budget leaves (see [`crate::render::cache::cache_budget`]), so that every
+/// rank keeps or drops a row alike.
+fn cache_budget(opts: &RenderOptions, comm: &dyn Collectives) -> u64 {
+    let resident = crate::report::resident_bytes();
+    let own = crate::render::cache::cache_budget(opts.memory_budget, resident);
+    let least = if comm.size() == 1 {
+        own
+    } else {
+        // Exact in f64: a byte count below 2^53.
+        comm.all_gather_f64(&[own as f64])
+            .into_iter()
+            .fold(own as f64, f64::min) as u64
+    };
+    if comm.rank() == 0 && opts.cache_rows {
+        log::debug!(
+            "row cache: {:.0} MB a rank ({:.0} MB resident of a {:.1} GB budget)",
+            least as f64 / 1e6,
+            resident as f64 / 1e6,
+            opts.memory_budget as f64 / 1e9
+        );
+    }
+    least
 }
 
 /// The share of the shot `region` (of patch `shooter`, through `row`) that
