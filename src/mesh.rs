@@ -454,6 +454,13 @@ impl Mesh {
             .sum()
     }
 
+    /// The power the solution starts from, W (sum over RGB): the surfaces'
+    /// emission plus what the lights, the sun and the sky deliver. What the
+    /// unshot fraction and a shot's strength are measured against.
+    pub fn source_power(&self) -> f64 {
+        self.emitted_power() + self.light_field.emitted
+    }
+
     /// Total area of all elements.
     pub fn total_area(&self) -> f64 {
         self.elements.iter().map(|e| e.area).sum()

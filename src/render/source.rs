@@ -168,7 +168,10 @@ impl<'a> GpuFormFactors<'a> {
             mesh,
             comm,
             tiers,
-            choice: TierChoice::new(opts, mesh.emitted_power()),
+            // Against all the light, the lights' and sky's too: measured
+            // against the surfaces' emission alone, a scene lit only by a
+            // sun had no weak shot and never drew the coarse tier.
+            choice: TierChoice::new(opts, mesh.source_power()),
             last_tier: 0,
             method: opts.form_factor,
             exchanger: Exchanger::new(comm, opts.exchange, opts.form_factor, patches),

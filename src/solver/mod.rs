@@ -286,7 +286,7 @@ impl<'m> Solver<'m> {
             .iter()
             .map(|p| mesh.polygons[p.polygon as usize].exitance)
             .collect();
-        let emitted_power = mesh.emitted_power() + mesh.light_field.emitted;
+        let emitted_power = mesh.source_power();
         let mut solver = Self {
             mesh,
             rank,

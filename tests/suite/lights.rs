@@ -172,6 +172,16 @@ fn a_point_light_in_a_closed_room_balances_its_power() {
     assert_eq!((lights[0].name.as_str(), lights[0].kind), ("bulb", "point"));
     assert!(rel(lights[0].power.expect("a point light's power"), power) < 1e-12);
     check("balance", e.balance, 1.0, 0.01);
+    // Weak shots are weak against all the light, a light's too: measured
+    // against the surfaces' emission alone (none here) no shot was weak,
+    // and a room lit by lights never drew the coarse hemisphere.
+    let t = &r.report.timings;
+    assert!(
+        t.coarse_shots > 0 && t.coarse_shots < r.report.shots,
+        "{} of {} shots coarse",
+        t.coarse_shots,
+        r.report.shots
+    );
 }
 
 #[test]
