@@ -265,9 +265,10 @@ impl<'m> ShotLoop<'m> {
         solver: &Solver,
         hooks: &dyn LoopHooks,
     ) -> Vec<Vote> {
+        let (unshot, candidate) = solver.local_vote();
         let mine = Vote {
-            unshot: solver.local_unshot_fixed(),
-            candidate: solver.local_candidate(),
+            unshot,
+            candidate,
             landed: self.landed,
             delivered: self.delivered,
             pending_bytes: source.pending_bytes(),
