@@ -609,13 +609,13 @@ impl HemisphereRasterizer {
     }
 }
 
-/// A buffer of `size` bytes for `usage`, not mapped.
 /// The most rectangles one draw call draws (see [`HemisphereRasterizer::submit`]).
 const DRAW_INSTANCES: u32 = 1 << 12;
 
 /// The rectangle buffer's first size (it grows to the largest shot).
 const INITIAL_INSTANCE_BYTES: u64 = 1 << 20;
 
+/// A buffer of `size` bytes for `usage`, not mapped.
 fn buffer(
     device: &wgpu::Device,
     label: &str,

@@ -162,7 +162,12 @@ impl<'a> GpuFormFactors<'a> {
             .map(|res| Tier::new(gpu, mesh, opts, res, n, extent))
             .collect::<Result<Vec<_>, _>>()?;
         let patches = mesh.elements.iter().map(|e| e.patch);
-        let per_rank_cache = cache_budget(opts, comm);
+        // Every rank has the same options, so all or none meet in the collective.
+        let per_rank_cache = if opts.cache_rows {
+            cache_budget(opts, comm)
+        } else {
+            0
+        };
         Ok(Self {
             gpu,
             mesh,
@@ -181,7 +186,7 @@ impl<'a> GpuFormFactors<'a> {
             view: [0; 3],
             last_blocked: 0.0,
             timings: PhaseTimes {
-                cache_budget: if opts.cache_rows { per_rank_cache } else { 0 },
+                cache_budget: per_rank_cache,
                 ..PhaseTimes::default()
             },
             busy: Vec::new(),
@@ -605,7 +610,7 @@ fn cache_budget(opts: &RenderOptions, comm: &dyn Collectives) -> u64 {
             .into_iter()
             .fold(own as f64, f64::min) as u64
     };
-    if comm.rank() == 0 && opts.cache_rows {
+    if comm.rank() == 0 {
         log::debug!(
             "row cache: {:.0} MB a rank ({:.0} MB resident of a {:.1} GB budget)",
             least as f64 / 1e6,

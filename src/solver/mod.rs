@@ -386,9 +386,7 @@ impl<'m> Solver<'m> {
     /// This rank's unshot power (of |dB|) over the emitted power, in
     /// [`UNSHOT_ONE`] fixed point.
     pub fn local_unshot_fixed(&self) -> u64 {
-        self.own_patches()
-            .map(|i| self.to_fixed(self.patch_power(i)))
-            .sum()
+        self.local_vote().0
     }
 
     /// A power over the emitted power, in [`UNSHOT_ONE`] fixed point.
@@ -400,10 +398,12 @@ impl<'m> Solver<'m> {
     }
 
     /// [`Solver::local_unshot_fixed`] and [`Solver::local_candidate`] in one
-    /// scan of the patches (what every shot's vote needs; the same numbers).
+    /// scan of the patches (what every shot's vote needs).
     pub fn local_vote(&self) -> (u64, Option<Candidate>) {
         let mut fixed = 0u64;
         let mut best: Option<(usize, f64)> = None;
+        // Patches in increasing order, so the first of equal powers wins
+        // (the lowest index, as `Candidate::best` breaks ties).
         for i in self.own_patches() {
             let w = self.patch_power(i);
             fixed += self.to_fixed(w);
@@ -444,7 +444,7 @@ impl<'m> Solver<'m> {
             return out;
         }
         for i in self.own_patches() {
-            let (b, a) = (&self.unshot[i], self.mesh.patches[i].area);
+            let (b, a) = (&self.unshot[i], self.patch_area[i]);
             for c in 0..3 {
                 out[c] += (b[c] * a / self.emitted_power * UNSHOT_ONE).round() as i64;
             }
@@ -469,17 +469,7 @@ impl<'m> Solver<'m> {
 
     /// This rank's patch with the largest unshot power (lowest index on ties), if any has some.
     pub fn local_candidate(&self) -> Option<Candidate> {
-        // Patches in increasing order, so the first of equal powers wins
-        // (the lowest index, as `Candidate::best` breaks ties).
-        let mut best: Option<(usize, f64)> = None;
-        for i in self.own_patches() {
-            let w = self.patch_power(i);
-            if w > 0.0 && best.is_none_or(|(_, b)| w > b) {
-                best = Some((i, w));
-            }
-        }
-        let (i, power) = best?;
-        Some(self.patch_candidate(i, power))
+        self.local_vote().1
     }
 
     /// The candidate of patch `i`, whose power is `power`.
