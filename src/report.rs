@@ -363,6 +363,9 @@ pub struct RankStats {
     pub cells: u64,
     /// ... and receiving elements whose form factors it summed.
     pub receivers: u64,
+    /// Proxies whose cell rectangle it computed (the bounds pass's work;
+    /// over several ranks, only polygons that may show in its tiles).
+    pub bounded: u64,
     /// This process's peak resident memory, bytes (Linux `VmHWM`; 0 where
     /// unknown), when the solve was gathered.
     pub peak_resident_bytes: u64,

@@ -70,6 +70,9 @@ pub struct RasterStats {
     /// Rectangles drawn (seam copies included; one cut into pieces at a
     /// rank's tiles counts once), or triangles with the tessellated projection.
     pub rects: u32,
+    /// Proxies whose cell rectangle was computed: over several ranks, only
+    /// those of polygons that may show in the rank's tiles.
+    pub bounded: u32,
     /// Uploading, drawing and waiting for the GPU.
     pub rasterise: Duration,
     /// Mapping the item buffer and copying it out.
@@ -577,11 +580,11 @@ impl HemisphereRasterizer {
             clip: !lattice,
         });
         self.find_outside(shooter);
-        let mut rects = 0;
+        let mut collected = super::proxies::Collected::default();
         if self.tess.is_some() {
             self.collect_triangles(shooter);
         } else {
-            rects = self.proxies.collect_rects(
+            collected = self.proxies.collect_rects(
                 shooter,
                 &self.outside,
                 self.res,
@@ -601,8 +604,9 @@ impl HemisphereRasterizer {
             bounds,
             rects: match &self.tess {
                 Some(t) => (t.vertices.len() / 3) as u32,
-                None => rects as u32,
+                None => collected.rects as u32,
             },
+            bounded: collected.bounded as u32,
             rasterise,
             readback: read_start.elapsed(),
         })

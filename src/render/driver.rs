@@ -343,6 +343,7 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, traffic: Traffic, cpu: f64
         cpu,
         traffic.cpu_seconds,
         traffic.calls as f64,
+        t.bounded as f64,
     ]
 }
 
@@ -366,6 +367,7 @@ fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
         cpu_seconds: v[13],
         mpi_cpu_seconds: v[14],
         mpi_calls: v[15] as u64,
+        bounded: v[16] as u64,
     }
 }
 

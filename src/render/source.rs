@@ -34,6 +34,9 @@ pub struct PhaseTimes {
     pub far: Duration,
     /// Rectangles drawn.
     pub rects: u64,
+    /// Proxies whose cell rectangle this rank computed (the bounds pass's
+    /// work: over several ranks, only polygons that may show in its tiles).
+    pub bounded: u64,
     /// Hemisphere cells this rank drew (its tiles' cells, summed over the
     /// shots it drew): work the ranks divide.
     pub cells: u64,
@@ -419,6 +422,7 @@ impl<'a> GpuFormFactors<'a> {
         )?;
         self.timings.bounds += stats.bounds;
         self.timings.rects += stats.rects as u64;
+        self.timings.bounded += stats.bounded as u64;
         self.timings.cells += tier.cells.cells_at(own) as u64;
         self.timings.rasterise += stats.rasterise;
         self.timings.read_back += stats.readback;
