@@ -300,7 +300,7 @@ pub(super) fn sphere_cells(c: Vec3, r: f32, res: Resolution) -> Option<[f32; 4]>
     }
     let (rows, cols) = (res.rows as f32, res.cols as f32);
     let alpha = (r / d).asin();
-    let rho = c.x.hypot(c.y);
+    let rho = (c.x * c.x + c.y * c.y).sqrt();
     let polar = rho.atan2(c.z);
     let y0 = (polar - alpha) / FRAC_PI_2 * rows - SPHERE_MARGIN;
     let y1 = (polar + alpha) / FRAC_PI_2 * rows + SPHERE_MARGIN;
@@ -308,7 +308,12 @@ pub(super) fn sphere_cells(c: Vec3, r: f32, res: Resolution) -> Option<[f32; 4]>
         return Some([0.0, cols, y0, y1]);
     }
     let beta = (r / rho).asin();
-    let azimuth = c.y.atan2(c.x).rem_euclid(TAU);
+    let azimuth = c.y.atan2(c.x);
+    let azimuth = if azimuth < 0.0 {
+        azimuth + TAU
+    } else {
+        azimuth
+    };
     Some([
         (azimuth - beta) / TAU * cols - SPHERE_MARGIN,
         (azimuth + beta) / TAU * cols + SPHERE_MARGIN,
@@ -368,6 +373,26 @@ fn hidden_back_face(
             .is_some_and(|c| (shooter.centre - c[0]).dot(poly.normal) < 0.0)
 }
 
+/// The largest integer at most `x` (saturating; `x` is finite here).
+fn floor_i(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) > x {
+        t - 1
+    } else {
+        t
+    }
+}
+
+/// The smallest integer at least `x` (saturating; `x` is finite here).
+fn ceil_i(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) < x {
+        t + 1
+    } else {
+        t
+    }
+}
+
 /// Scenes with at least this many proxies find their rectangles on several threads.
 const PARALLEL_PROXIES: usize = 8192;
 
@@ -388,20 +413,25 @@ pub(super) struct Ownership {
 
 impl Ownership {
     /// The spans of `[lo, hi]` along `axis` that lie in this rank's tiles.
+    /// (Whole cells and tiles in integers: f32 floor, ceil and rem_euclid
+    /// are library calls on the baseline x86-64 target, and this runs for
+    /// every rectangle on every rank.)
     fn spans(&self, lo: f32, hi: f32, axis: usize) -> impl Iterator<Item = [f32; 2]> {
-        let (tile, grid, own) = (self.tile[axis], self.grid[axis], self.own[axis]);
-        let c0 = (lo - 0.5).ceil().max(0.0);
-        let c1 = (hi - 0.5).floor().min(self.cells[axis] - 1.0);
-        let (t0, t1) = ((c0 / tile).floor(), (c1 / tile).floor());
+        let [tile, grid, own, cells] =
+            [self.tile, self.grid, self.own, self.cells].map(|v| v[axis] as i64);
+        let c0 = ceil_i(lo - 0.5).max(0);
+        let c1 = floor_i(hi - 0.5).min(cells - 1);
+        let (t0, t1) = (c0.div_euclid(tile), c1.div_euclid(tile));
         // The first of this rank's tiles at or after t0.
         let first = t0 + (own - t0).rem_euclid(grid);
         let count = if c0 <= c1 && first <= t1 {
-            ((t1 - first) / grid).floor() as usize + 1
+            ((t1 - first) / grid) as usize + 1
         } else {
             0
         };
+        let tile = tile as f32;
         (0..count).map(move |k| {
-            let t = first + k as f32 * grid;
+            let t = (first + k as i64 * grid) as f32;
             [lo.max(t * tile), hi.min((t + 1.0) * tile)]
         })
     }
@@ -589,5 +619,49 @@ mod tests {
             "only {culled} of {} culled",
             culled + kept
         );
+    }
+
+    #[test]
+    fn a_rectangles_pieces_hold_exactly_the_ranks_cells_it_holds() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let centre_in = |r: &[f32; 4], x: u32, y: u32| {
+            let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+            r[0] <= cx && cx <= r[1] && r[2] <= cy && cy <= r[3]
+        };
+        for o in layouts() {
+            let own = |x: u32, y: u32| {
+                let (tx, ty) = (x / o.tile[0] as u32, y / o.tile[1] as u32);
+                tx % o.grid[0] as u32 == o.own[0] as u32 && ty % o.grid[1] as u32 == o.own[1] as u32
+            };
+            for _ in 0..40 {
+                let (x0, y0) = (rnd() * 560.0 - 20.0, rnd() * 140.0 - 6.0);
+                let rect = [x0, x0 + rnd() * 200.0, y0, y0 + rnd() * 60.0];
+                let pieces: Vec<[f32; 4]> = o.pieces(rect).collect();
+                let mut holds = false;
+                for y in 0..128 {
+                    for x in 0..512 {
+                        let want = own(x, y) && centre_in(&rect, x, y);
+                        let got = pieces.iter().filter(|p| centre_in(p, x, y)).count();
+                        assert_eq!(
+                            got, want as usize,
+                            "cell ({x}, {y}) of {rect:?} in tiles {:?}",
+                            o.own
+                        );
+                        holds |= want;
+                    }
+                }
+                assert_eq!(
+                    o.holds_own(rect[0], rect[1], rect[2], rect[3]),
+                    holds,
+                    "{rect:?}"
+                );
+            }
+        }
     }
 }
