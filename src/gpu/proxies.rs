@@ -528,16 +528,20 @@ fn push_piece(
 mod tests {
     use super::*;
 
-    /// Random quads around a shooter at the origin (z up), small and
-    /// large, near and far, some reaching below the horizon.
-    fn quads(count: usize) -> Vec<[Vec3; 4]> {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = move || {
+    /// A seeded xorshift generator of numbers in [0, 1).
+    fn uniform(mut seed: u64) -> impl FnMut() -> f32 {
+        move || {
             seed ^= seed << 13;
             seed ^= seed >> 7;
             seed ^= seed << 17;
             (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        }
+    }
+
+    /// Random quads around a shooter at the origin (z up), small and
+    /// large, near and far, some reaching below the horizon.
+    fn quads(count: usize) -> Vec<[Vec3; 4]> {
+        let mut rnd = uniform(0x2545_f491_4f6c_dd1d);
         (0..count)
             .map(|_| {
                 let dist = 0.2 + 20.0 * rnd() * rnd();
@@ -623,13 +627,7 @@ mod tests {
 
     #[test]
     fn a_rectangles_pieces_hold_exactly_the_ranks_cells_it_holds() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rnd = uniform(0x9e37_79b9_7f4a_7c15);
         let centre_in = |r: &[f32; 4], x: u32, y: u32| {
             let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
             r[0] <= cx && cx <= r[1] && r[2] <= cy && cy <= r[3]
