@@ -74,6 +74,8 @@ struct ViewKey {
 pub struct Viewer {
     args: Args,
     tx: Sender<Command>,
+    /// The solve's thread, joined on exit (see [`crate::view::join_by`]).
+    solve_thread: Option<std::thread::JoinHandle<()>>,
     shared: Arc<Mutex<Snapshot>>,
     home: Orbit,
     orbit: Orbit,
@@ -149,7 +151,7 @@ impl Viewer {
             view_ctx.request_repaint_after(BACKGROUND_FRAME)
         })?;
         let (solver_gpu, solver_shared, ctx) = (gpu(), shared.clone(), cc.egui_ctx.clone());
-        std::thread::Builder::new()
+        let solve_thread = std::thread::Builder::new()
             .name("solve".into())
             .spawn(move || {
                 solve::run(solver_gpu, scene, settings, rx, solver_shared, move || {
@@ -176,6 +178,7 @@ impl Viewer {
             view: None,
             reference,
             worker,
+            solve_thread: Some(solve_thread),
             view_ms: 0.0,
             last_request: std::time::Instant::now(),
             started: std::time::Instant::now(),
@@ -747,8 +750,20 @@ impl eframe::App for Viewer {
             }
         }
         solve::send(&self.tx, Command::Quit);
+        // Both threads use the device: let them leave it before the
+        // process exits (a detached one inside lavapipe at exit crashed
+        // the viewer about once in fifteen test runs). A shot or a view
+        // takes well under this, even on Sponza.
+        let deadline = std::time::Instant::now() + EXIT_WAIT;
+        self.worker.stop(deadline);
+        if let Some(t) = self.solve_thread.take() {
+            crate::view::join_by(t, deadline);
+        }
     }
 }
+
+/// How long closing the window waits for the background threads.
+const EXIT_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// The `surfaces` of a report or of a `radiosity accuracy` reference.
 fn read_reference(path: &std::path::Path) -> Result<Vec<radiosity::report::Surface>, String> {

@@ -42,9 +42,11 @@ pub struct Finished<K> {
 
 /// The UI's handle on the view thread.
 pub struct ViewWorker<K> {
-    tx: Sender<Request<K>>,
+    /// `None` once [`ViewWorker::stop`] has closed the channel.
+    tx: Option<Sender<Request<K>>>,
     done: Arc<Mutex<Option<Finished<K>>>>,
     busy: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
 }
 
 impl<K: Send + 'static> ViewWorker<K> {
@@ -54,11 +56,26 @@ impl<K: Send + 'static> ViewWorker<K> {
         let done = Arc::new(Mutex::new(None));
         let busy = Arc::new(AtomicBool::new(false));
         let (d, b) = (done.clone(), busy.clone());
-        std::thread::Builder::new()
+        let thread = std::thread::Builder::new()
             .name("view".into())
             .spawn(move || run(gpu, rx, d, b, wake))
             .map_err(|e| format!("cannot start the view thread: {e}"))?;
-        Ok(Self { tx, done, busy })
+        Ok(Self {
+            tx: Some(tx),
+            done,
+            busy,
+            thread: Some(thread),
+        })
+    }
+
+    /// Closes the channel and waits, at most until `deadline`, for the
+    /// thread to finish its drawing and leave the device: a thread still
+    /// inside the driver when the process exits can crash it.
+    pub fn stop(&mut self, deadline: Instant) {
+        self.tx = None;
+        if let Some(t) = self.thread.take() {
+            join_by(t, deadline);
+        }
     }
 
     /// Whether a request is being drawn (the UI then waits for it before
@@ -70,7 +87,7 @@ impl<K: Send + 'static> ViewWorker<K> {
     /// Asks for an image.
     pub fn request(&self, r: Request<K>) {
         self.busy.store(true, Ordering::Release);
-        if self.tx.send(r).is_err() {
+        if self.tx.as_ref().is_none_or(|tx| tx.send(r).is_err()) {
             self.busy.store(false, Ordering::Release);
         }
     }
@@ -79,6 +96,20 @@ impl<K: Send + 'static> ViewWorker<K> {
     pub fn take(&self) -> Option<Finished<K>> {
         self.done.lock().ok()?.take()
     }
+}
+
+/// Joins `thread` if it finishes by `deadline`; otherwise leaves it (a
+/// stuck driver must not keep the window from closing).
+pub fn join_by(thread: std::thread::JoinHandle<()>, deadline: Instant) {
+    while !thread.is_finished() {
+        if Instant::now() >= deadline {
+            log::warn!("a background thread did not finish in time; exiting without it");
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    // A panic there was already reported on its own thread.
+    let _ = thread.join();
 }
 
 fn run<K>(
