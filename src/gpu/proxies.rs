@@ -204,7 +204,7 @@ impl Proxies {
                 // any per-proxy work: the ranks divide the bounds.
                 if let Some(o) = ownership {
                     let c = shooter.to_local(poly.centre - shooter.centre);
-                    if !o.may_hold(sphere_cells(c, poly.radius, res)) {
+                    if !o.may_hold(sphere_cells(c, poly.radius, res, o.split())) {
                         continue;
                     }
                 }
@@ -289,8 +289,11 @@ pub(super) struct Collected {
 /// of radius r at distance rho = |c.xy| from the axis, so unless it covers
 /// the axis its azimuths lie within asin(r / rho) of `c`'s. A margin of
 /// [`SPHERE_MARGIN`] cells covers the f32 arithmetic here and the
-/// rectangles' own margin.
-pub(super) fn sphere_cells(c: Vec3, r: f32, res: Resolution) -> Option<[f32; 4]> {
+/// rectangles' own margin. Only the axes `split` says the ranks' tiles
+/// divide are bounded (the other spans every cell): over 2 ranks the
+/// tiles are columns of the hemisphere, and the polar bound would cost a
+/// third of the test for nothing.
+pub(super) fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f32; 4]> {
     use std::f32::consts::{FRAC_PI_2, TAU};
     let d = c.length();
     // Near or around the shooter the cone is wide; asin is steep there
@@ -299,12 +302,18 @@ pub(super) fn sphere_cells(c: Vec3, r: f32, res: Resolution) -> Option<[f32; 4]>
         return None;
     }
     let (rows, cols) = (res.rows as f32, res.cols as f32);
-    let alpha = (r / d).asin();
     let rho = (c.x * c.x + c.y * c.y).sqrt();
-    let polar = rho.atan2(c.z);
-    let y0 = (polar - alpha) / FRAC_PI_2 * rows - SPHERE_MARGIN;
-    let y1 = (polar + alpha) / FRAC_PI_2 * rows + SPHERE_MARGIN;
-    if r >= 0.9 * rho {
+    let (y0, y1) = if split[1] {
+        let alpha = (r / d).asin();
+        let polar = rho.atan2(c.z);
+        (
+            (polar - alpha) / FRAC_PI_2 * rows - SPHERE_MARGIN,
+            (polar + alpha) / FRAC_PI_2 * rows + SPHERE_MARGIN,
+        )
+    } else {
+        (0.0, rows)
+    };
+    if !split[0] || r >= 0.9 * rho {
         return Some([0.0, cols, y0, y1]);
     }
     let beta = (r / rho).asin();
@@ -449,6 +458,12 @@ impl Ownership {
     /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
     fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
         self.spans(x0, x1, 0).next().is_some() && self.spans(y0, y1, 1).next().is_some()
+    }
+
+    /// Whether the ranks' tiles divide the columns and the rows (the rank
+    /// grid has more than one rank along each).
+    pub(super) fn split(&self) -> [bool; 2] {
+        [self.grid[0] > 1.0, self.grid[1] > 1.0]
     }
 
     /// Whether `bounds` (from [`sphere_cells`], `None`: unknown) may hold a
@@ -603,7 +618,7 @@ mod tests {
             for o in layouts() {
                 let mut out = Vec::new();
                 let drawn = push_piece(&mut out, &d, n, 0, &Lookup::default(), res, 100.0, Some(o));
-                let may = o.may_hold(sphere_cells(centre, radius, res));
+                let may = o.may_hold(sphere_cells(centre, radius, res, o.split()));
                 assert!(
                     may || drawn == 0,
                     "a quad at {centre} (radius {radius}) draws {drawn} rectangles in tiles {:?} its sphere misses",
