@@ -204,7 +204,7 @@ impl Proxies {
                 // any per-proxy work: the ranks divide the bounds.
                 if let Some(o) = ownership {
                     let c = shooter.to_local(poly.centre - shooter.centre);
-                    if !o.may_hold(sphere_cells(c, poly.radius, res, o.split())) {
+                    if !o.may_see(c, poly.radius, res) {
                         continue;
                     }
                 }
@@ -293,7 +293,7 @@ pub(super) struct Collected {
 /// divide are bounded (the other spans every cell): over 2 ranks the
 /// tiles are columns of the hemisphere, and the polar bound would cost a
 /// third of the test for nothing.
-pub(super) fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f32; 4]> {
+fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f32; 4]> {
     use std::f32::consts::{FRAC_PI_2, TAU};
     let d = c.length();
     // Near or around the shooter the cone is wide; asin is steep there
@@ -460,16 +460,13 @@ impl Ownership {
         self.spans(x0, x1, 0).next().is_some() && self.spans(y0, y1, 1).next().is_some()
     }
 
-    /// Whether the ranks' tiles divide the columns and the rows (the rank
-    /// grid has more than one rank along each).
-    pub(super) fn split(&self) -> [bool; 2] {
-        [self.grid[0] > 1.0, self.grid[1] > 1.0]
-    }
-
-    /// Whether `bounds` (from [`sphere_cells`], `None`: unknown) may hold a
-    /// cell of this rank's tiles, its columns wrapped around the azimuth.
-    pub(super) fn may_hold(&self, bounds: Option<[f32; 4]>) -> bool {
-        let Some([x0, x1, y0, y1]) = bounds else {
+    /// Whether a sphere with centre `c` (in the shooter's frame) and radius
+    /// `r` may show in a cell of this rank's tiles ([`sphere_cells`], on
+    /// the axes the rank grid divides), its columns wrapped around the
+    /// azimuth.
+    pub(super) fn may_see(&self, c: Vec3, r: f32, res: Resolution) -> bool {
+        let split = [self.grid[0] > 1.0, self.grid[1] > 1.0];
+        let Some([x0, x1, y0, y1]) = sphere_cells(c, r, res, split) else {
             return true;
         };
         let cols = self.cells[0];
@@ -618,7 +615,7 @@ mod tests {
             for o in layouts() {
                 let mut out = Vec::new();
                 let drawn = push_piece(&mut out, &d, n, 0, &Lookup::default(), res, 100.0, Some(o));
-                let may = o.may_hold(sphere_cells(centre, radius, res, o.split()));
+                let may = o.may_see(centre, radius, res);
                 assert!(
                     may || drawn == 0,
                     "a quad at {centre} (radius {radius}) draws {drawn} rectangles in tiles {:?} its sphere misses",

@@ -710,7 +710,7 @@ impl<'m> Solver<'m> {
     /// (the whole solution's on one rank or once assembled).
     pub fn net_unshot_power(&self) -> f64 {
         self.own_patches()
-            .map(|i| power(&self.unshot[i], self.mesh.patches[i].area))
+            .map(|i| power(&self.unshot[i], self.patch_area[i]))
             .sum()
     }
 
