@@ -651,7 +651,7 @@ fn azimuth_range(u: &[Vec3; 4]) -> (f32, f32, bool) {
         if u[k].x * u[k].x + u[k].y * u[k].y < 1e-12 {
             full = true;
         }
-        a[k] = wrap(u[k].y.atan2(u[k].x));
+        a[k] = wrap(crate::angle::atan2_f32(u[k].y, u[k].x));
     }
     let (mut t0, mut span) = (0.0f32, TAU);
     for k in 0..4 {
@@ -682,8 +682,12 @@ fn azimuth_range(u: &[Vec3; 4]) -> (f32, f32, bool) {
 fn polar_range(d: &[Vec3; 4]) -> (f64, f64) {
     let w = d.map(|c| c.as_dvec3());
     let key = |v: glam::DVec3| v.z * v.z.abs() / v.length_squared();
-    let polar =
-        |v: glam::DVec3| f64::from(((v.x * v.x + v.y * v.y).sqrt() as f32).atan2(v.z as f32));
+    let polar = |v: glam::DVec3| {
+        f64::from(crate::angle::atan2_f32(
+            (v.x * v.x + v.y * v.y).sqrt() as f32,
+            v.z as f32,
+        ))
+    };
     // The candidates nearest the pole and nearest the horizon (or below it).
     let (mut top, mut bottom) = ((key(w[0]), w[0]), (key(w[0]), w[0]));
     for k in 0..4 {

@@ -102,6 +102,37 @@ pub(super) struct Proxies {
     /// Quad polygons drawn in pieces.
     pub(super) quads: Vec<QuadGrid>,
     pub(super) polygons: Vec<PolygonProxies>,
+    /// A bounding sphere of each run of [`BLOCK`] consecutive polygons
+    /// (centre, radius): a shot skips a run wholly out of view, or wholly
+    /// outside a rank's tiles, without looking at its polygons.
+    pub(super) blocks: Vec<(Vec3, f32)>,
+}
+
+/// Polygons per block of [`Proxies::blocks`]. Consecutive polygons are
+/// mostly near each other (one glTF mesh, one box), so a block's sphere is
+/// small; 32 keeps the block test a small share of the polygons' tests.
+const BLOCK: usize = 32;
+
+/// The bounding spheres of each [`BLOCK`] consecutive polygons.
+fn block_spheres(polygons: &[PolygonProxies]) -> Vec<(Vec3, f32)> {
+    polygons
+        .chunks(BLOCK)
+        .map(|run| {
+            let (lo, hi) = run.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), p| {
+                (lo.min(p.centre - p.radius), hi.max(p.centre + p.radius))
+            });
+            let centre = 0.5 * (lo + hi);
+            let radius = run
+                .iter()
+                .map(|p| p.centre.distance(centre) + p.radius)
+                .fold(0.0f32, f32::max);
+            // Grown a little: f32 rounding must not put a polygon outside it.
+            (
+                centre,
+                radius * (1.0 + 1e-5) + 1e-6 * centre.abs().max_element(),
+            )
+        })
+        .collect()
 }
 
 impl Proxies {
@@ -160,12 +191,36 @@ impl Proxies {
                 solid: mesh.solid_of.get(k).copied().flatten(),
             });
         }
+        let blocks = block_spheres(&polygons);
         Self {
             corners,
             element,
             quads,
             polygons,
+            blocks,
         }
+    }
+
+    /// Whether no polygon of block `b` can be drawn by this shot on this
+    /// rank: the block's sphere is wholly behind the shooter's plane, wholly
+    /// beyond its reach, or (over several ranks) shows in none of this
+    /// rank's tiles. Each polygon's sphere lies inside the block's, so
+    /// [`in_view`]'s plane and reach tests and [`Ownership::may_see`] would
+    /// reject every one of them: skipping the block changes nothing drawn.
+    fn block_out(
+        &self,
+        b: usize,
+        shooter: &ShooterFrame,
+        res: Resolution,
+        ownership: Option<Ownership>,
+    ) -> bool {
+        let (centre, radius) = self.blocks[b];
+        let d = centre - shooter.centre;
+        let dist = d.length();
+        let slack = 1e-5 * (dist + radius);
+        d.dot(shooter.normal) + radius < -slack
+            || dist - radius > shooter.reach + slack
+            || ownership.is_some_and(|o| !o.may_see(shooter.to_local(d), radius + slack, res))
     }
 
     /// Fills `self.instances` with a rectangle for every proxy the shooter can
@@ -195,8 +250,19 @@ impl Proxies {
         // once) and the proxies bounded.
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
             let mut done = Collected::default();
-            for (k, poly) in polys.iter().enumerate() {
-                if !in_view(first + k, poly, corners, outside, shooter) {
+            let mut k = 0;
+            while k < polys.len() {
+                let at = first + k;
+                // At each block's start (or the run's), skip it whole if it can.
+                if (at % BLOCK == 0 || k == 0)
+                    && self.block_out(at / BLOCK, shooter, res, ownership)
+                {
+                    k = ((at / BLOCK + 1) * BLOCK - first).min(polys.len());
+                    continue;
+                }
+                let poly = &polys[k];
+                k += 1;
+                if !in_view(at, poly, corners, outside, shooter) {
                     continue;
                 }
                 // Over several ranks, a polygon whose bounding sphere holds
@@ -305,7 +371,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
     let rho = (c.x * c.x + c.y * c.y).sqrt();
     let (y0, y1) = if split[1] {
         let alpha = (r / d).asin();
-        let polar = rho.atan2(c.z);
+        let polar = crate::angle::atan2_f32(rho, c.z);
         (
             (polar - alpha) / FRAC_PI_2 * rows - SPHERE_MARGIN,
             (polar + alpha) / FRAC_PI_2 * rows + SPHERE_MARGIN,
@@ -317,7 +383,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
         return Some([0.0, cols, y0, y1]);
     }
     let beta = (r / rho).asin();
-    let azimuth = c.y.atan2(c.x);
+    let azimuth = crate::angle::atan2_f32(c.y, c.x);
     let azimuth = if azimuth < 0.0 {
         azimuth + TAU
     } else {
@@ -635,6 +701,50 @@ mod tests {
             "only {culled} of {} culled",
             culled + kept
         );
+    }
+
+    #[test]
+    fn skipping_blocks_of_polygons_draws_the_same_rectangles() {
+        // A room of 512 boxes: shots from patches all over it, whole
+        // hemispheres and split groups' short reaches, one rank and several.
+        let scene = crate::scene::open("cubes-8").expect("built-in scene");
+        let mesh = Mesh::build(&scene, &crate::mesh::MeshSettings::default());
+        let proxies = Proxies::build(&mesh, 4);
+        let mut never = Proxies::build(&mesh, 4);
+        never.blocks.iter_mut().for_each(|b| b.1 = f32::INFINITY);
+        let res = Resolution {
+            rows: 128,
+            cols: 512,
+        };
+        let outside = vec![true; mesh.solids.len()];
+        let (mut skipped, mut all) = (0, 0);
+        let owners: Vec<Option<Ownership>> = std::iter::once(None)
+            .chain(layouts().into_iter().map(Some))
+            .collect();
+        for (k, patch) in mesh.patches.iter().enumerate().step_by(97) {
+            let poly = &mesh.polygons[patch.polygon as usize];
+            let frame = ShooterFrame::new(patch.centre, poly.normal, poly.tangent, patch.polygon);
+            for shooter in [frame, frame.within(1.5)] {
+                for &o in owners.iter().skip(k % 3).step_by(3) {
+                    let (mut a, mut b) = (Vec::new(), Vec::new());
+                    let got = proxies.collect_rects(&shooter, &outside, res, 1e3, o, &mut a);
+                    let want = never.collect_rects(&shooter, &outside, res, 1e3, o, &mut b);
+                    assert_eq!(got, want, "patch {k}");
+                    assert!(
+                        bytemuck::cast_slice::<Instance, u8>(&a)
+                            == bytemuck::cast_slice::<Instance, u8>(&b),
+                        "patch {k}: other rectangles"
+                    );
+                    skipped += (0..proxies.blocks.len())
+                        .filter(|&b| proxies.block_out(b, &shooter, res, o))
+                        .count();
+                    all += proxies.blocks.len();
+                }
+            }
+        }
+        // The blocks have to pay: half the room is behind a box's face, and
+        // a split group's reach holds a few boxes (31 % skipped when written).
+        assert!(4 * skipped > all, "{skipped} of {all} blocks skipped");
     }
 
     #[test]

@@ -1,0 +1,183 @@
+//! atan2 without a library call.
+//!
+//! On the baseline x86-64 target `f64::atan2` and `f32::atan2` are calls into
+//! libm, and a big scene's shot makes millions of them: four per contour
+//! integral of every receiver ([`crate::formfactor::point_to_polygon`]) and
+//! six per cell rectangle ([`crate::hemisphere::cell_bounds`]). glibc's are
+//! correctly rounded and cost 40-100 cycles; these reduce the argument to
+//! [0, 1] with one division and evaluate a polynomial fitted to atan on it
+//! (Chebyshev fit of atan(t)/t in t^2, converted to powers): within 5e-14
+//! relative in f64 and 5e-7 rad in f32, against std in the tests below.
+
+use std::f32::consts::{FRAC_PI_2 as HALF_PI_32, PI as PI_32};
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// atan(t) / t as a polynomial in t^2, for t in [0, 1] (relative error 4e-14).
+const ATAN_64: [f64; 16] = [
+    0.999_999_999_999_959_8,
+    -0.333_333_333_312_143_54,
+    0.199_999_998_147_622_34,
+    -0.142_857_078_498_869_03,
+    0.111_109_929_433_003_45,
+    -0.090_895_865_337_160_51,
+    0.076_824_880_410_572_41,
+    -0.066_155_618_187_011_77,
+    0.056_886_515_129_014_79,
+    -0.047_130_499_046_033_995,
+    0.035_636_177_429_358_366,
+    -0.022_994_407_742_328_905,
+    0.011_746_193_147_377_931,
+    -0.004_344_535_897_620_449,
+    0.001_018_241_070_888_484_8,
+    -0.000_112_433_349_210_503_12,
+];
+
+/// The same in f32 (absolute error 1.7e-7 on [0, 1]).
+const ATAN_32: [f32; 8] = [
+    0.999_999_9,
+    -0.333_319_6,
+    0.199_692_38,
+    -0.140_165_97,
+    0.099_061_22,
+    -0.059_367_374,
+    0.024_166_333,
+    -0.004_668_801,
+];
+
+/// The polynomial with coefficients `c` (lowest first) at `u`, by Estrin's
+/// scheme: four levels of independent products instead of Horner's chain of
+/// fifteen dependent ones (no fused multiply-add on the baseline target).
+#[inline]
+fn estrin_16(c: &[f64; 16], u: f64) -> f64 {
+    let u2 = u * u;
+    let u4 = u2 * u2;
+    let u8 = u4 * u4;
+    let p: [f64; 8] = std::array::from_fn(|k| c[2 * k] + c[2 * k + 1] * u);
+    let q: [f64; 4] = std::array::from_fn(|k| p[2 * k] + p[2 * k + 1] * u2);
+    let r = [q[0] + q[1] * u4, q[2] + q[3] * u4];
+    r[0] + r[1] * u8
+}
+
+/// The angle of (x, y) from the x axis in (-pi, pi], as `y.atan2(x)` within
+/// 5e-14 relative; 0 for (0, 0), NaN for NaN input.
+#[inline]
+pub fn atan2(y: f64, x: f64) -> f64 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (num, den) = if ay <= ax { (ay, ax) } else { (ax, ay) };
+    if den == 0.0 {
+        return if x.is_sign_negative() {
+            PI.copysign(y)
+        } else {
+            0.0f64.copysign(y)
+        };
+    }
+    let t = num / den;
+    let u = t * t;
+    let mut a = t * estrin_16(&ATAN_64, u);
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    a.copysign(y)
+}
+
+/// `y.atan2(x)` in f32, within 5e-7 rad; 0 for (0, 0).
+#[inline]
+pub fn atan2_f32(y: f32, x: f32) -> f32 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let (num, den) = if ay <= ax { (ay, ax) } else { (ax, ay) };
+    if den == 0.0 {
+        return if x.is_sign_negative() {
+            PI_32.copysign(y)
+        } else {
+            0.0f32.copysign(y)
+        };
+    }
+    let t = num / den;
+    let u = t * t;
+    let mut a = t * ATAN_32.iter().rev().fold(0.0, |acc, &c| acc * u + c);
+    if ay > ax {
+        a = HALF_PI_32 - a;
+    }
+    if x < 0.0 {
+        a = PI_32 - a;
+    }
+    a.copysign(y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points on circles of many radii in every direction, the axes and the
+    /// diagonals included.
+    fn points() -> Vec<(f64, f64)> {
+        let mut out = Vec::new();
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        for k in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let angle = (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 * PI - PI;
+            let radius = 10f64.powi((k % 13) as i32 - 6);
+            out.push((radius * angle.sin(), radius * angle.cos()));
+        }
+        for (y, x) in [
+            (0.0, 1.0),
+            (1.0, 0.0),
+            (0.0, -1.0),
+            (-1.0, 0.0),
+            (1.0, 1.0),
+            (-1.0, -1.0),
+        ] {
+            out.push((y, x));
+        }
+        out
+    }
+
+    #[test]
+    fn the_f64_angle_is_std_within_5e_14_relative() {
+        let mut worst = 0.0f64;
+        for (y, x) in points() {
+            let (got, want) = (atan2(y, x), y.atan2(x));
+            worst = worst.max((got - want).abs() / want.abs().max(1e-300));
+        }
+        assert!(worst < 5e-14, "worst relative error {worst:e}");
+        // Small angles keep their relative precision (contour integrals of
+        // far polygons sum terms of this size).
+        let tiny = atan2(1e-9, 1.0);
+        assert!((tiny - 1e-9).abs() < 1e-22, "{tiny:e}");
+    }
+
+    #[test]
+    fn the_f32_angle_is_std_within_5e_7_rad() {
+        let mut worst = 0.0f32;
+        for (y, x) in points() {
+            let (y, x) = (y as f32, x as f32);
+            worst = worst.max((atan2_f32(y, x) - y.atan2(x)).abs());
+        }
+        assert!(worst < 5e-7, "worst error {worst:e} rad");
+    }
+
+    #[test]
+    fn zeros_and_signs_follow_std() {
+        for (y, x) in [
+            (0.0, 0.0),
+            (-0.0, 0.0),
+            (0.0, -0.0),
+            (-0.0, -0.0),
+            (0.0, -2.0),
+            (-0.0, -2.0),
+        ] {
+            assert_eq!(atan2(y, x), f64::atan2(y, x), "({y}, {x})");
+            assert_eq!(
+                atan2_f32(y as f32, x as f32),
+                f32::atan2(y as f32, x as f32)
+            );
+        }
+        assert!(atan2(f64::NAN, 1.0).is_nan());
+        assert!(atan2(1.0, f64::NAN).is_nan());
+    }
+}
