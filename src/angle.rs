@@ -121,7 +121,7 @@ mod tests {
             s ^= s >> 7;
             s ^= s << 17;
             let angle = (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 * PI - PI;
-            let radius = 10f64.powi((k % 13) as i32 - 6);
+            let radius = 10f64.powi(k % 13 - 6);
             out.push((radius * angle.sin(), radius * angle.cos()));
         }
         for (y, x) in [
