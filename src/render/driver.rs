@@ -80,7 +80,7 @@ fn start_solver<'m>(
     opts: &RenderOptions,
     comm: &dyn Collectives,
     refinement: &Refinement,
-) -> Result<(Solver<'m>, Trace, f64), RenderError> {
+) -> Result<(Solver<'m>, Trace<'m>, f64), RenderError> {
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     solver.set_overshoot(opts.overshoot);
     let mut trace = Trace::default();
@@ -106,25 +106,25 @@ fn start_solver<'m>(
 }
 
 /// What the final solve left: its loop statistics, trace and solve time.
-struct Solved {
+struct Solved<'m> {
     stats: LoopStats,
-    trace: Trace,
+    trace: Trace<'m>,
     solve: f64,
 }
 
 /// Runs the final solve with the trace, progress and checkpoint hooks.
 #[allow(clippy::too_many_arguments)]
-fn final_solve(
+fn final_solve<'m>(
     scene: &Scene,
-    mesh: &Mesh,
+    mesh: &'m Mesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
     source: &mut GpuFormFactors,
-    solver: &mut Solver,
-    (trace, so_far): (Trace, f64),
+    solver: &mut Solver<'m>,
+    (trace, so_far): (Trace<'m>, f64),
     header: Header,
     progress: &mut dyn FnMut(&Progress),
-) -> Result<Solved, RenderError> {
+) -> Result<Solved<'m>, RenderError> {
     let solve_start = Instant::now()
         .checked_sub(Duration::from_secs_f64(so_far))
         .unwrap_or_else(Instant::now);

@@ -22,12 +22,12 @@ pub struct Progress {
 }
 
 /// The final solve's hooks: the trace, progress, checkpoints and interrupts.
-pub struct SolveHooks<'a, 'p> {
+pub struct SolveHooks<'a, 'p, 'm> {
     pub(super) comm: &'a dyn Collectives,
     pub(super) nodes: &'a [String],
     pub(super) ambient: bool,
     pub(super) solve_start: Instant,
-    pub(super) trace: Trace,
+    pub(super) trace: Trace<'m>,
     pub(super) progress: &'p mut dyn FnMut(&Progress),
     pub(super) plan: Option<&'a CheckpointPlan>,
     pub(super) interrupt: Option<&'a AtomicBool>,
@@ -36,8 +36,8 @@ pub struct SolveHooks<'a, 'p> {
     pub(super) header: Header,
 }
 
-impl LoopHooks for SolveHooks<'_, '_> {
-    fn after_shot(&mut self, solver: &Solver, unshot_fraction: f64) {
+impl<'m> LoopHooks<'m> for SolveHooks<'_, '_, 'm> {
+    fn after_shot(&mut self, solver: &Solver<'m>, unshot_fraction: f64) {
         if self.trace.due(solver.shots()) {
             self.trace.record(
                 self.comm,

@@ -15,15 +15,15 @@ use crate::solver::{
 use std::time::{Duration, Instant};
 
 /// What the shooting loop asks of its caller between shots.
-pub trait LoopHooks {
+pub trait LoopHooks<'m> {
     /// After every shot, on every rank, with the unshot fraction before it.
-    fn after_shot(&mut self, _solver: &Solver, _unshot_fraction: f64) {}
+    fn after_shot(&mut self, _solver: &Solver<'m>, _unshot_fraction: f64) {}
     /// This rank's say for the next shot (see [`Flags`]).
     fn flags(&self) -> Flags {
         Flags::default()
     }
     /// Saves the state; every rank calls it at the same point.
-    fn checkpoint(&mut self, _solver: &Solver) -> Result<(), RenderError> {
+    fn checkpoint(&mut self, _solver: &Solver<'m>) -> Result<(), RenderError> {
         Ok(())
     }
 }
@@ -53,8 +53,8 @@ impl Flags {
 /// Hooks from a closure run after every shot (no checkpoints).
 pub struct AfterShot<F>(pub F);
 
-impl<F: FnMut(&Solver, f64)> LoopHooks for AfterShot<F> {
-    fn after_shot(&mut self, solver: &Solver, unshot_fraction: f64) {
+impl<'m, F: FnMut(&Solver<'m>, f64)> LoopHooks<'m> for AfterShot<F> {
+    fn after_shot(&mut self, solver: &Solver<'m>, unshot_fraction: f64) {
         (self.0)(solver, unshot_fraction)
     }
 }
@@ -205,11 +205,11 @@ impl<'m> ShotLoop<'m> {
 
     /// Decides, with every rank, whether to go on and who shoots; then
     /// shoots. `hooks` run after the shot and say when to save or stop.
-    pub fn step(
+    pub fn step<'s>(
         &mut self,
         source: &mut GpuFormFactors,
-        solver: &mut Solver,
-        hooks: &mut dyn LoopHooks,
+        solver: &mut Solver<'s>,
+        hooks: &mut dyn LoopHooks<'s>,
     ) -> Result<Step, RenderError> {
         let shot_start = Instant::now();
         let votes = self.vote(source, solver, hooks);
@@ -259,11 +259,11 @@ impl<'m> ShotLoop<'m> {
 
     /// Every rank's vote, in rank order (one collective), after which the
     /// last shot's cache row is settled.
-    fn vote(
+    fn vote<'s>(
         &self,
         source: &mut GpuFormFactors,
-        solver: &Solver,
-        hooks: &dyn LoopHooks,
+        solver: &Solver<'s>,
+        hooks: &dyn LoopHooks<'s>,
     ) -> Vec<Vote> {
         let (unshot, candidate) = solver.local_vote();
         let mine = Vote {
@@ -370,14 +370,14 @@ impl<'m> ShotLoop<'m> {
 }
 
 /// Shoots until the loop stops (see [`ShotLoop`]).
-pub fn shoot_until(
-    mesh: &Mesh,
+pub fn shoot_until<'m>(
+    mesh: &'m Mesh,
     stop: &StopRule,
     floor: f64,
     comm: &dyn Collectives,
     source: &mut GpuFormFactors,
-    solver: &mut Solver,
-    hooks: &mut dyn LoopHooks,
+    solver: &mut Solver<'m>,
+    hooks: &mut dyn LoopHooks<'m>,
 ) -> Result<LoopStats, RenderError> {
     let mut shots = ShotLoop::new(mesh, comm, *stop, floor);
     while let Step::Shot(_) = shots.step(source, solver, hooks)? {}

@@ -27,6 +27,23 @@ pub fn gather_whole<'m>(
     solver: &Solver<'m>,
     extra: Extra,
 ) -> Option<Solver<'m>> {
+    let mut whole = None;
+    gather_whole_into(comm, solver, extra, &mut whole);
+    whole
+}
+
+/// [`gather_whole`] into `whole`, reused when it already holds a solver of
+/// the same mesh (a solver for a big scene is hundreds of megabytes, and a
+/// fresh one per trace point spent most of a point's time on page faults).
+/// Returns `Some` on rank 0. Every field the whole solution reads is
+/// overwritten: every patch is some rank's, so the gathered radiosities and
+/// unshot radiosities cover all of them.
+pub fn gather_whole_into<'w, 'm>(
+    comm: &dyn Collectives,
+    solver: &Solver<'m>,
+    extra: Extra,
+    whole: &'w mut Option<Solver<'m>>,
+) -> Option<&'w Solver<'m>> {
     let (b, u) = solver.local_state();
     let (gb, gu) = (comm.gather_f64(&b), comm.gather_f64(&u));
     let ge = (extra.element_unshot)
@@ -35,8 +52,15 @@ pub fn gather_whole<'m>(
     let gd = (extra.direct)
         .then(|| comm.gather_f64(&solver.local_direct()))
         .flatten();
-    let mut whole = Solver::new(solver.mesh());
-    whole.assemble(&gb?, &gu?);
+    let (gb, gu) = (gb?, gu?);
+    if whole
+        .as_ref()
+        .is_none_or(|w| !std::ptr::eq(w.mesh(), solver.mesh()))
+    {
+        *whole = Some(Solver::new(solver.mesh()));
+    }
+    let whole = whole.as_mut()?;
+    whole.assemble(&gb, &gu);
     if let Some(e) = &ge {
         whole.assemble_element_unshot(e);
     }
@@ -53,7 +77,7 @@ pub fn gather_whole<'m>(
 /// The report's convergence trace as the solve goes: when to record, and the
 /// points so far (rank 0's; other ranks only take part in the gathers).
 #[derive(Default)]
-pub struct Trace {
+pub struct Trace<'m> {
     /// Recorded points.
     pub points: Vec<TracePoint>,
     /// The next shot count to record after the first 32.
@@ -64,9 +88,11 @@ pub struct Trace {
     pub spent_cpu: f64,
     /// Bytes the trace's gathers moved (left out of the exchange's traffic).
     pub traffic: Traffic,
+    /// Rank 0's whole solution, reused from point to point (several ranks).
+    whole: Option<Solver<'m>>,
 }
 
-impl Trace {
+impl<'m> Trace<'m> {
     /// Whether a point is due after `shots` shots: every shot up to 32, then
     /// at every power of two and at counts growing by 2^(1/4). The
     /// same on every rank, since it depends on the shot count alone.
@@ -86,7 +112,7 @@ impl Trace {
     pub fn record(
         &mut self,
         comm: &dyn Collectives,
-        solver: &Solver,
+        solver: &Solver<'m>,
         nodes: &[String],
         ambient: bool,
         solve_start: Instant,
@@ -103,7 +129,7 @@ impl Trace {
     pub fn record_at(
         &mut self,
         comm: &dyn Collectives,
-        solver: &Solver,
+        solver: &Solver<'m>,
         nodes: &[String],
         ambient: bool,
         seconds: f64,
@@ -122,7 +148,7 @@ impl Trace {
                 element_unshot: solver.overshoot(),
                 direct: false,
             };
-            gather_whole(comm, solver, extra).map(|whole| {
+            gather_whole_into(comm, solver, extra, &mut self.whole).map(|whole| {
                 (
                     report::surfaces(solver.mesh(), nodes, &whole.display_radiosity(ambient)),
                     whole.unshot_fraction(),

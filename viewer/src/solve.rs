@@ -244,7 +244,7 @@ fn solve(
 }
 
 /// What the solve thread publishes to the window, and how often.
-struct Publisher<'s, W: Fn()> {
+struct Publisher<'s, 'm, W: Fn()> {
     shared: &'s Mutex<Snapshot>,
     wake: &'s W,
     ambient: bool,
@@ -252,10 +252,10 @@ struct Publisher<'s, W: Fn()> {
     /// Solve time so far (pauses left out).
     solve_time: Duration,
     /// The report's convergence trace, as `radiosity render` keeps it.
-    trace: Trace,
+    trace: Trace<'m>,
 }
 
-impl<'s, W: Fn()> Publisher<'s, W> {
+impl<'s, 'm, W: Fn()> Publisher<'s, 'm, W> {
     /// Publishes the start of a solve (B = E) and returns the publisher.
     fn start(
         shared: &'s Mutex<Snapshot>,
@@ -289,7 +289,7 @@ impl<'s, W: Fn()> Publisher<'s, W> {
     /// Records the trace when due and publishes the shot.
     fn after_shot(
         &mut self,
-        solver: &Solver,
+        solver: &Solver<'m>,
         source: &GpuFormFactors,
         shooter: u32,
         nodes: &[String],
@@ -354,7 +354,7 @@ fn save<W: Fn()>(
     mesh: &Mesh,
     opts: &RenderOptions,
     solver: &Solver,
-    pub_: &Publisher<W>,
+    pub_: &Publisher<'_, '_, W>,
     req: &SaveRequest,
 ) -> Result<String, String> {
     let (w, h) = (800, 600);
