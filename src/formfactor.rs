@@ -442,7 +442,7 @@ fn integrals(
     };
     // The integrals are independent: large rows use every core, joined in order.
     let threads = if jobs.len() * outlines.len() >= PARALLEL_INTEGRALS {
-        std::thread::available_parallelism().map_or(1, |n| n.get().min(8))
+        cores().min(8)
     } else {
         1
     };
@@ -462,12 +462,20 @@ fn integrals(
     })
 }
 
+/// The cores this process may use, asked once: `available_parallelism`
+/// reads the affinity mask and the cgroup's quota files on every call
+/// (about 20 us), and every row of a small scene asked it.
+fn cores() -> usize {
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 /// Fixed-point scale of the form factors a split decision sums: per
 /// receiver rounded, so sums are exact and ranks agree bit for bit.
 pub const SHARE_ONE: f64 = (1u64 << 40) as f64;
 
 fn to_share(f: f64) -> u64 {
-    (f.clamp(0.0, 1.0) * SHARE_ONE).round() as u64
+    crate::numeric::round_u64(f.clamp(0.0, 1.0) * SHARE_ONE)
 }
 
 /// A shot is split when the near receivers lose more than this share of the
@@ -531,7 +539,7 @@ pub fn point_to_polygon(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
         if lc <= 1e-300 {
             continue;
         }
-        let angle = crate::angle::atan2(lc, a.dot(b));
+        let angle = crate::numeric::atan2(lc, a.dot(b));
         sum += angle * n.dot(c) / lc;
     }
     (sum / (2.0 * std::f64::consts::PI)).abs()

@@ -119,7 +119,7 @@ impl Resolution {
     /// Delta form factors of every row in fixed point (see [`FIXED_ONE`]).
     pub fn delta_form_factors_fixed(&self) -> Vec<u64> {
         (0..self.rows)
-            .map(|p| (self.delta_form_factor(p) * FIXED_ONE).round() as u64)
+            .map(|p| crate::numeric::round_u64(self.delta_form_factor(p) * FIXED_ONE))
             .collect()
     }
 
@@ -651,7 +651,7 @@ fn azimuth_range(u: &[Vec3; 4]) -> (f32, f32, bool) {
         if u[k].x * u[k].x + u[k].y * u[k].y < 1e-12 {
             full = true;
         }
-        a[k] = wrap(crate::angle::atan2_f32(u[k].y, u[k].x));
+        a[k] = wrap(crate::numeric::atan2_f32(u[k].y, u[k].x));
     }
     let (mut t0, mut span) = (0.0f32, TAU);
     for k in 0..4 {
@@ -683,7 +683,7 @@ fn polar_range(d: &[Vec3; 4]) -> (f64, f64) {
     let w = d.map(|c| c.as_dvec3());
     let key = |v: glam::DVec3| v.z * v.z.abs() / v.length_squared();
     let polar = |v: glam::DVec3| {
-        f64::from(crate::angle::atan2_f32(
+        f64::from(crate::numeric::atan2_f32(
             (v.x * v.x + v.y * v.y).sqrt() as f32,
             v.z as f32,
         ))

@@ -4,7 +4,7 @@
 //! Layers, bottom up (see ARCHITECTURE.md):
 //! - [`hemisphere`]: cells, delta form factors, tiles (pure maths);
 //! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
-//! - [`angle`]: atan2 without a libm call (pure maths);
+//! - [`numeric`]: atan2 and rounding without libm calls (pure maths);
 //! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
 //! - [`settings`]: the enums a render is told and the report records;
 //! - [`raytrace`], [`direct`], [`lights`], [`sampling`]: exact visibility
@@ -26,7 +26,6 @@
 //! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
 //! - [`bake`]: the solution as glTF with vertex colours.
 
-pub mod angle;
 pub mod bake;
 pub mod checkpoint;
 pub mod comm;
@@ -40,6 +39,7 @@ pub mod interpolate;
 pub mod launch;
 pub mod lights;
 pub mod mesh;
+pub mod numeric;
 pub mod output;
 pub mod parallel;
 pub mod raytrace;

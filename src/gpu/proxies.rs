@@ -371,7 +371,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
     let rho = (c.x * c.x + c.y * c.y).sqrt();
     let (y0, y1) = if split[1] {
         let alpha = (r / d).asin();
-        let polar = crate::angle::atan2_f32(rho, c.z);
+        let polar = crate::numeric::atan2_f32(rho, c.z);
         (
             (polar - alpha) / FRAC_PI_2 * rows - SPHERE_MARGIN,
             (polar + alpha) / FRAC_PI_2 * rows + SPHERE_MARGIN,
@@ -383,7 +383,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
         return Some([0.0, cols, y0, y1]);
     }
     let beta = (r / rho).asin();
-    let azimuth = crate::angle::atan2_f32(c.y, c.x);
+    let azimuth = crate::numeric::atan2_f32(c.y, c.x);
     let azimuth = if azimuth < 0.0 {
         azimuth + TAU
     } else {

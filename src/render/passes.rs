@@ -139,7 +139,7 @@ fn one_pass(
     let mut sums: Vec<u64> = source.penumbra.iter().flatten().copied().collect();
     sums.extend(solver.patch_unevenness().iter().map(|&w| {
         let share = if emitted > 0.0 { w / emitted } else { 0.0 };
-        (share.clamp(0.0, 1.0) * one).round() as u64
+        crate::numeric::round_u64(share.clamp(0.0, 1.0) * one)
     }));
     let settings = opts.mesh_settings();
     // The shading error needs neighbours' values across patches (and
@@ -159,7 +159,7 @@ fn one_pass(
             let radiosity = whole.display_radiosity(false);
             let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
             for (s, e) in shading.iter_mut().zip(errors) {
-                *s = (e.clamp(0.0, SHADING_CAP) * one).round() as u64;
+                *s = crate::numeric::round_u64(e.clamp(0.0, SHADING_CAP) * one);
             }
         }
     }

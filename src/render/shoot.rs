@@ -359,10 +359,10 @@ impl<'m> ShotLoop<'m> {
             if !solver.owns(self.mesh.elements[t.element as usize].patch) {
                 continue;
             }
-            landed += (t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE).round() as u64;
+            landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
             if emitted > 0.0 {
                 let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
-                delivered += (w / emitted * UNSHOT_ONE).round() as i64;
+                delivered += crate::numeric::round_i64(w / emitted * UNSHOT_ONE);
             }
         }
         (landed, delivered)

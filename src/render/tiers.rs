@@ -155,7 +155,7 @@ impl TierCells {
         let shares = res
             .delta_form_factors()
             .iter()
-            .map(|f| (f * crate::formfactor::SHARE_ONE).round() as u64)
+            .map(|f| crate::numeric::round_u64(f * crate::formfactor::SHARE_ONE))
             .collect();
         Self {
             resolution: res,

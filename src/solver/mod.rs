@@ -394,7 +394,7 @@ impl<'m> Solver<'m> {
         if self.emitted_power <= 0.0 {
             return 0;
         }
-        (power / self.emitted_power * UNSHOT_ONE).round() as u64
+        crate::numeric::round_u64(power / self.emitted_power * UNSHOT_ONE)
     }
 
     /// [`Solver::local_unshot_fixed`] and [`Solver::local_candidate`] in one
@@ -446,7 +446,7 @@ impl<'m> Solver<'m> {
         for i in self.own_patches() {
             let (b, a) = (&self.unshot[i], self.patch_area[i]);
             for c in 0..3 {
-                out[c] += (b[c] * a / self.emitted_power * UNSHOT_ONE).round() as i64;
+                out[c] += crate::numeric::round_i64(b[c] * a / self.emitted_power * UNSHOT_ONE);
             }
         }
         out

@@ -1,7 +1,10 @@
-//! atan2 without a library call.
+//! atan2 and rounding without library calls.
 //!
-//! On the baseline x86-64 target `f64::atan2` and `f32::atan2` are calls into
-//! libm, and a big scene's shot makes millions of them: four per contour
+//! On the baseline x86-64 target `f64::atan2`, `f32::atan2` and
+//! `f64::round` are calls into libm. A shot rounds every receiver's form
+//! factor and every patch's unshot power to fixed point ([`round_u64`],
+//! [`round_i64`]: the same results, by truncation and one compare), and a
+//! big scene's shot makes millions of atan2 calls: four per contour
 //! integral of every receiver ([`crate::formfactor::point_to_polygon`]) and
 //! six per cell rectangle ([`crate::hemisphere::cell_bounds`]). glibc's are
 //! correctly rounded and cost 40-100 cycles; these reduce the argument to
@@ -43,6 +46,35 @@ const ATAN_32: [f32; 8] = [
     0.024_166_333,
     -0.004_668_801,
 ];
+
+/// `x.round() as i64` (half away from zero) without a libm call: the same
+/// result for every f64, NaN (0) and out-of-range values (saturated) included.
+#[inline]
+pub fn round_i64(x: f64) -> i64 {
+    // From 2^52 up every f64 is an integer (and NaN compares false).
+    if !(x.abs() < 4_503_599_627_370_496.0) {
+        return x as i64;
+    }
+    let t = x as i64;
+    // Exact: the fractional part of an f64 below 2^52 is an f64. No
+    // branches: which way a value rounds is a coin toss for the predictor.
+    let f = x - t as f64;
+    t + i64::from(f >= 0.5) - i64::from(f <= -0.5)
+}
+
+/// `x.round() as u64` without a libm call: the same result for every f64
+/// (negative and NaN give 0, too large saturates).
+#[inline]
+pub fn round_u64(x: f64) -> u64 {
+    if !(x > 0.0) {
+        return 0;
+    }
+    if x >= 4_503_599_627_370_496.0 {
+        return x as u64;
+    }
+    let t = x as u64;
+    t + u64::from(x - t as f64 >= 0.5)
+}
 
 /// The polynomial with coefficients `c` (lowest first) at `u`, by Estrin's
 /// scheme: four levels of independent products instead of Horner's chain of
@@ -159,6 +191,40 @@ mod tests {
             worst = worst.max((atan2_f32(y, x) - y.atan2(x)).abs());
         }
         assert!(worst < 5e-7, "worst error {worst:e} rad");
+    }
+
+    #[test]
+    fn rounding_is_std_bit_for_bit() {
+        let mut values = vec![
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            2.5,
+            -2.5,
+            0.499_999_999_999_999_94,
+            -0.499_999_999_999_999_94,
+            4_503_599_627_370_495.5,
+            4_503_599_627_370_497.0,
+            -4_503_599_627_370_495.5,
+            9.3e18,
+            2e19,
+            -2e19,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+        ];
+        for (y, x) in points() {
+            values.push(y * 1e12);
+            values.push(x * 3.7);
+            values.push((y * 1e6).floor() + 0.5);
+        }
+        for v in values {
+            assert_eq!(round_i64(v), v.round() as i64, "{v:e}");
+            assert_eq!(round_u64(v), v.round() as u64, "{v:e}");
+        }
     }
 
     #[test]
