@@ -52,7 +52,7 @@ const ATAN_32: [f32; 8] = [
 #[inline]
 pub fn round_i64(x: f64) -> i64 {
     // From 2^52 up every f64 is an integer (and NaN compares false).
-    if !(x.abs() < 4_503_599_627_370_496.0) {
+    if x.is_nan() || x.abs() >= 4_503_599_627_370_496.0 {
         return x as i64;
     }
     let t = x as i64;
@@ -66,7 +66,7 @@ pub fn round_i64(x: f64) -> i64 {
 /// (negative and NaN give 0, too large saturates).
 #[inline]
 pub fn round_u64(x: f64) -> u64 {
-    if !(x > 0.0) {
+    if x.is_nan() || x <= 0.0 {
         return 0;
     }
     if x >= 4_503_599_627_370_496.0 {
