@@ -442,7 +442,7 @@ fn integrals(
     };
     // The integrals are independent: large rows use every core, joined in order.
     let threads = if jobs.len() * outlines.len() >= PARALLEL_INTEGRALS {
-        cores().min(8)
+        crate::parallel::cores().min(8)
     } else {
         1
     };
@@ -460,14 +460,6 @@ fn integrals(
             .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
             .collect()
     })
-}
-
-/// The cores this process may use, asked once: `available_parallelism`
-/// reads the affinity mask and the cgroup's quota files on every call
-/// (about 20 us), and every row of a small scene asked it.
-fn cores() -> usize {
-    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
 /// Fixed-point scale of the form factors a split decision sums: per

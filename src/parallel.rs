@@ -136,6 +136,14 @@ impl Collectives for Single {
     }
 }
 
+/// The cores this process may use, asked once: `available_parallelism`
+/// reads the affinity mask and the cgroup's quota files on every call
+/// (about 20 us), and every shot of a small scene asked it several times.
+pub fn cores() -> usize {
+    static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 /// The rank that owns patch `patch` among `ranks` ranks: k mod ranks (an
 /// element belongs to its patch's owner). The one place this rule lives.
 pub fn patch_owner(patch: u32, ranks: usize) -> usize {

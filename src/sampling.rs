@@ -39,7 +39,7 @@ pub fn unit(rng: &mut Rng) -> f32 {
 /// result depends only on its index, so the output is the same on any
 /// number of threads.
 pub fn in_parallel<T: Send>(out: &mut [T], work: impl Fn(usize, &mut T) + Sync) {
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = crate::parallel::cores();
     let chunk = out.len().div_ceil(threads * 8).max(1);
     let next = std::sync::Mutex::new(out.chunks_mut(chunk).enumerate());
     std::thread::scope(|s| {

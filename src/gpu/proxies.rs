@@ -241,9 +241,7 @@ impl Proxies {
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
         } else {
-            std::thread::available_parallelism()
-                .map_or(1, |n| n.get())
-                .min(8)
+            crate::parallel::cores().min(8)
         };
         let (corners, element, quads) = (&self.corners, &self.element, &self.quads);
         // Returns the rectangles drawn (each cut to a rank's tiles counts

@@ -95,6 +95,35 @@ impl Tier {
 /// `GpuFormFactors::add_far_receivers`).
 pub const FAR_CELLS: f32 = 4.0;
 
+/// One of this rank's patches as the far receivers' scan reads it: every
+/// shot tests every patch, and reading these from the patches, polygons
+/// and elements was a cache miss apiece (most of the scan's time in big
+/// scenes).
+#[derive(Clone, Copy)]
+struct FarPatch {
+    centre: glam::Vec3,
+    area: f32,
+    normal: glam::Vec3,
+    patch: u32,
+}
+
+impl FarPatch {
+    /// Rank `rank`'s patches of `ranks`, in increasing order.
+    fn owned(mesh: &Mesh, rank: usize, ranks: usize) -> Vec<Self> {
+        parallel::owned_patches(rank, ranks, mesh.patches.len())
+            .map(|k| {
+                let p = &mesh.patches[k];
+                Self {
+                    centre: p.centre,
+                    area: p.area as f32,
+                    normal: mesh.polygons[p.polygon as usize].normal,
+                    patch: k as u32,
+                }
+            })
+            .collect()
+    }
+}
+
 /// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
 /// exchanging them between ranks as DESIGN.md section 3 describes. Returns
 /// the form factors of this rank's elements only.
@@ -138,6 +167,12 @@ pub struct GpuFormFactors<'a> {
     split: bool,
     /// Per patch, whether the last hemisphere's cells covered it.
     seen: Vec<bool>,
+    /// Per element, its patch (a compact copy: marking the patches seen
+    /// reads it for every receiver, and an element is 120 bytes).
+    patch_of: Vec<u32>,
+    /// What the far receivers' scan reads of each of this rank's patches,
+    /// contiguous (see [`FarPatch`]).
+    far_patches: Vec<FarPatch>,
     /// Per tile this rank drew, the item buffer of the last whole (not
     /// reach-limited) hemisphere (see [`GpuFormFactors::view_of`]).
     whole_items: Vec<Vec<u32>>,
@@ -198,6 +233,8 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, per_rank_cache, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
+            patch_of: mesh.elements.iter().map(|e| e.patch).collect(),
+            far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh
                 .patches
                 .iter()
@@ -351,23 +388,23 @@ impl<'a> GpuFormFactors<'a> {
         // Most candidates in a cluttered scene are hidden, by the same
         // occluder as the patch before them (see `Bvh::occluded_hinted`).
         let mut hint = None;
-        let (rank, ranks) = (self.comm.rank(), self.comm.size());
-        for k in parallel::owned_patches(rank, ranks, mesh.patches.len()) {
-            let p = &mesh.patches[k];
+        for fp in &self.far_patches {
+            let k = fp.patch as usize;
             if k == shooter as usize || self.seen[k] {
                 continue;
             }
-            let d = p.centre - centre;
+            let d = fp.centre - centre;
             let dist2 = d.length_squared();
             if dist2 > within * within {
                 continue;
             }
-            let rn = mesh.polygons[p.polygon as usize].normal;
+            let rn = fp.normal;
             let cos_r = -rn.dot(d);
             if n.dot(d) <= 0.0 || cos_r <= 0.0 {
                 continue;
             }
-            let solid_angle = (p.area as f32) * cos_r / (dist2 * dist2.sqrt());
+            let solid_angle = fp.area * cos_r / (dist2 * dist2.sqrt());
+            let p = &mesh.patches[k];
             if solid_angle > FAR_CELLS * cell || !p.elements.clone().any(&keep) {
                 continue;
             }
@@ -395,17 +432,18 @@ impl<'a> GpuFormFactors<'a> {
             }
         }
         if self.pairs.len() > before {
-            self.pairs.sort_unstable_by_key(|p| p.0);
+            // Two sorted runs (the cells' pairs, then these in patch
+            // order): the stable sort finds them and merges in one pass.
+            self.pairs.sort_by_key(|p| p.0);
         }
         self.timings.far += start.elapsed();
     }
 
     /// Marks in `self.seen` the patches the last hemisphere's cells covered.
     fn mark_seen(&mut self) {
-        let mesh = self.mesh;
         self.seen.iter_mut().for_each(|s| *s = false);
         for &(j, _) in &self.pairs {
-            self.seen[mesh.elements[j as usize].patch as usize] = true;
+            self.seen[self.patch_of[j as usize] as usize] = true;
         }
     }
 
