@@ -51,6 +51,59 @@ pub fn split_groups(
         .collect()
 }
 
+/// What a hybrid row reads of every receiver element, packed: a big
+/// scene's row visits about 100 000 of them in element order, and reading
+/// the element, patch and polygon records (120, 80 and 120 bytes) was a
+/// cache miss each, most of a row's time outside the integrals.
+pub struct ReceiverTable {
+    elements: Vec<ReceiverElement>,
+    /// Per polygon, its normal.
+    normals: Vec<glam::Vec3>,
+    /// Per patch, its elements' first and one-past-last index.
+    patch_elements: Vec<[u32; 2]>,
+}
+
+/// One element in a [`ReceiverTable`].
+#[derive(Clone, Copy)]
+struct ReceiverElement {
+    centre: glam::Vec3,
+    polygon: u32,
+    area: f64,
+    /// The largest distance from its centre to a corner.
+    radius: f64,
+    patch: u32,
+}
+
+impl ReceiverTable {
+    /// The table of `mesh` (40 bytes an element).
+    pub fn new(mesh: &Mesh) -> Self {
+        Self {
+            elements: mesh
+                .elements
+                .iter()
+                .map(|e| ReceiverElement {
+                    centre: element_centre(e),
+                    polygon: e.polygon,
+                    area: e.area,
+                    radius: element_radius(e, element_centre(e).as_dvec3()),
+                    patch: e.patch,
+                })
+                .collect(),
+            normals: mesh.polygons.iter().map(|p| p.normal).collect(),
+            patch_elements: mesh
+                .patches
+                .iter()
+                .map(|p| [p.elements.start, p.elements.end])
+                .collect(),
+        }
+    }
+
+    /// The patch of element `j`.
+    pub fn patch(&self, j: u32) -> u32 {
+        self.elements[j as usize].patch
+    }
+}
+
 /// Receivers farther than this many shooter radii from the shooter's centre
 /// take one integral over the whole patch instead of one per shooter element.
 pub const NEAR_FIELD: f64 = 4.0;
@@ -237,6 +290,7 @@ impl Row {
 /// visibility from one point is not to be trusted (see [`split_groups`]).
 pub fn hybrid_row(
     mesh: &Mesh,
+    table: &ReceiverTable,
     shooter: u32,
     counts: &[(u32, u64)],
     columns: std::ops::Range<usize>,
@@ -247,9 +301,9 @@ pub fn hybrid_row(
         ..Row::default()
     };
     // First the receivers and their visibilities (cheap), then the integrals.
-    let (jobs, partly) = receivers(mesh, &geo, counts, &mut row.near_hidden);
+    let (jobs, partly) = receivers(mesh, table, &geo, counts, &mut row.near_hidden);
     let shares = column_shares(mesh, &geo, &columns);
-    let values = integrals(mesh, &geo, &shares, &columns, &jobs);
+    let values = integrals(mesh, table, &geo, &shares, &columns, &jobs);
     let m = geo.outlines.len();
     for ((&(j, _), v), &part) in jobs.iter().zip(values.chunks_exact(m)).zip(&partly) {
         if v.iter().any(|&f| f > 0.0) {
@@ -316,21 +370,21 @@ impl<'m> ShooterGeometry<'m> {
 /// receivers lose to occlusion seen from the shooter's centre.
 fn receivers(
     mesh: &Mesh,
+    table: &ReceiverTable,
     geo: &ShooterGeometry,
     counts: &[(u32, u64)],
     near_hidden: &mut u64,
 ) -> (Vec<(u32, f64)>, Vec<bool>) {
-    let mut jobs: Vec<(u32, f64)> = Vec::new();
-    let mut partly = Vec::new();
+    let mut jobs: Vec<(u32, f64)> = Vec::with_capacity(counts.len());
+    let mut partly = Vec::with_capacity(counts.len());
     let mut k = 0;
     while k < counts.len() {
-        let patch = mesh.elements[counts[k].0 as usize].patch;
-        // A patch's elements are contiguous: compare ids with its range
-        // rather than read each element (a cache miss apiece in big scenes).
-        let range = mesh.patches[patch as usize].elements.clone();
+        let patch = table.patch(counts[k].0);
+        // A patch's elements are contiguous: compare ids with its range.
+        let [first, last] = table.patch_elements[patch as usize];
         let end = k + counts[k..]
             .iter()
-            .take_while(|(id, _)| range.contains(id))
+            .take_while(|(id, _)| (first..last).contains(id))
             .count();
         let group = &counts[k..end];
         k = end;
@@ -343,7 +397,7 @@ fn receivers(
         }
         let patch_visibility = pv as f64 / pc as f64;
         let mut g = group.iter().peekable();
-        for j in mesh.patches[patch as usize].elements.clone() {
+        for j in first..last {
             let (vis, cov) = match g.peek() {
                 Some(&&(id, x)) if id == j => {
                     g.next();
@@ -357,7 +411,7 @@ fn receivers(
                 patch_visibility
             };
             // The shooter emits from its front only.
-            let x = element_centre(&mesh.elements[j as usize]).as_dvec3();
+            let x = table.elements[j as usize].centre.as_dvec3();
             if geo.normal.dot(x - geo.origin) <= 0.0 {
                 continue;
             }
@@ -404,6 +458,7 @@ fn column_shares(mesh: &Mesh, geo: &ShooterGeometry, columns: &std::ops::Range<u
 /// ones one integral over the whole patch, shared out by `shares`.
 fn integrals(
     mesh: &Mesh,
+    table: &ReceiverTable,
     geo: &ShooterGeometry,
     shares: &[f64],
     columns: &std::ops::Range<usize>,
@@ -414,11 +469,11 @@ fn integrals(
         let mut values = Vec::with_capacity(jobs.len() * outlines.len());
         let mut column = vec![0.0; outlines.len()];
         for &(j, v) in jobs {
-            let e = &mesh.elements[j as usize];
-            let x = element_centre(e).as_dvec3();
-            let normal = mesh.polygons[e.polygon as usize].normal.as_dvec3();
-            let scale = v * e.area / geo.patch.area;
-            let reach = geo.radius.max(element_radius(e, x));
+            let r = &table.elements[j as usize];
+            let x = r.centre.as_dvec3();
+            let normal = table.normals[r.polygon as usize].as_dvec3();
+            let scale = v * r.area / geo.patch.area;
+            let reach = geo.radius.max(r.radius);
             if x.distance(geo.origin) > NEAR_FIELD * reach {
                 // Far: one integral over the whole patch, at the element's centre.
                 let f = scale * point_to_polygon(x, normal, geo.patch_outline());
@@ -428,7 +483,7 @@ fn integrals(
                 // receiver (the midpoint rule alone is off where the
                 // integrand bends within the element).
                 column.iter_mut().for_each(|c| *c = 0.0);
-                for y in sub_points(e) {
+                for y in sub_points(&mesh.elements[j as usize]) {
                     for (k, (c, (o, n))) in column.iter_mut().zip(outlines).enumerate() {
                         if columns.contains(&k) {
                             *c += point_to_polygon(y, normal, &o[..*n]);

@@ -33,6 +33,10 @@ pub(super) struct PolygonProxies {
     pub(super) quad: Option<u32>,
     /// The solid it bounds, if any (an index into `Mesh::solids`).
     pub(super) solid: Option<u32>,
+    /// Its first proxy's first corner, a point of its plane (kept here: the
+    /// back-face test reads it for every solid's polygon in view, and the
+    /// proxies' corners are elsewhere in memory).
+    pub(super) corner: Vec3,
 }
 
 /// A quad polygon drawn in pieces: its corners (world space) and element
@@ -189,6 +193,9 @@ impl Proxies {
                 radius: 0.5 * (hi - lo).length(),
                 quad,
                 solid: mesh.solid_of.get(k).copied().flatten(),
+                corner: corners
+                    .get(first as usize)
+                    .map_or(Vec3::ZERO, |c: &[Vec3; 4]| c[0]),
             });
         }
         let blocks = block_spheres(&polygons);
@@ -344,6 +351,13 @@ pub(super) struct Collected {
     pub(super) bounded: usize,
 }
 
+/// asin of `x` in [0, 0.9] as atan2(x, sqrt(1 - x^2)), within 5e-7 rad
+/// (f32 `asin` is a libm call, and the sphere test runs for every polygon
+/// in view on every rank).
+fn asin(x: f32) -> f32 {
+    crate::numeric::atan2_f32(x, (1.0 - x * x).sqrt())
+}
+
 /// Conservative bounds, in cells ([x0, x1, y0, y1]; x may run below 0 or
 /// past the last column, to be wrapped), of the directions from the
 /// shooter to a sphere with centre `c` (in the shooter's frame) and radius
@@ -368,7 +382,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
     let (rows, cols) = (res.rows as f32, res.cols as f32);
     let rho = (c.x * c.x + c.y * c.y).sqrt();
     let (y0, y1) = if split[1] {
-        let alpha = (r / d).asin();
+        let alpha = asin(r / d);
         let polar = crate::numeric::atan2_f32(rho, c.z);
         (
             (polar - alpha) / FRAC_PI_2 * rows - SPHERE_MARGIN,
@@ -380,7 +394,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
     if !split[0] || r >= 0.9 * rho {
         return Some([0.0, cols, y0, y1]);
     }
-    let beta = (r / rho).asin();
+    let beta = asin(r / rho);
     let azimuth = crate::numeric::atan2_f32(c.y, c.x);
     let azimuth = if azimuth < 0.0 {
         azimuth + TAU
@@ -441,9 +455,8 @@ fn hidden_back_face(
 ) -> bool {
     poly.solid
         .is_some_and(|s| outside.get(s as usize).copied().unwrap_or(false))
-        && corners
-            .get(poly.proxies.start as usize)
-            .is_some_and(|c| (shooter.centre - c[0]).dot(poly.normal) < 0.0)
+        && poly.proxies.start < poly.proxies.end.min(corners.len() as u32)
+        && (shooter.centre - poly.corner).dot(poly.normal) < 0.0
 }
 
 /// The largest integer at most `x` (saturating; `x` is finite here).

@@ -167,9 +167,9 @@ pub struct GpuFormFactors<'a> {
     split: bool,
     /// Per patch, whether the last hemisphere's cells covered it.
     seen: Vec<bool>,
-    /// Per element, its patch (a compact copy: marking the patches seen
-    /// reads it for every receiver, and an element is 120 bytes).
-    patch_of: Vec<u32>,
+    /// The receivers as hybrid rows and the marking of patches seen read
+    /// them (compact: see [`formfactor::ReceiverTable`]).
+    receivers: formfactor::ReceiverTable,
     /// What the far receivers' scan reads of each of this rank's patches,
     /// contiguous (see [`FarPatch`]).
     far_patches: Vec<FarPatch>,
@@ -233,7 +233,7 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, per_rank_cache, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
-            patch_of: mesh.elements.iter().map(|e| e.patch).collect(),
+            receivers: formfactor::ReceiverTable::new(mesh),
             far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh
                 .patches
@@ -443,7 +443,7 @@ impl<'a> GpuFormFactors<'a> {
     fn mark_seen(&mut self) {
         self.seen.iter_mut().for_each(|s| *s = false);
         for &(j, _) in &self.pairs {
-            self.seen[self.patch_of[j as usize] as usize] = true;
+            self.seen[self.receivers.patch(j) as usize] = true;
         }
     }
 
@@ -507,7 +507,8 @@ impl<'a> GpuFormFactors<'a> {
         let centre = self.last_centre;
         self.add_far_receivers(shooter, centre, tier, f32::INFINITY, |_| true);
         self.timings.receivers += self.pairs.len() as u64;
-        let mut row = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, 0..columns);
+        let mut row =
+            formfactor::hybrid_row(self.mesh, &self.receivers, shooter, &self.pairs, 0..columns);
         if let Some(p) = self.penumbra.get_mut(shooter as usize) {
             *p = [row.partial + row.near_hidden, row.total + row.near_hidden];
         }
@@ -543,7 +544,13 @@ impl<'a> GpuFormFactors<'a> {
             let within = reach + self.max_patch_radius;
             self.add_far_receivers(shooter, *at, tier, within, &is_near);
             self.timings.receivers += self.pairs.len() as u64;
-            let mut part = formfactor::hybrid_row(self.mesh, shooter, &self.pairs, group.clone());
+            let mut part = formfactor::hybrid_row(
+                self.mesh,
+                &self.receivers,
+                shooter,
+                &self.pairs,
+                group.clone(),
+            );
             part.retain(&is_near);
             row.merge(&part);
             views.extend(self.view);
