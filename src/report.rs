@@ -482,6 +482,15 @@ pub struct Side {
 /// Per-node areas and area-weighted mean radiosities, the front and the
 /// back of double-sided surfaces apart.
 pub fn surfaces(mesh: &Mesh, nodes: &[String], radiosity: &[[f64; 3]]) -> Vec<Surface> {
+    surfaces_of(mesh, nodes, radiosity.iter().copied())
+}
+
+/// [`surfaces`] of radiosities given element by element, in element order.
+pub fn surfaces_of(
+    mesh: &Mesh,
+    nodes: &[String],
+    radiosity: impl Iterator<Item = [f64; 3]>,
+) -> Vec<Surface> {
     // [front, back] per node.
     let mut area = vec![[0.0f64; 2]; nodes.len()];
     let mut sum = vec![[[0.0f64; 3]; 2]; nodes.len()];

@@ -823,11 +823,18 @@ impl<'m> Solver<'m> {
 
     /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.
     pub fn display_radiosity(&self, ambient: bool) -> Vec<[f64; 3]> {
+        self.display_radiosities(ambient).collect()
+    }
+
+    /// [`Solver::display_radiosity`] element by element, without the
+    /// vector (the trace summarises it per node at every point, and in a
+    /// big scene a fresh vector per point was tens of megabytes).
+    pub fn display_radiosities(&self, ambient: bool) -> impl Iterator<Item = [f64; 3]> + '_ {
         let amb = if ambient { self.ambient() } else { [0.0; 3] };
         self.radiosity
             .iter()
             .zip(&self.mesh.elements)
-            .map(|(b, e)| {
+            .map(move |(b, e)| {
                 let rho = e.reflectance;
                 let amb = if takes_ambient(self.mesh, e) {
                     amb
@@ -840,7 +847,6 @@ impl<'m> Solver<'m> {
                     b[2] + rho[2] * amb[2],
                 ]
             })
-            .collect()
     }
 }
 
