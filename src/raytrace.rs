@@ -347,13 +347,20 @@ impl Bvh {
         }
         let inv = dir.recip();
         let mut far = t_max;
-        let mut stack = [0u32; 64];
+        // Each entry keeps the entry distance its slab test gave when it was
+        // pushed (NaN for the root, which had none): if that is still within
+        // `far` the test would pass again (its box's exit lay beyond it
+        // then), so only an entry `far` has since overtaken, or a NaN, is
+        // tested again. That halves the slab tests of a shadow ray, whose
+        // `far` never shrinks, and changes no verdict.
+        let mut stack = [(0u32, f32::NAN); 64];
         let mut top = 1;
         while top > 0 {
             top -= 1;
-            let at = stack[top];
+            let (at, entry) = stack[top];
             let node = &self.nodes[at as usize];
-            if slab(node, origin, inv, t_min, far).is_none() {
+            let still_in = entry <= far;
+            if !still_in && slab(node, origin, inv, t_min, far).is_none() {
                 continue;
             }
             if node.count > 0 {
@@ -372,10 +379,10 @@ impl Bvh {
             let dr = slab(&self.nodes[r as usize], origin, inv, t_min, far);
             // Push the farther child first so the nearer is visited first.
             let order = match (dl, dr) {
-                (Some(a), Some(b)) if a <= b => [Some(r), Some(l)],
-                (Some(_), Some(_)) => [Some(l), Some(r)],
-                (Some(_), None) => [None, Some(l)],
-                (None, Some(_)) => [None, Some(r)],
+                (Some(a), Some(b)) if a <= b => [Some((r, b)), Some((l, a))],
+                (Some(a), Some(b)) => [Some((l, a)), Some((r, b))],
+                (Some(a), None) => [None, Some((l, a))],
+                (None, Some(b)) => [None, Some((r, b))],
                 (None, None) => [None, None],
             };
             for child in order.into_iter().flatten() {
