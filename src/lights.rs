@@ -101,13 +101,28 @@ impl LightField {
 /// (normal `n`), with one shadow ray from `x + n eps` (0 where anything but
 /// `polygon` blocks it).
 pub fn irradiance(light: &Light, bvh: &Bvh, x: Vec3, n: Vec3, polygon: u32, eps: f32) -> [f64; 3] {
+    irradiance_hinted(light, bvh, x, n, polygon, eps, &mut None)
+}
+
+/// [`irradiance`], its shadow ray trying first the leaf that stopped the
+/// last one (see [`Bvh::occluded_hinted`]: the same answer, sooner where
+/// neighbouring points are shadowed by the same occluder).
+fn irradiance_hinted(
+    light: &Light,
+    bvh: &Bvh,
+    x: Vec3,
+    n: Vec3,
+    polygon: u32,
+    eps: f32,
+    hint: &mut Option<u32>,
+) -> [f64; 3] {
     let origin = x + n * eps;
     let skip = [polygon, polygon];
     let scale = match light.kind {
         LightKind::Directional => {
             let toward = -light.direction;
             let cos = n.dot(toward);
-            if cos <= 0.0 || bvh.occluded(origin, toward, 0.0, f32::INFINITY, skip) {
+            if cos <= 0.0 || bvh.occluded_hinted(origin, toward, 0.0, f32::INFINITY, skip, hint) {
                 return [0.0; 3];
             }
             f64::from(cos)
@@ -121,7 +136,7 @@ pub fn irradiance(light: &Light, bvh: &Bvh, x: Vec3, n: Vec3, polygon: u32, eps:
             }
             let unit_d = d.normalize();
             let falloff = light.falloff(-unit_d);
-            if falloff <= 0.0 || bvh.occluded(origin, d, 0.0, 1.0, skip) {
+            if falloff <= 0.0 || bvh.occluded_hinted(origin, d, 0.0, 1.0, skip, hint) {
                 return [0.0; 3];
             }
             falloff * f64::from(cos) / (r2 * r2.sqrt())
@@ -132,7 +147,9 @@ pub fn irradiance(light: &Light, bvh: &Bvh, x: Vec3, n: Vec3, polygon: u32, eps:
 
 /// The share of the cosine-weighted hemisphere over `n` at `x` that leaves
 /// the scene, from shadow rays along the cells `first..first+side` (each
-/// axis) of a `grid` x `grid` stratification (one jittered direction a cell).
+/// axis) of a `grid` x `grid` stratification (one jittered direction a
+/// cell), each trying first the leaf that stopped the last (`hint`).
+#[allow(clippy::too_many_arguments)]
 fn sky_share(
     bvh: &Bvh,
     x: Vec3,
@@ -141,6 +158,7 @@ fn sky_share(
     eps: f32,
     cells: Cells,
     rng: &mut Rng,
+    hint: &mut Option<u32>,
 ) -> f64 {
     let origin = x + n * eps;
     let (t, b) = frame(n);
@@ -152,7 +170,7 @@ fn sky_share(
         let (r, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
         let d = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
         all += 1;
-        if !bvh.occluded(origin, d, 0.0, f32::INFINITY, [polygon, polygon]) {
+        if !bvh.occluded_hinted(origin, d, 0.0, f32::INFINITY, [polygon, polygon], hint) {
             open += 1;
         }
     }
@@ -224,13 +242,17 @@ pub fn element_field_reusing(
         let mut rng = Rng(0x119b_7000_0000 ^ (u64::from(e.polygon) << 32) ^ local);
         let (side, rays) = (ELEMENT_POINTS, SKY_RAYS);
         let (mut direct, mut parallel, mut open, mut weight) = ([0.0; 3], 0.0, 0.0, 0.0);
+        // The leaf that stopped each light's last ray, and the sky's: an
+        // element's points are mostly shadowed by the same occluders.
+        let mut hints = vec![None; lights.len()];
+        let mut sky_hint = None;
         for q in 0..side * side {
             let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
             let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;
             let (x, jac) = point_in(corners, u, v);
             let jac = f64::from(jac);
-            for light in lights {
-                let d = irradiance(light, bvh, x, n, e.polygon, eps);
+            for (light, hint) in lights.iter().zip(&mut hints) {
+                let d = irradiance_hinted(light, bvh, x, n, e.polygon, eps, hint);
                 for c in 0..3 {
                     direct[c] += d[c] * jac;
                 }
@@ -244,7 +266,7 @@ pub fn element_field_reusing(
                     first: [q % side * rays, q / side * rays],
                     side: rays,
                 };
-                open += sky_share(bvh, x, n, e.polygon, eps, cells, &mut rng) * jac;
+                open += sky_share(bvh, x, n, e.polygon, eps, cells, &mut rng, &mut sky_hint) * jac;
             }
             weight += jac;
         }
