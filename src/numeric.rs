@@ -90,54 +90,54 @@ fn estrin_16(c: &[f64; 16], u: f64) -> f64 {
     r[0] + r[1] * u8
 }
 
-/// The angle of (x, y) from the x axis in (-pi, pi], as `y.atan2(x)` within
-/// 5e-14 relative; 0 for (0, 0), NaN for NaN input.
-#[inline]
-pub fn atan2(y: f64, x: f64) -> f64 {
-    let (ax, ay) = (x.abs(), y.abs());
-    let (num, den) = if ay <= ax { (ay, ax) } else { (ax, ay) };
-    if den == 0.0 {
-        return if x.is_sign_negative() {
-            PI.copysign(y)
-        } else {
-            0.0f64.copysign(y)
-        };
-    }
-    let t = num / den;
-    let u = t * t;
-    let mut a = t * estrin_16(&ATAN_64, u);
-    if ay > ax {
-        a = FRAC_PI_2 - a;
-    }
-    if x < 0.0 {
-        a = PI - a;
-    }
-    a.copysign(y)
+/// An atan2 for one float type: reduce to t = min / max of |x|, |y| in
+/// [0, 1], take atan(t) = t p(t^2) from `poly`, and unfold the octant.
+macro_rules! atan2_for {
+    ($(#[$doc:meta])* $name:ident, $t:ty, $pi:expr, $half_pi:expr, $poly:expr) => {
+        $(#[$doc])*
+        #[inline]
+        pub fn $name(y: $t, x: $t) -> $t {
+            let (ax, ay) = (x.abs(), y.abs());
+            let (num, den) = if ay <= ax { (ay, ax) } else { (ax, ay) };
+            if den == 0.0 {
+                let zero: $t = 0.0;
+                return if x.is_sign_negative() {
+                    $pi.copysign(y)
+                } else {
+                    zero.copysign(y)
+                };
+            }
+            let t = num / den;
+            let mut a = t * ($poly)(t * t);
+            if ay > ax {
+                a = $half_pi - a;
+            }
+            if x < 0.0 {
+                a = $pi - a;
+            }
+            a.copysign(y)
+        }
+    };
 }
 
-/// `y.atan2(x)` in f32, within 5e-7 rad; 0 for (0, 0).
-#[inline]
-pub fn atan2_f32(y: f32, x: f32) -> f32 {
-    let (ax, ay) = (x.abs(), y.abs());
-    let (num, den) = if ay <= ax { (ay, ax) } else { (ax, ay) };
-    if den == 0.0 {
-        return if x.is_sign_negative() {
-            PI_32.copysign(y)
-        } else {
-            0.0f32.copysign(y)
-        };
-    }
-    let t = num / den;
-    let u = t * t;
-    let mut a = t * ATAN_32.iter().rev().fold(0.0, |acc, &c| acc * u + c);
-    if ay > ax {
-        a = HALF_PI_32 - a;
-    }
-    if x < 0.0 {
-        a = PI_32 - a;
-    }
-    a.copysign(y)
-}
+atan2_for!(
+    /// The angle of (x, y) from the x axis in (-pi, pi], as `y.atan2(x)` within
+    /// 5e-14 relative; 0 for (0, 0), NaN for NaN input.
+    atan2,
+    f64,
+    PI,
+    FRAC_PI_2,
+    |u| estrin_16(&ATAN_64, u)
+);
+
+atan2_for!(
+    /// `y.atan2(x)` in f32, within 5e-7 rad; 0 for (0, 0).
+    atan2_f32,
+    f32,
+    PI_32,
+    HALF_PI_32,
+    |u| ATAN_32.iter().rev().fold(0.0, |acc, &c| acc * u + c)
+);
 
 #[cfg(test)]
 mod tests {
