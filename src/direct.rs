@@ -94,14 +94,20 @@ struct Pool {
     unoccluded: Vec<[f64; 3]>,
     /// Per emitter, its shadow rays' (seen, all) weights.
     rays: Vec<[f64; 2]>,
+    /// Per light, then per emitter, the leaf that stopped the last shadow
+    /// ray toward it (a pixel's or an element's points are near each other
+    /// and mostly shadowed alike; see `Bvh::occluded_hinted`, which gives
+    /// the same answer whatever the hint).
+    hints: Vec<Option<u32>>,
 }
 
 impl Pool {
-    fn new(emitters: usize) -> Self {
+    fn new(emitters: usize, lights: usize) -> Self {
         Pool {
             lights: [0.0; 3],
             unoccluded: vec![[0.0; 3]; emitters],
             rays: vec![[0.0; 2]; emitters],
+            hints: vec![None; lights + emitters],
         }
     }
 
@@ -172,7 +178,7 @@ impl<'a> DirectLight<'a> {
     /// [`DirectLight::irradiance`] with shadow rays to the cells `strata`
     /// says of each emitter's (u, v) square.
     fn irradiance_in(&self, x: Vec3, polygon: u32, rng: &mut Rng, strata: Strata) -> [f64; 3] {
-        let mut pool = Pool::new(self.emitters.len());
+        let mut pool = Pool::new(self.emitters.len(), self.lights.len());
         self.gather(&mut pool, x, polygon, [1.0; 3], rng, strata);
         pool.total()
     }
@@ -192,8 +198,10 @@ impl<'a> DirectLight<'a> {
     ) {
         let n = self.normals[polygon as usize];
         let origin = x + n * self.eps;
-        for light in &self.lights {
-            let d = crate::lights::irradiance(light, self.bvh, x, n, polygon, self.eps);
+        let (light_hints, emitter_hints) = pool.hints.split_at_mut(self.lights.len());
+        for (light, hint) in self.lights.iter().zip(light_hints) {
+            let d =
+                crate::lights::irradiance_hinted(light, self.bvh, x, n, polygon, self.eps, hint);
             for c in 0..3 {
                 pool.lights[c] += weight[c] * d[c];
             }
@@ -206,7 +214,8 @@ impl<'a> DirectLight<'a> {
             if f <= 0.0 {
                 continue;
             }
-            let (seen, all) = self.shadow_rays(e, origin, n, polygon, rng, strata);
+            let hint = &mut emitter_hints[k];
+            let (seen, all) = self.shadow_rays(e, origin, n, polygon, rng, strata, hint);
             for ((u, w), x) in pool.unoccluded[k].iter_mut().zip(weight).zip(e.exitance) {
                 *u += w * x * f;
             }
@@ -218,6 +227,7 @@ impl<'a> DirectLight<'a> {
     /// Emitter `e`'s shadow rays from `origin`: the visible ones' and all
     /// of them's cos cos / r^2 over the sampling density (their ratio is the
     /// share of the unoccluded form factor `origin` sees).
+    #[allow(clippy::too_many_arguments)]
     fn shadow_rays(
         &self,
         e: &Emitter,
@@ -226,6 +236,7 @@ impl<'a> DirectLight<'a> {
         polygon: u32,
         rng: &mut Rng,
         strata: Strata,
+        hint: &mut Option<u32>,
     ) -> (f64, f64) {
         let (mut all, mut seen) = (0.0f64, 0.0f64);
         let g = strata.grid as f32;
@@ -243,7 +254,10 @@ impl<'a> DirectLight<'a> {
                 continue;
             }
             all += w;
-            if !self.bvh.occluded(origin, d, 0.0, 1.0, [polygon, e.polygon]) {
+            if !self
+                .bvh
+                .occluded_hinted(origin, d, 0.0, 1.0, [polygon, e.polygon], hint)
+            {
                 seen += w;
             }
         }
@@ -266,7 +280,7 @@ impl<'a> DirectLight<'a> {
                 &e.corners
             };
             let mut rng = Rng(0x5eed_0000_0000 ^ j as u64);
-            let mut pool = Pool::new(self.emitters.len());
+            let mut pool = Pool::new(self.emitters.len(), self.lights.len());
             let mut weight = 0.0;
             let (side, rays) = (ELEMENT_POINTS, ELEMENT_RAYS);
             for q in 0..side * side {
@@ -317,7 +331,7 @@ impl<'a> DirectLight<'a> {
             for k in (1..order.len()).rev() {
                 order.swap(k, rng.below(k + 1));
             }
-            let mut pool = Pool::new(self.emitters.len());
+            let mut pool = Pool::new(self.emitters.len(), self.lights.len());
             let mut texture = [0.0f64; 3];
             for k in 0..ss * ss {
                 let (sx, sy) = ((px + k % ss) as f32 + 0.5, (py + k / ss) as f32 + 0.5);

@@ -107,7 +107,7 @@ pub fn irradiance(light: &Light, bvh: &Bvh, x: Vec3, n: Vec3, polygon: u32, eps:
 /// [`irradiance`], its shadow ray trying first the leaf that stopped the
 /// last one (see [`Bvh::occluded_hinted`]: the same answer, sooner where
 /// neighbouring points are shadowed by the same occluder).
-fn irradiance_hinted(
+pub fn irradiance_hinted(
     light: &Light,
     bvh: &Bvh,
     x: Vec3,
