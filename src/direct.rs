@@ -200,8 +200,7 @@ impl<'a> DirectLight<'a> {
         let origin = x + n * self.eps;
         let (light_hints, emitter_hints) = pool.hints.split_at_mut(self.lights.len());
         for (light, hint) in self.lights.iter().zip(light_hints) {
-            let d =
-                crate::lights::irradiance_hinted(light, self.bvh, x, n, polygon, self.eps, hint);
+            let d = crate::lights::irradiance(light, self.bvh, x, n, polygon, self.eps, hint);
             for c in 0..3 {
                 pool.lights[c] += weight[c] * d[c];
             }

@@ -81,12 +81,15 @@ impl ReceiverTable {
             elements: mesh
                 .elements
                 .iter()
-                .map(|e| ReceiverElement {
-                    centre: element_centre(e),
-                    polygon: e.polygon,
-                    area: e.area,
-                    radius: element_radius(e, element_centre(e).as_dvec3()),
-                    patch: e.patch,
+                .map(|e| {
+                    let centre = element_centre(e);
+                    ReceiverElement {
+                        centre,
+                        polygon: e.polygon,
+                        area: e.area,
+                        radius: element_radius(e, centre.as_dvec3()),
+                        patch: e.patch,
+                    }
                 })
                 .collect(),
             normals: mesh.polygons.iter().map(|p| p.normal).collect(),

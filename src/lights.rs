@@ -99,15 +99,10 @@ impl LightField {
 
 /// Irradiance (W/m^2 per channel) from `light` at `x` on polygon `polygon`
 /// (normal `n`), with one shadow ray from `x + n eps` (0 where anything but
-/// `polygon` blocks it).
-pub fn irradiance(light: &Light, bvh: &Bvh, x: Vec3, n: Vec3, polygon: u32, eps: f32) -> [f64; 3] {
-    irradiance_hinted(light, bvh, x, n, polygon, eps, &mut None)
-}
-
-/// [`irradiance`], its shadow ray trying first the leaf that stopped the
-/// last one (see [`Bvh::occluded_hinted`]: the same answer, sooner where
-/// neighbouring points are shadowed by the same occluder).
-pub fn irradiance_hinted(
+/// `polygon` blocks it). The ray tries first the leaf `hint` that stopped
+/// the last one (see [`Bvh::occluded_hinted`]: the same answer, sooner
+/// where neighbouring points are shadowed by the same occluder).
+pub fn irradiance(
     light: &Light,
     bvh: &Bvh,
     x: Vec3,
@@ -252,7 +247,7 @@ pub fn element_field_reusing(
             let (x, jac) = point_in(corners, u, v);
             let jac = f64::from(jac);
             for (light, hint) in lights.iter().zip(&mut hints) {
-                let d = irradiance_hinted(light, bvh, x, n, e.polygon, eps, hint);
+                let d = irradiance(light, bvh, x, n, e.polygon, eps, hint);
                 for c in 0..3 {
                     direct[c] += d[c] * jac;
                 }

@@ -480,13 +480,10 @@ pub struct Side {
 }
 
 /// Per-node areas and area-weighted mean radiosities, the front and the
-/// back of double-sided surfaces apart.
-pub fn surfaces(mesh: &Mesh, nodes: &[String], radiosity: &[[f64; 3]]) -> Vec<Surface> {
-    surfaces_of(mesh, nodes, radiosity.iter().copied())
-}
-
-/// [`surfaces`] of radiosities given element by element, in element order.
-pub fn surfaces_of(
+/// back of double-sided surfaces apart, of radiosities given element by
+/// element in element order (no per-element vector needed: the trace
+/// summarises a big scene at every point).
+pub fn surfaces(
     mesh: &Mesh,
     nodes: &[String],
     radiosity: impl Iterator<Item = [f64; 3]>,

@@ -271,7 +271,7 @@ impl HemisphereRasterizer {
         t.vertices.clear();
         let (outside, corners) = (&self.outside, &self.proxies.corners);
         for (k, poly) in self.proxies.polygons.iter().enumerate() {
-            if !in_view(k, poly, corners, outside, shooter) {
+            if !in_view(k, poly, outside, shooter) {
                 continue;
             }
             let n = shooter.to_local(poly.normal);

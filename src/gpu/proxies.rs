@@ -267,7 +267,7 @@ impl Proxies {
                 }
                 let poly = &polys[k];
                 k += 1;
-                if !in_view(at, poly, corners, outside, shooter) {
+                if !in_view(at, poly, outside, shooter) {
                     continue;
                 }
                 // Over several ranks, a polygon whose bounding sphere holds
@@ -422,7 +422,6 @@ const SPHERE_MARGIN: f32 = 0.05;
 pub(super) fn in_view(
     k: usize,
     poly: &PolygonProxies,
-    corners: &[[Vec3; 4]],
     outside: &[bool],
     shooter: &ShooterFrame,
 ) -> bool {
@@ -430,7 +429,7 @@ pub(super) fn in_view(
         && (poly.centre - shooter.centre).dot(shooter.normal) + poly.radius > 0.0
         && (poly.centre - shooter.centre).length() - poly.radius <= shooter.reach
         && !edge_on(poly, shooter)
-        && !hidden_back_face(poly, corners, outside, shooter)
+        && !hidden_back_face(poly, outside, shooter)
 }
 
 /// Whether `poly`'s plane passes through the shooter's centre (to a
@@ -447,15 +446,10 @@ fn edge_on(poly: &PolygonProxies, shooter: &ShooterFrame) -> bool {
 /// Whether `poly` is a back face of a solid that the shooter is outside of
 /// (`outside`, per solid): then a front face of the same solid is nearer in
 /// every direction it covers, and it need not be drawn.
-fn hidden_back_face(
-    poly: &PolygonProxies,
-    corners: &[[Vec3; 4]],
-    outside: &[bool],
-    shooter: &ShooterFrame,
-) -> bool {
+fn hidden_back_face(poly: &PolygonProxies, outside: &[bool], shooter: &ShooterFrame) -> bool {
     poly.solid
         .is_some_and(|s| outside.get(s as usize).copied().unwrap_or(false))
-        && poly.proxies.start < poly.proxies.end.min(corners.len() as u32)
+        && !poly.proxies.is_empty()
         && (shooter.centre - poly.corner).dot(poly.normal) < 0.0
 }
 

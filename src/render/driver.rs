@@ -498,7 +498,7 @@ pub fn build_report(
         energy: solver.energy(),
         timings,
         parallel,
-        surfaces: report::surfaces(mesh, &scene.nodes, &solver.display_radiosity(opts.ambient)),
+        surfaces: report::surfaces(mesh, &scene.nodes, solver.display_radiosities(opts.ambient)),
         convergence: Vec::new(),
         warnings: scene.warnings.clone(),
     }

@@ -139,7 +139,7 @@ impl<'m> Trace<'m> {
         let before = comm.traffic();
         let summary = if comm.size() == 1 {
             Some((
-                report::surfaces_of(solver.mesh(), nodes, solver.display_radiosities(ambient)),
+                report::surfaces(solver.mesh(), nodes, solver.display_radiosities(ambient)),
                 solver.unshot_fraction(),
             ))
         } else {
@@ -150,7 +150,7 @@ impl<'m> Trace<'m> {
             };
             gather_whole_into(comm, solver, extra, &mut self.whole).map(|whole| {
                 (
-                    report::surfaces_of(solver.mesh(), nodes, whole.display_radiosities(ambient)),
+                    report::surfaces(solver.mesh(), nodes, whole.display_radiosities(ambient)),
                     whole.unshot_fraction(),
                 )
             })
