@@ -26,6 +26,7 @@
 //! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
 //! - [`bake`]: the solution as glTF with vertex colours.
 
+pub mod ambient;
 pub mod bake;
 pub mod checkpoint;
 pub mod comm;

@@ -163,6 +163,9 @@ pub struct Mesh {
     /// What the scene's lights and sky deliver to each element (empty
     /// without them): their one shot, which every solver starts from.
     pub light_field: crate::lights::LightField,
+    /// Where each group of surfaces' diffuse light lands, for the display's
+    /// ambient term (built on first use, see [`Mesh::ambient_transport`]).
+    pub ambient: std::sync::OnceLock<crate::ambient::Transport>,
 }
 
 /// A glTF node whose polygons close a volume with their fronts facing out (a
@@ -441,6 +444,14 @@ impl Mesh {
                 let facing = if q.back_side { -q.normal } else { q.normal };
                 facing.dot(n) > 0.0
             })
+    }
+
+    /// The ambient term's transport ([`crate::ambient::Transport`]), estimated
+    /// on the first call (a few hundred thousand rays at most): only a
+    /// display of the solution needs it.
+    pub fn ambient_transport(&self) -> &crate::ambient::Transport {
+        self.ambient
+            .get_or_init(|| crate::ambient::Transport::new(self))
     }
 
     /// Total emitted power (exitance times area, summed over patches and RGB), W.

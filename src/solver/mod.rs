@@ -830,16 +830,19 @@ impl<'m> Solver<'m> {
     /// vector (the trace summarises it per node at every point, and in a
     /// big scene a fresh vector per point was tens of megabytes).
     pub fn display_radiosities(&self, ambient: bool) -> impl Iterator<Item = [f64; 3]> + '_ {
-        let amb = if ambient { self.ambient() } else { [0.0; 3] };
+        let amb = if ambient {
+            self.carried_ambient()
+        } else {
+            None
+        };
         self.radiosity
             .iter()
             .zip(&self.mesh.elements)
             .map(move |(b, e)| {
                 let rho = e.reflectance;
-                let amb = if takes_ambient(self.mesh, e) {
-                    amb
-                } else {
-                    [0.0; 3]
+                let amb = match &amb {
+                    Some((t, h)) => h[t.group_of(e.patch)],
+                    None => [0.0; 3],
                 };
                 [
                     b[0] + rho[0] * amb[0],
@@ -847,6 +850,27 @@ impl<'m> Solver<'m> {
                     b[2] + rho[2] * amb[2],
                 ]
             })
+    }
+
+    /// The display's ambient term: the irradiance per group of surfaces
+    /// that this solver's unshot power will deliver, carried along the
+    /// mesh's geometry ([`crate::ambient::Transport`]), with the transport
+    /// (None when nothing is unshot). Needs the whole solution (one rank,
+    /// or assembled).
+    fn carried_ambient(&self) -> Option<(&'m crate::ambient::Transport, Vec<[f64; 3]>)> {
+        let mesh = self.mesh;
+        if self.own_patches().all(|i| self.unshot[i] == [0.0; 3]) {
+            return None;
+        }
+        let transport = mesh.ambient_transport();
+        let mut unshot = vec![[0.0; 3]; transport.groups()];
+        for i in self.own_patches() {
+            let g = transport.group_of(i as u32);
+            for c in 0..3 {
+                unshot[g][c] += self.unshot[i][c] * self.patch_area[i];
+            }
+        }
+        Some((transport, transport.irradiance(&unshot)))
     }
 }
 
