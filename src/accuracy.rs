@@ -20,6 +20,7 @@ use radiosity::output;
 use radiosity::render::{render, FormFactorMethod, Projection, RenderOptions};
 use radiosity::report::Surface;
 use radiosity::scene::{self, GltfSurface, Scene};
+use radiosity::settings::AmbientTerm;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -814,6 +815,17 @@ fn solver_curves(
         o.mesh.refine = 0;
         eprintln!("accuracy: {} hybrid, no refinement", scene.name);
         let label = "hybrid 128x512, no refinement (--refine 0)".to_string();
+        let mut curve = run_curve(gpu, scene, &o, label, reference)?;
+        curve.key = true;
+        curves.push(curve);
+    }
+    if base.ambient == AmbientTerm::Carried {
+        // The ambient term carried along the geometry against Cohen's even
+        // spread: the same solve, another display of its unshot light.
+        let mut o = base.clone();
+        o.ambient = AmbientTerm::Even;
+        eprintln!("accuracy: {} hybrid, even ambient", scene.name);
+        let label = "hybrid 128x512, Cohen's even ambient term (--ambient even)".to_string();
         let mut curve = run_curve(gpu, scene, &o, label, reference)?;
         curve.key = true;
         curves.push(curve);

@@ -293,8 +293,14 @@ struct RenderArgs {
     /// Draw the element edges over the image.
     #[arg(long)]
     wireframe: bool,
-    /// Leave the ambient term (the estimate of the light not yet shot, Cohen
-    /// et al. 1988) out of the image and the report's radiosities.
+    /// The ambient term: the estimate of the light not yet shot that the
+    /// image, the trace and the report's radiosities add. `carried`: the
+    /// unshot power carried along the scene's geometry (rays between
+    /// patches, estimated once per solve); `even`: spread evenly over the
+    /// scene (Cohen et al. 1988); `off`: none.
+    #[arg(long, value_enum, default_value_t)]
+    ambient: radiosity::settings::AmbientTerm,
+    /// Same as `--ambient off`.
     #[arg(long)]
     no_ambient: bool,
     /// Tile size WxH in hemisphere cells when running on several MPI ranks
@@ -698,7 +704,11 @@ fn render_options(
     opts.height = args.height;
     opts.shading = args.shading;
     opts.shadow_rays = args.shadow_rays;
-    opts.ambient = !args.no_ambient;
+    opts.ambient = if args.no_ambient {
+        radiosity::settings::AmbientTerm::Off
+    } else {
+        args.ambient
+    };
     opts.wireframe = args.wireframe;
     opts.tile = args.tile;
     opts.exchange = args.exchange;

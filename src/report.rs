@@ -151,6 +151,8 @@ pub struct Settings {
     /// Whether the ambient term (the unshot light's estimate) is in the
     /// image and in the reported radiosities.
     pub ambient: bool,
+    /// Which ambient term (see [`crate::settings::AmbientTerm`]).
+    pub ambient_term: crate::settings::AmbientTerm,
     /// Whether shooters overshoot by the ambient term.
     pub overshoot: bool,
     /// The hemisphere resolution of weak shooters, and below what fraction

@@ -26,6 +26,30 @@ impl FormFactorMethod {
     }
 }
 
+/// What a display of a solution adds for the light not yet shot, the
+/// ambient term (`--ambient`): in the report's radiosities, the trace, the
+/// image and the viewer. The solver never sees it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum AmbientTerm {
+    /// Nothing: the radiosity shot so far.
+    Off,
+    /// Cohen et al. 1988: the unshot power spread evenly over the scene's
+    /// area, reflected by its mean reflectance.
+    Even,
+    /// The unshot power carried bounce by bounce along the scene's geometry
+    /// (`ambient::Transport`: ray-sampled shares between patches).
+    #[default]
+    Carried,
+}
+
+impl AmbientTerm {
+    /// Whether a display adds anything.
+    pub fn is_on(self) -> bool {
+        self != Self::Off
+    }
+}
+
 /// How a piece's cells are found on the hemisphere (`--projection`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]

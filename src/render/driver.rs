@@ -17,6 +17,7 @@ use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
 };
 use crate::scene::Scene;
+use crate::settings::AmbientTerm;
 use crate::settings::Projection;
 use crate::solver::Solver;
 use std::time::{Duration, Instant};
@@ -143,7 +144,7 @@ fn final_solve<'m>(
     // The display's ambient term needs its transport: estimated here, on the
     // rank that displays, so its cost counts as solve time (the trace's own
     // time does not).
-    if opts.ambient && comm.rank() == 0 {
+    if opts.ambient == AmbientTerm::Carried && comm.rank() == 0 {
         mesh.ambient_transport();
     }
     let stats = shoot_until(mesh, &opts.stop, 0.0, comm, source, solver, &mut hooks)?;
@@ -475,7 +476,8 @@ pub fn build_report(
             image_size,
             shading: opts.shading,
             shadow_rays: opts.shadow_rays,
-            ambient: opts.ambient,
+            ambient: opts.ambient.is_on(),
+            ambient_term: opts.ambient,
             overshoot: opts.overshoot,
             coarse: opts
                 .coarse_tier()

@@ -25,7 +25,7 @@ pub struct Progress {
 pub struct SolveHooks<'a, 'p, 'm> {
     pub(super) comm: &'a dyn Collectives,
     pub(super) nodes: &'a [String],
-    pub(super) ambient: bool,
+    pub(super) ambient: crate::settings::AmbientTerm,
     pub(super) solve_start: Instant,
     pub(super) trace: Trace<'m>,
     pub(super) progress: &'p mut dyn FnMut(&Progress),

@@ -55,7 +55,7 @@ pub struct RenderOptions {
     /// direct light (0: the direct light interpolated from the solution).
     pub shadow_rays: u32,
     /// Add the ambient term to the image and the reported radiosities.
-    pub ambient: bool,
+    pub ambient: crate::settings::AmbientTerm,
     /// Keep form-factor rows of patches that have shot, so a patch that
     /// shoots again costs no rasterisation (results are identical either way).
     pub cache_rows: bool,
@@ -113,7 +113,7 @@ impl Default for RenderOptions {
             height: None,
             shading: Shading::Smooth,
             shadow_rays: crate::render::image::DEFAULT_SHADOW_RAYS,
-            ambient: true,
+            ambient: crate::settings::AmbientTerm::default(),
             cache_rows: true,
             memory_budget: DEFAULT_MEMORY_BUDGET,
             split_shots: true,

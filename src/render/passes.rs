@@ -156,7 +156,7 @@ fn one_pass(
         );
         // (A pass's solver always knows its direct part.)
         if let Some((whole, direct)) = whole.as_ref().and_then(|w| Some((w, w.direct()?))) {
-            let radiosity = whole.display_radiosity(false);
+            let radiosity = whole.display_radiosity(crate::settings::AmbientTerm::Off);
             let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
             for (s, e) in shading.iter_mut().zip(errors) {
                 *s = crate::numeric::round_u64(e.clamp(0.0, SHADING_CAP) * one);

@@ -4,6 +4,7 @@
 
 use crate::parallel::{Collectives, Traffic};
 use crate::report::{self, Report, TracePoint};
+use crate::settings::AmbientTerm;
 use crate::solver::Solver;
 use std::time::{Duration, Instant};
 
@@ -114,7 +115,7 @@ impl<'m> Trace<'m> {
         comm: &dyn Collectives,
         solver: &Solver<'m>,
         nodes: &[String],
-        ambient: bool,
+        ambient: AmbientTerm,
         solve_start: Instant,
     ) {
         let seconds = solve_start
@@ -131,7 +132,7 @@ impl<'m> Trace<'m> {
         comm: &dyn Collectives,
         solver: &Solver<'m>,
         nodes: &[String],
-        ambient: bool,
+        ambient: AmbientTerm,
         seconds: f64,
     ) {
         let t = Instant::now();

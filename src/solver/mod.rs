@@ -18,6 +18,7 @@ use crate::mesh::Mesh;
 use crate::parallel::{owned_patches, patch_owner};
 
 mod state;
+use crate::settings::AmbientTerm;
 pub use state::{SolverState, StateMismatch};
 
 /// Anything that can produce the form factors from a shooter patch to the elements.
@@ -764,7 +765,7 @@ impl<'m> Solver<'m> {
 
     /// Radiance for display, W sr^-1 m^-2 per channel: a Lambertian
     /// surface's [`Solver::display_radiosity`] over pi.
-    pub fn display_radiance(&self, ambient: bool) -> Vec<[f32; 3]> {
+    pub fn display_radiance(&self, ambient: AmbientTerm) -> Vec<[f32; 3]> {
         self.display_radiosity(ambient)
             .iter()
             .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
@@ -821,27 +822,33 @@ impl<'m> Solver<'m> {
         self.direct_known = false;
     }
 
-    /// Radiosity for display: B, plus rho times the ambient term when `ambient` is set.
-    pub fn display_radiosity(&self, ambient: bool) -> Vec<[f64; 3]> {
+    /// Radiosity for display: B, plus rho times the ambient term `ambient`
+    /// asks for (see [`AmbientTerm`]).
+    pub fn display_radiosity(&self, ambient: AmbientTerm) -> Vec<[f64; 3]> {
         self.display_radiosities(ambient).collect()
     }
 
     /// [`Solver::display_radiosity`] element by element, without the
     /// vector (the trace summarises it per node at every point, and in a
     /// big scene a fresh vector per point was tens of megabytes).
-    pub fn display_radiosities(&self, ambient: bool) -> impl Iterator<Item = [f64; 3]> + '_ {
-        let amb = if ambient {
-            self.carried_ambient()
-        } else {
-            None
+    pub fn display_radiosities(&self, ambient: AmbientTerm) -> impl Iterator<Item = [f64; 3]> + '_ {
+        // Per element, the irradiance the unshot light will still bring.
+        let carried = match ambient {
+            AmbientTerm::Carried => self.carried_ambient(),
+            _ => None,
+        };
+        let even = match ambient {
+            AmbientTerm::Even => self.ambient(),
+            _ => [0.0; 3],
         };
         self.radiosity
             .iter()
             .zip(&self.mesh.elements)
             .map(move |(b, e)| {
                 let rho = e.reflectance;
-                let amb = match &amb {
+                let amb = match &carried {
                     Some((t, h)) => h[t.group_of(e.patch)],
+                    None if takes_ambient(self.mesh, e) => even,
                     None => [0.0; 3],
                 };
                 [
@@ -866,8 +873,8 @@ impl<'m> Solver<'m> {
         let mut unshot = vec![[0.0; 3]; transport.groups()];
         for i in self.own_patches() {
             let g = transport.group_of(i as u32);
-            for c in 0..3 {
-                unshot[g][c] += self.unshot[i][c] * self.patch_area[i];
+            for (u, b) in unshot[g].iter_mut().zip(self.unshot[i]) {
+                *u += b * self.patch_area[i];
             }
         }
         Some((transport, transport.irradiance(&unshot)))
@@ -909,7 +916,7 @@ mod tests {
         // Patch 3's first shot carries its emission (1) and what it received
         // (0.05): only the emission's share of what it delivers is direct.
         shoot(&mut solver, 3, 1);
-        let delivered = solver.display_radiosity(false)[1][0] - 1.0;
+        let delivered = solver.display_radiosity(AmbientTerm::Off)[1][0] - 1.0;
         assert!((delivered - 0.5 * 0.1 * 1.05).abs() < 1e-12, "{delivered}");
         let direct = solver.direct().expect("known")[1];
         assert!((direct[0] - 0.5 * 0.1 * 1.0).abs() < 1e-12, "{direct:?}");

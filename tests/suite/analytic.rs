@@ -114,7 +114,7 @@ fn trace_ends_at_the_report_and_its_error_falls() {
         ],
     );
     let mut opts = tight(1e-7);
-    opts.ambient = false;
+    opts.ambient = radiosity::settings::AmbientTerm::Off;
     let r = solve_file(&path, &opts);
     let trace = &r.report.convergence;
     let last = trace.last().expect("a trace");

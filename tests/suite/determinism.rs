@@ -240,7 +240,7 @@ fn the_ambient_term_is_in_the_report_unless_asked_not_to_be() {
     };
     opts.stop.max_shots = 20;
     let with = cornell(&opts);
-    opts.ambient = false;
+    opts.ambient = radiosity::settings::AmbientTerm::Off;
     let without = cornell(&opts);
     assert!(with.report.unshot_fraction > 0.1);
     // After 20 shots much light is unshot: every reflecting surface is

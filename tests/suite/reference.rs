@@ -122,13 +122,50 @@ fn check<const N: usize>(scenes: [&str; N]) {
 
 /// [`check`] of one scene `s` against the reference named `scene`.
 fn check_scene(scene: &str, s: &radiosity::scene::Scene) {
+    let opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    check_with(scene, s, &opts, 0.01, 0.03);
+}
+
+/// A solve stopped after 64 shots, with most of the light still unshot
+/// (19-37 %), shows that light by the ambient term carried along the
+/// geometry (`radiosity::ambient`): within 1 % mean per node of the
+/// references. Cohen's even spread, which it replaced, was 2.2-7.9 % off
+/// at this point on the same scenes (docs/accuracy.md, "The ambient term").
+#[test]
+fn a_solve_stopped_early_shows_the_unshot_light_within_one_percent_mean() {
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 64;
+    for (scene, worst) in [
+        ("cornell", 0.02),
+        ("cubes-4", 0.02),
+        ("family-l-room-2", 0.02),
+        // One box of the pile is far from settled after 64 shots (5 %).
+        ("family-stacked-2", 0.08),
+    ] {
+        let s = radiosity::scene::open(scene).expect("scene");
+        check_with(scene, &s, &opts, 0.01, worst);
+    }
+}
+
+/// Renders `s` with `opts` and checks it against the reference named
+/// `scene`: area-weighted mean node error at most `mean_bound`, worst
+/// node at most `worst_bound` (emitters left out).
+fn check_with(
+    scene: &str,
+    s: &radiosity::scene::Scene,
+    opts: &RenderOptions,
+    mean_bound: f64,
+    worst_bound: f64,
+) {
     {
         let reference = reference(scene);
-        let opts = RenderOptions {
-            width: 0,
-            ..RenderOptions::default()
-        };
-        let r = render(gpu(), s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+        let r = render(gpu(), s, opts, Duration::ZERO, &mut |_| {}).expect("render");
         let (mut weighted, mut area, mut worst) = (0.0, 0.0, (0.0f64, String::new()));
         for surface in &r.report.surfaces {
             // The emitters' radiosity is their emission: nothing to score.
@@ -156,12 +193,12 @@ fn check_scene(scene: &str, s: &radiosity::scene::Scene) {
             worst.1
         );
         assert!(
-            mean <= 0.01,
+            mean <= mean_bound,
             "{scene}: mean node error {:.2} %",
             100.0 * mean
         );
         assert!(
-            worst.0 <= 0.03,
+            worst.0 <= worst_bound,
             "{scene}: node {} is {:.2} % off",
             worst.1,
             100.0 * worst.0

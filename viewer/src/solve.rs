@@ -247,7 +247,7 @@ fn solve(
 struct Publisher<'s, 'm, W: Fn()> {
     shared: &'s Mutex<Snapshot>,
     wake: &'s W,
-    ambient: bool,
+    ambient: radiosity::settings::AmbientTerm,
     last_publish: Instant,
     /// Solve time so far (pauses left out).
     solve_time: Duration,
