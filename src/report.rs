@@ -265,6 +265,9 @@ pub struct Timings {
     pub far_receivers: f64,
     /// Distributing radiosity (summed over shots).
     pub update: f64,
+    /// Of `solve`: estimating the ambient term's transport, once, at its
+    /// start (`--ambient carried`; 0 otherwise).
+    pub ambient: f64,
     /// Rendering and writing the image.
     pub image: f64,
     /// Median milliseconds per shot.

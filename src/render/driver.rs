@@ -111,6 +111,8 @@ struct Solved<'m> {
     stats: LoopStats,
     trace: Trace<'m>,
     solve: f64,
+    /// Of `solve`: the ambient term's transport.
+    ambient: f64,
 }
 
 /// Runs the final solve with the trace, progress and checkpoint hooks.
@@ -144,9 +146,11 @@ fn final_solve<'m>(
     // The display's ambient term needs its transport: estimated here, on the
     // rank that displays, so its cost counts as solve time (the trace's own
     // time does not).
+    let t = Instant::now();
     if opts.ambient == AmbientTerm::Carried && comm.rank() == 0 {
         mesh.ambient_transport();
     }
+    let ambient = t.elapsed().as_secs_f64();
     let stats = shoot_until(mesh, &opts.stop, 0.0, comm, source, solver, &mut hooks)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
@@ -154,6 +158,7 @@ fn final_solve<'m>(
         stats,
         trace,
         solve,
+        ambient,
     })
 }
 
@@ -214,6 +219,7 @@ pub fn render_on(
         progress,
     )?;
     timings.solve = solved.solve;
+    timings.ambient = solved.ambient;
     source.release_cache();
     let excluded = solved.trace.traffic.plus(before);
     // The trace's summaries are left out of the solve's CPU as of its time.
