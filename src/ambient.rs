@@ -64,6 +64,16 @@ pub struct Transport {
     offsets: Vec<usize>,
     /// (group landed on, share of the light that left group q), by group.
     landings: Vec<(u32, f64)>,
+    /// Per group, the share of its light that met back faces.
+    back: Vec<f64>,
+    /// Group g's elements are `elements[element_offsets[g]..element_offsets[g + 1]]`.
+    element_offsets: Vec<usize>,
+    /// The groups' elements, group by group.
+    elements: Vec<u32>,
+    /// Group g's patches are `patches[patch_offsets[g]..patch_offsets[g + 1]]`.
+    patch_offsets: Vec<usize>,
+    /// The groups' patches, group by group, in increasing order.
+    patches: Vec<u32>,
 }
 
 impl Transport {
@@ -91,28 +101,52 @@ impl Transport {
             }
         }
         let rays = (RAY_BUDGET / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
-        let mut rows: Vec<Vec<(u32, f64)>> = vec![Vec::new(); count];
+        let mut rows: Vec<(Vec<(u32, f64)>, f64)> = vec![(Vec::new(), 0.0); count];
         in_parallel(&mut rows, |g, row| {
             *row = landings_of(mesh, &group_of, &members[g], g as u64, rays);
         });
         let mut offsets = Vec::with_capacity(count + 1);
         offsets.push(0);
         let mut landings = Vec::new();
-        for row in rows {
+        let mut back = Vec::with_capacity(count);
+        for (row, b) in rows {
             landings.extend(row);
             offsets.push(landings.len());
+            back.push(b);
+        }
+        let mut element_offsets = Vec::with_capacity(count + 1);
+        element_offsets.push(0);
+        let mut elements = Vec::with_capacity(mesh.elements.len());
+        for m in &members {
+            elements.extend(m.iter().map(|&(j, _)| j));
+            element_offsets.push(elements.len());
         }
         log::info!(
             "ambient term: {count} groups, {rays} rays each, {} landings, {:.3} s",
             landings.len(),
             start.elapsed().as_secs_f64()
         );
+        let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); count];
+        for (i, &g) in group_of.iter().enumerate() {
+            by_group[g as usize].push(i as u32);
+        }
+        let mut patch_offsets = vec![0];
+        let mut patches = Vec::with_capacity(group_of.len());
+        for b in by_group {
+            patches.extend(b);
+            patch_offsets.push(patches.len());
+        }
         Self {
             group_of,
             area,
             reflectance,
             offsets,
             landings,
+            back,
+            element_offsets,
+            elements,
+            patch_offsets,
+            patches,
         }
     }
 
@@ -135,8 +169,29 @@ impl Transport {
             .map_or(0.0, |(_, s)| *s)
     }
 
-    fn row(&self, g: usize) -> &[(u32, f64)] {
+    /// Where group `g`'s diffuse light lands: (group, share), by group.
+    pub fn row(&self, g: usize) -> &[(u32, f64)] {
         &self.landings[self.offsets[g]..self.offsets[g + 1]]
+    }
+
+    /// The share of group `g`'s diffuse light that meets back faces.
+    pub fn back_share(&self, g: usize) -> f64 {
+        self.back[g]
+    }
+
+    /// Group `g`'s elements, in increasing order.
+    pub fn elements_of(&self, g: usize) -> &[u32] {
+        &self.elements[self.element_offsets[g]..self.element_offsets[g + 1]]
+    }
+
+    /// Group `g`'s patches, in increasing order.
+    pub fn patches_of(&self, g: usize) -> &[u32] {
+        &self.patches[self.patch_offsets[g]..self.patch_offsets[g + 1]]
+    }
+
+    /// Group `g`'s area, m^2.
+    pub fn area_of(&self, g: usize) -> f64 {
+        self.area[g]
     }
 
     /// The irradiance, W/m^2 per channel and group, that the unshot power
@@ -236,20 +291,22 @@ fn groups(mesh: &Mesh) -> Vec<u32> {
 }
 
 /// Where `rays` rays from group `seed`'s elements `members` (with their
-/// cumulative areas) land: (group, share), by group.
+/// cumulative areas) land: (group, share), by group; and the share that
+/// met back faces.
 fn landings_of(
     mesh: &Mesh,
     group_of: &[u32],
     members: &[(u32, f64)],
     seed: u64,
     rays: usize,
-) -> Vec<(u32, f64)> {
+) -> (Vec<(u32, f64)>, f64) {
     let Some(&(_, total)) = members.last() else {
-        return Vec::new();
+        return (Vec::new(), 0.0);
     };
     if total <= 0.0 {
-        return Vec::new();
+        return (Vec::new(), 0.0);
     }
+    let mut back = 0usize;
     let mut rng = Rng(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ 0x5eed_a3b1);
     let mut hits: Vec<u32> = Vec::with_capacity(rays);
     for r in 0..rays {
@@ -275,6 +332,8 @@ fn landings_of(
         // are black behind).
         if mesh.polygons[hit.polygon as usize].normal.dot(dir) < 0.0 {
             hits.push(group_at(mesh, group_of, hit.polygon, origin + dir * hit.t));
+        } else {
+            back += 1;
         }
     }
     hits.sort_unstable();
@@ -288,7 +347,7 @@ fn landings_of(
     for (_, s) in &mut out {
         *s /= rays as f64;
     }
-    out
+    (out, back as f64 / rays as f64)
 }
 
 /// The group of the point `x` of polygon `polygon`: that of the patch

@@ -220,6 +220,13 @@ pub struct SolveArgs {
     /// --resolution).
     #[arg(long, default_value_t = radiosity::render::DEFAULT_COARSE_BELOW, value_parser = parse_fraction)]
     coarse_below: f64,
+    /// Shooters whose unshot power is below this fraction of the emitted
+    /// power shoot along the ambient term's ray-sampled transport instead of
+    /// drawing a hemisphere: their light lands on whole patches (clusters of
+    /// patches in meshes of over 8192), for microseconds a shot. 0 (the
+    /// default): never. See README "Weak shooters along the transport".
+    #[arg(long, default_value_t = 0.0, value_parser = parse_fraction)]
+    transport_below: f64,
 }
 
 impl SolveArgs {
@@ -251,6 +258,7 @@ impl SolveArgs {
             overshoot: self.overshoot,
             coarse: self.coarse_resolution,
             coarse_below: self.coarse_below,
+            transport_below: self.transport_below,
             ..RenderOptions::default()
         }
     }

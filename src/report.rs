@@ -158,6 +158,9 @@ pub struct Settings {
     /// The hemisphere resolution of weak shooters, and below what fraction
     /// of the emitted power a shooter is weak (absent: every shot at `resolution`).
     pub coarse: Option<(String, f64)>,
+    /// Shooters below this fraction of the emitted power shoot along the
+    /// ambient term's transport (0: none do).
+    pub transport_below: f64,
 }
 
 /// One point of the convergence trace.
@@ -252,6 +255,8 @@ pub struct Timings {
     /// Shots drawn at the coarse hemisphere resolution (weak shooters;
     /// rasterised shots only).
     pub coarse_shots: u64,
+    /// Shots along the ambient term's transport (`--transport-below`).
+    pub transport_shots: u64,
     /// Drawing hemispheres on the GPU and waiting for them (summed over shots).
     pub rasterise: f64,
     /// Reading item buffers back (summed over shots).

@@ -394,6 +394,7 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.row_cache_bytes = t.cache_budget;
     timings.split_shots = t.split;
     timings.coarse_shots = t.coarse;
+    timings.transport_shots = t.transported;
     timings.rasterise = t.rasterise.as_secs_f64();
     timings.read_back = t.read_back.as_secs_f64();
     timings.exchange = t.exchange.as_secs_f64();
@@ -488,6 +489,7 @@ pub fn build_report(
             coarse: opts
                 .coarse_tier()
                 .map(|c| (c.to_string(), opts.coarse_below)),
+            transport_below: opts.transport_below,
         },
         device: gpu.describe(),
         lights: scene

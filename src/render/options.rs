@@ -72,6 +72,12 @@ pub struct RenderOptions {
     /// Shooters whose unshot power is below this fraction of the emitted
     /// power draw their hemisphere at `coarse` (0: every shot at `resolution`).
     pub coarse_below: f64,
+    /// Shooters whose unshot power is below this fraction of the emitted
+    /// power shoot along the ambient term's ray-sampled transport
+    /// (`crate::ambient::Transport`) instead of drawing a hemisphere: their
+    /// light lands on whole patches (clusters in big meshes), for
+    /// microseconds a shot (0, the default: never).
+    pub transport_below: f64,
     /// Shooters overshoot by rho times the ambient term (Feda & Purgathofer
     /// 1992): fewer shots to the same error, not less time on lavapipe
     /// (off by default).
@@ -120,6 +126,7 @@ impl Default for RenderOptions {
             overshoot: false,
             coarse: None,
             coarse_below: DEFAULT_COARSE_BELOW,
+            transport_below: 0.0,
             wireframe: false,
             checkpoint: None,
             interrupt: None,
@@ -159,6 +166,12 @@ impl RenderOptions {
         self.resolution
             .validate()
             .map_err(|e| RenderError::Settings(e.to_string()))?;
+        if !(0.0..1.0).contains(&self.transport_below) {
+            return Err(RenderError::Settings(format!(
+                "transport-below {} must be in [0, 1)",
+                self.transport_below
+            )));
+        }
         if self.stop.threshold.is_nan() || self.stop.threshold < 0.0 {
             return Err(RenderError::Settings(format!(
                 "threshold {} must be >= 0",
@@ -231,6 +244,12 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         option_text(opts.coarse_tier().map(|r| format!("\"{r}\""))),
         opts.coarse_below
     );
+    // Only when set, so checkpoints written before the option resume.
+    let settings = if opts.transport_below > 0.0 {
+        format!("{settings} transport {}", opts.transport_below)
+    } else {
+        settings
+    };
     crate::checkpoint::fingerprint(&[
         &geometry,
         settings.as_bytes(),

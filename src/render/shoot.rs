@@ -250,7 +250,10 @@ impl<'m> ShotLoop<'m> {
                 *n += x;
             }
         }
-        let region = self.region(solver, &best, solver.ambient_from(net));
+        let mut region = self.region(solver, &best, solver.ambient_from(net));
+        if source.by_transport(best.power) && !solver.overshoot() {
+            self.join_group(solver, &best, &mut region);
+        }
         let shot = self.shoot(source, solver, &best, &region)?;
         self.stats.shot_times.push(shot_start.elapsed());
         hooks.after_shot(solver, unshot_fraction);
@@ -318,6 +321,44 @@ impl<'m> ShotLoop<'m> {
             [theirs[0], theirs[1], theirs[2]],
             elements,
         )
+    }
+
+    /// A weak shooter along the transport shoots for its whole group (its
+    /// cluster of patches, in a mesh of more than `ambient::PATCH_GROUPS`
+    /// patches): the other members' unshot power, summed exactly over the
+    /// ranks (fixed point), joins `region` as if `best` held it, and the
+    /// members' stores are emptied before the shot lands (light landing
+    /// back on them stays). Members whose emission is unshot wait for their
+    /// own shot (its first shot is the solution's direct part). So weak
+    /// shots scale with the clusters, not the patches.
+    fn join_group(&self, solver: &mut Solver, best: &Candidate, region: &mut ShotRegion) {
+        let transport = self.mesh.ambient_transport();
+        let members: Vec<u32> = transport
+            .patches_of(transport.group_of(best.patch))
+            .iter()
+            .copied()
+            .filter(|&p| p != best.patch && !solver.emission_unshot(p))
+            .collect();
+        if members.is_empty() {
+            return;
+        }
+        let mine = solver.net_unshot_of(&members).map(|x| x as f64);
+        let all = self.comm.all_gather_f64(&mine);
+        let mut net = [0i64; 3];
+        for rank in all.chunks_exact(3) {
+            for (n, x) in net.iter_mut().zip(rank) {
+                *n += *x as i64;
+            }
+        }
+        let area = self.mesh.patches[best.patch as usize].area;
+        let emitted = solver.emitted_power();
+        for (s, n) in region.shoot.iter_mut().zip(net) {
+            *s += n as f64 / UNSHOT_ONE * emitted / area;
+        }
+        // `region.power` stays the shooter's: it chose the transport, and
+        // the source asks it again. The transport shoots the mean only.
+        region.elements.clear();
+        solver.clear_unshot(&members);
     }
 
     /// Gets the form factors of `best`'s shot and distributes it.

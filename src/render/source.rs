@@ -49,6 +49,8 @@ pub struct PhaseTimes {
     pub split: u64,
     /// Shots drawn at the coarse resolution (weak shooters).
     pub coarse: u64,
+    /// Shots along the ambient term's transport (`--transport-below`).
+    pub transported: u64,
     /// The row cache a rank may hold, bytes (what its memory budget left).
     pub cache_budget: u64,
 }
@@ -694,6 +696,50 @@ fn back_share(mesh: &Mesh, shooter: u32, row: &Row, region: &ShotRegion) -> f64 
     }
 }
 
+impl GpuFormFactors<'_> {
+    /// Whether a shooter of unshot power `power` shoots along the ambient
+    /// term's transport (`--transport-below`).
+    pub fn by_transport(&self, power: f64) -> bool {
+        self.choice.by_transport(power)
+    }
+
+    /// A weak shooter's row along the ambient term's transport: its group's
+    /// ray-sampled shares, each spread over the receiving group's elements
+    /// by area (F = share * A_j / A_group), the patch shooting its mean
+    /// radiosity. The same on every rank (the transport is seeded).
+    fn transport_row(&mut self, shooter: u32, region: &ShotRegion, out: &mut Vec<Transfer>) {
+        let mesh = self.mesh;
+        let transport = mesh.ambient_transport();
+        let g = transport.group_of(shooter);
+        out.clear();
+        for &(h, share) in transport.row(g) {
+            let h = h as usize;
+            let area = transport.area_of(h);
+            if area <= 0.0 {
+                continue;
+            }
+            for &j in transport.elements_of(h) {
+                // A degenerate element takes nothing (the solver divides
+                // by its area).
+                let a = mesh.elements[j as usize].area;
+                if a <= 0.0 {
+                    continue;
+                }
+                let f = share * a / area;
+                out.push(Transfer {
+                    element: j,
+                    form_factor: f,
+                    radiosity: region.shoot.map(|s| f * s),
+                });
+            }
+        }
+        // Clusters' elements interleave with other clusters'.
+        out.sort_unstable_by_key(|t| t.element);
+        self.last_blocked = transport.back_share(g);
+        self.timings.transported += 1;
+    }
+}
+
 impl FormFactorSource for GpuFormFactors<'_> {
     type Error = RenderError;
 
@@ -705,6 +751,14 @@ impl FormFactorSource for GpuFormFactors<'_> {
     ) -> Result<(), RenderError> {
         let start = Instant::now();
         let cpu = parallel::CpuSpan::start(self.comm);
+        if self.choice.by_transport(region.power) {
+            self.transport_row(shooter, region, out);
+            let spent = start.elapsed();
+            self.timings.sum += spent;
+            self.busy.push(spent.as_secs_f64());
+            self.busy_cpu.push(cpu.own(self.comm));
+            return Ok(());
+        }
         let tier = self.choice.tier_for(region.power);
         let key = RowKey::new(shooter, region.centre, tier);
         if let Some(row) = self.cache.get(&key) {

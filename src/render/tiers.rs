@@ -14,6 +14,9 @@ pub struct TierChoice {
     pub tiers: usize,
     /// Shooters with less unshot power than this (W, sum over RGB) draw coarse.
     pub coarse_below: f64,
+    /// Shooters with less unshot power than this (W, sum over RGB) shoot
+    /// along the ambient term's transport, drawing nothing.
+    pub transport_below: f64,
 }
 
 impl TierChoice {
@@ -22,7 +25,13 @@ impl TierChoice {
         Self {
             tiers: 1 + opts.coarse_tier().is_some() as usize,
             coarse_below: opts.coarse_below * emitted_power,
+            transport_below: opts.transport_below * emitted_power,
         }
+    }
+
+    /// Whether a shooter of unshot power `power` shoots along the transport.
+    pub fn by_transport(&self, power: f64) -> bool {
+        power < self.transport_below
     }
 
     /// The tier a shooter of unshot power `power` draws in.
@@ -265,6 +274,7 @@ mod tests {
         let none = TierChoice::new(
             &RenderOptions {
                 coarse_below: 0.0,
+                transport_below: 0.0,
                 ..opts.clone()
             },
             100.0,

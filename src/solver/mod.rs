@@ -261,6 +261,17 @@ fn ambient_area(mesh: &Mesh) -> f64 {
         .sum()
 }
 
+/// Element `e`'s share of its patch's area (0 in a patch of no area: a
+/// degenerate triangle of a real file, whose elements have none either).
+fn patch_share(mesh: &Mesh, e: &crate::mesh::Element) -> f64 {
+    let a = mesh.patches[e.patch as usize].area;
+    if a > 0.0 {
+        e.area / a
+    } else {
+        0.0
+    }
+}
+
 /// Power of a radiosity over an area, sum over RGB (signed).
 fn power(b: &[f64; 3], area: f64) -> f64 {
     (b[0] + b[1] + b[2]) * area
@@ -334,7 +345,7 @@ impl<'m> Solver<'m> {
         }
         for (j, e) in mesh.elements.iter().enumerate() {
             let rho = e.reflectance;
-            let share = e.area / mesh.patches[e.patch as usize].area;
+            let share = patch_share(mesh, e);
             let (lights, sky) = (field.direct[j], field.sky[j]);
             for c in 0..3 {
                 let d = rho[c] * (lights[c] + sky[c]);
@@ -434,6 +445,44 @@ impl<'m> Solver<'m> {
                 .sum()
         } else {
             abs_power(&self.unshot[i], self.patch_area[i])
+        }
+    }
+
+    /// Whether patch `patch` still holds its emission unshot (every rank knows).
+    pub fn emission_unshot(&self, patch: u32) -> bool {
+        self.emission_unshot[patch as usize]
+    }
+
+    /// The signed unshot power of this rank's patches among `patches`, per
+    /// channel, as a fraction of the emitted power in [`UNSHOT_ONE`] fixed
+    /// point (summed over ranks it is theirs, whatever the ranks).
+    pub fn net_unshot_of(&self, patches: &[u32]) -> NetUnshot {
+        let mut out = [0i64; 3];
+        if self.emitted_power <= 0.0 {
+            return out;
+        }
+        for &i in patches.iter().filter(|&&i| self.owns(i)) {
+            let (b, a) = (&self.unshot[i as usize], self.patch_area[i as usize]);
+            for (o, x) in out.iter_mut().zip(b) {
+                *o += crate::numeric::round_i64(x * a / self.emitted_power * UNSHOT_ONE);
+            }
+        }
+        out
+    }
+
+    /// Marks this rank's patches among `patches` as having shot all they
+    /// held (a group shooting as one: see `render::shoot`).
+    pub fn clear_unshot(&mut self, patches: &[u32]) {
+        let mesh = self.mesh;
+        let (rank, ranks) = (self.rank, self.ranks);
+        for &i in patches
+            .iter()
+            .filter(|&&i| crate::parallel::patch_owner(i, ranks) == rank)
+        {
+            self.unshot[i as usize] = [0.0; 3];
+            for k in mesh.patches[i as usize].elements.clone() {
+                self.element_unshot[k as usize] = [0.0; 3];
+            }
         }
     }
 
@@ -637,7 +686,7 @@ impl<'m> Solver<'m> {
             }
             let rho = el.reflectance;
             let scale = area / el.area;
-            let patch_share = el.area / mesh.patches[el.patch as usize].area;
+            let patch_share = patch_share(mesh, el);
             for (c, r) in rho.iter().enumerate() {
                 let d = r * t.radiosity[c] * scale;
                 self.direct[j][c] += d * direct_share[c];
@@ -871,7 +920,7 @@ impl<'m> Solver<'m> {
         }
         let transport = mesh.ambient_transport();
         let mut unshot = vec![[0.0; 3]; transport.groups()];
-        for i in self.own_patches() {
+        for i in self.own_patches().filter(|&i| self.patch_area[i] > 0.0) {
             let g = transport.group_of(i as u32);
             for (u, b) in unshot[g].iter_mut().zip(self.unshot[i]) {
                 *u += b * self.patch_area[i];
@@ -890,6 +939,35 @@ mod tests {
         let mut mesh = crate::mesh::unit_square(2, 1);
         mesh.polygons[0].exitance = [1.0; 3];
         mesh
+    }
+
+    #[test]
+    fn a_patch_of_no_area_under_a_light_keeps_every_display_finite() {
+        // Real files carry degenerate triangles (Sponza: patches of no area
+        // under its sun). Their share of their patch was 0 / 0, which the
+        // carried ambient term then spread over the whole scene.
+        let mut mesh = crate::mesh::unit_square(2, 1);
+        let n = mesh.elements.len();
+        mesh.patches[1].area = 0.0;
+        let degenerate = mesh.patches[1].elements.clone();
+        for j in degenerate {
+            mesh.elements[j as usize].area = 0.0;
+        }
+        mesh.light_field = crate::lights::LightField {
+            direct: vec![[1.0; 3]; n],
+            sky: vec![[0.0; 3]; n],
+            emitted: 1.0,
+            delivered: 1.0,
+            directional: vec![0.0; n],
+        };
+        let solver = Solver::new(&mesh);
+        for ambient in [AmbientTerm::Off, AmbientTerm::Even, AmbientTerm::Carried] {
+            let shown = solver.display_radiosity(ambient);
+            assert!(
+                shown.iter().flatten().all(|x| x.is_finite()),
+                "{ambient:?}: {shown:?}"
+            );
+        }
     }
 
     #[test]

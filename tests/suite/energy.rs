@@ -78,3 +78,50 @@ fn an_open_scene_reports_the_light_that_escapes() {
     let sum = e.absorbed + e.back_faces + e.unshot + e.escaped;
     assert!((sum / e.emitted - 1.0).abs() < 1e-9, "{e:?}");
 }
+
+/// Weak shooters along the ambient term's transport (`--transport-below`)
+/// conserve energy too, patch by patch in a small mesh (family-stacked-2)
+/// and cluster by cluster in a big one (cubes-b1, 50 088 patches: a weak
+/// shooter's whole cluster shoots as one, its members' power summed
+/// exactly over ranks); on 1 and 2 ranks, the same bits.
+#[test]
+fn weak_shooters_along_the_transport_conserve_energy_on_one_and_two_ranks() {
+    for (scene, refine, shots) in [("family-stacked-2", 1, 100_000), ("cubes-b1", 0, 400)] {
+        let scene = radiosity::scene::open(scene).expect("scene");
+        let mut opts = RenderOptions {
+            width: 0,
+            transport_below: 1e-3,
+            ..RenderOptions::default()
+        };
+        opts.mesh.refine = refine;
+        opts.stop.threshold = 0.02;
+        opts.stop.max_shots = shots;
+        let run = |ranks: usize| {
+            ThreadComm::run(ranks, |comm| {
+                render_on(gpu(), &scene, &opts, comm, Duration::ZERO, &mut |_| {})
+                    .expect("render")
+                    .map(|r| r.report)
+            })
+            .into_iter()
+            .flatten()
+            .next()
+            .expect("rank 0's report")
+        };
+        let (one, two) = (run(1), run(2));
+        let name = &scene.name;
+        assert!(
+            one.timings.transport_shots > one.shots / 2,
+            "{name}: {} of {} shots along the transport",
+            one.timings.transport_shots,
+            one.shots
+        );
+        let e = one.energy;
+        assert!((e.balance - 1.0).abs() < 1e-3, "{name}: {e:?}");
+        assert!(e.back_faces < 1e-3 * e.emitted, "{name}: {e:?}");
+        assert_eq!(one.energy, two.energy, "{name}: 1 and 2 ranks differ");
+        assert_eq!(one.shots, two.shots);
+        for (a, b) in one.surfaces.iter().zip(&two.surfaces) {
+            assert_eq!(a.radiosity, b.radiosity, "{name} {}", a.node);
+        }
+    }
+}

@@ -205,3 +205,22 @@ fn check_with(
         );
     }
 }
+
+/// Weak shooters along the transport (`--transport-below 1e-4`) against the
+/// references: their light lands on whole patches, from ray-sampled
+/// shares, so the result is coarser than the default's, but it must stay
+/// within the bounds (1 % mean, 3 % worst) on a built-in scene and
+/// two held-out ones. (At 1e-3, held-out stacked boxes end 6.7 % off on one
+/// box, and family-boxes-2 3.1 %: README "Weak shooters along the transport".)
+#[test]
+fn weak_shooters_along_the_transport_stay_within_one_percent_mean() {
+    let opts = RenderOptions {
+        width: 0,
+        transport_below: 1e-4,
+        ..RenderOptions::default()
+    };
+    for scene in ["cornell", "family-l-room-2", "family-boxes-2"] {
+        let s = radiosity::scene::open(scene).expect("scene");
+        check_with(scene, &s, &opts, 0.01, 0.03);
+    }
+}
