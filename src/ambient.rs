@@ -76,16 +76,107 @@ pub struct Transport {
     patches: Vec<u32>,
 }
 
+/// What one group's rays found: how many it cast, how many landed on the
+/// front of each group (by group) and how many met back faces. Plain
+/// counts, so ranks can cast different groups' rays and gather them
+/// ([`GroupRays::pack`]) into the same bits one rank would make.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GroupRays {
+    /// The group.
+    pub group: u32,
+    /// Rays cast.
+    pub rays: u32,
+    /// (group landed on, rays), by group.
+    pub hits: Vec<(u32, u32)>,
+    /// Rays that met back faces.
+    pub back: u32,
+}
+
+impl GroupRays {
+    /// Appends this group's counts to `out` as words.
+    pub fn pack(&self, out: &mut Vec<u32>) {
+        out.extend([self.group, self.rays, self.back, self.hits.len() as u32]);
+        for &(g, n) in &self.hits {
+            out.extend([g, n]);
+        }
+    }
+
+    /// Every group's counts in `words` (as [`GroupRays::pack`] wrote them;
+    /// None if they are cut short).
+    pub fn unpack_all(mut words: &[u32]) -> Option<Vec<GroupRays>> {
+        let mut out = Vec::new();
+        while let [group, rays, back, n, rest @ ..] = words {
+            let n = *n as usize;
+            let pairs = rest.get(..2 * n)?;
+            out.push(GroupRays {
+                group: *group,
+                rays: *rays,
+                back: *back,
+                hits: pairs.chunks_exact(2).map(|p| (p[0], p[1])).collect(),
+            });
+            words = &rest[2 * n..];
+        }
+        words.is_empty().then_some(out)
+    }
+}
+
+/// How a transport's rays are cast: the groups, their members and rays.
+/// [`Plan::cast`] casts one group's rays, the same wherever it runs.
+pub struct Plan<'m> {
+    mesh: &'m Mesh,
+    group_of: Vec<u32>,
+    /// Per group, its elements and their cumulative areas (to pick points
+    /// in proportion to area).
+    members: Vec<Vec<(u32, f64)>>,
+    rays: usize,
+}
+
+impl Plan<'_> {
+    /// The number of groups.
+    pub fn groups(&self) -> usize {
+        self.members.len()
+    }
+
+    /// Group `g`'s rays.
+    pub fn cast(&self, g: usize) -> GroupRays {
+        landings_of(
+            self.mesh,
+            &self.group_of,
+            &self.members[g],
+            g as u64,
+            self.rays,
+        )
+    }
+
+    /// The rays of each of `groups`, on every core, in that order.
+    pub fn cast_these(&self, groups: &[usize]) -> Vec<GroupRays> {
+        let mut out = vec![GroupRays::default(); groups.len()];
+        in_parallel(&mut out, |k, row| *row = self.cast(groups[k]));
+        out
+    }
+
+    /// Every group's rays, in group order.
+    pub fn cast_all(&self) -> Vec<GroupRays> {
+        self.cast_these(&(0..self.groups()).collect::<Vec<_>>())
+    }
+}
+
 impl Transport {
-    /// Estimates the shares for `mesh` (see the module docs).
+    /// Estimates the shares for `mesh` (see the module docs), casting every
+    /// group's rays here.
     pub fn new(mesh: &Mesh) -> Self {
+        Self::built(mesh, |plan| plan.cast_all())
+    }
+
+    /// [`Transport::new`], with the rays cast by `cast`, which must return
+    /// [`Plan::cast`] of every group in group order (it may split the
+    /// groups between ranks and gather their counts: the same bits).
+    pub fn built(mesh: &Mesh, cast: impl FnOnce(&Plan) -> Vec<GroupRays>) -> Self {
         let start = std::time::Instant::now();
         let group_of = groups(mesh);
         let count = group_of.iter().map(|&g| g as usize + 1).max().unwrap_or(0);
         let mut area = vec![0.0; count];
         let mut reflectance = vec![[0.0; 3]; count];
-        // Per group, its elements and their cumulative areas (to pick
-        // points in proportion to area).
         let mut members: Vec<Vec<(u32, f64)>> = vec![Vec::new(); count];
         for (j, e) in mesh.elements.iter().enumerate() {
             let g = group_of[e.patch as usize] as usize;
@@ -101,18 +192,25 @@ impl Transport {
             }
         }
         let rays = (RAY_BUDGET / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
-        let mut rows: Vec<(Vec<(u32, f64)>, f64)> = vec![(Vec::new(), 0.0); count];
-        in_parallel(&mut rows, |g, row| {
-            *row = landings_of(mesh, &group_of, &members[g], g as u64, rays);
-        });
+        let plan = Plan {
+            mesh,
+            group_of,
+            members,
+            rays,
+        };
+        let rows = cast(&plan);
+        let Plan {
+            group_of, members, ..
+        } = plan;
         let mut offsets = Vec::with_capacity(count + 1);
         offsets.push(0);
         let mut landings = Vec::new();
         let mut back = Vec::with_capacity(count);
-        for (row, b) in rows {
-            landings.extend(row);
+        for row in rows {
+            let n = f64::from(row.rays.max(1));
+            landings.extend(row.hits.iter().map(|&(g, k)| (g, f64::from(k) / n)));
             offsets.push(landings.len());
-            back.push(b);
+            back.push(f64::from(row.back) / n);
         }
         let mut element_offsets = Vec::with_capacity(count + 1);
         element_offsets.push(0);
@@ -291,22 +389,25 @@ fn groups(mesh: &Mesh) -> Vec<u32> {
 }
 
 /// Where `rays` rays from group `seed`'s elements `members` (with their
-/// cumulative areas) land: (group, share), by group; and the share that
-/// met back faces.
+/// cumulative areas) land.
 fn landings_of(
     mesh: &Mesh,
     group_of: &[u32],
     members: &[(u32, f64)],
     seed: u64,
     rays: usize,
-) -> (Vec<(u32, f64)>, f64) {
+) -> GroupRays {
+    let mut out = GroupRays {
+        group: seed as u32,
+        rays: rays as u32,
+        ..GroupRays::default()
+    };
     let Some(&(_, total)) = members.last() else {
-        return (Vec::new(), 0.0);
+        return out;
     };
     if total <= 0.0 {
-        return (Vec::new(), 0.0);
+        return out;
     }
-    let mut back = 0usize;
     let mut rng = Rng(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ 0x5eed_a3b1);
     let mut hits: Vec<u32> = Vec::with_capacity(rays);
     for r in 0..rays {
@@ -333,21 +434,17 @@ fn landings_of(
         if mesh.polygons[hit.polygon as usize].normal.dot(dir) < 0.0 {
             hits.push(group_at(mesh, group_of, hit.polygon, origin + dir * hit.t));
         } else {
-            back += 1;
+            out.back += 1;
         }
     }
     hits.sort_unstable();
-    let mut out: Vec<(u32, f64)> = Vec::new();
     for g in hits {
-        match out.last_mut() {
-            Some((last, s)) if *last == g => *s += 1.0,
-            _ => out.push((g, 1.0)),
+        match out.hits.last_mut() {
+            Some((last, n)) if *last == g => *n += 1,
+            _ => out.hits.push((g, 1)),
         }
     }
-    for (_, s) in &mut out {
-        *s /= rays as f64;
-    }
-    (out, back as f64 / rays as f64)
+    out
 }
 
 /// The group of the point `x` of polygon `polygon`: that of the patch
@@ -530,6 +627,48 @@ mod tests {
         let (a, b) = (Transport::new(&mesh), Transport::new(&mesh));
         assert_eq!(a.landings, b.landings);
         assert_eq!(a.offsets, b.offsets);
+    }
+
+    #[test]
+    fn rays_cast_by_several_ranks_and_gathered_give_the_same_transport() {
+        let mesh = cube(0.5, 2);
+        let whole = Transport::new(&mesh);
+        for ranks in [2, 3, 7] {
+            let split = Transport::built(&mesh, |plan| {
+                let mut gathered = Vec::new();
+                for rank in 0..ranks {
+                    let mine: Vec<usize> = (rank..plan.groups()).step_by(ranks).collect();
+                    let mut words = Vec::new();
+                    for row in plan.cast_these(&mine) {
+                        row.pack(&mut words);
+                    }
+                    gathered.extend(GroupRays::unpack_all(&words).expect("whole words"));
+                }
+                gathered.sort_by_key(|r| r.group);
+                gathered
+            });
+            assert_eq!(split.landings, whole.landings, "{ranks} ranks");
+            assert_eq!(split.back, whole.back);
+        }
+        // Words cut short are refused, not misread.
+        let mut words = Vec::new();
+        Plan {
+            mesh: &mesh,
+            group_of: groups(&mesh),
+            members: vec![Vec::new(); 1],
+            rays: 4,
+        }
+        .cast(0)
+        .pack(&mut words);
+        let row = GroupRays {
+            group: 3,
+            rays: 8,
+            hits: vec![(1, 2), (5, 6)],
+            back: 0,
+        };
+        row.pack(&mut words);
+        assert_eq!(GroupRays::unpack_all(&words).map(|r| r.len()), Some(2));
+        assert_eq!(GroupRays::unpack_all(&words[..words.len() - 1]), None);
     }
 
     #[test]

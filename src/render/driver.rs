@@ -7,6 +7,7 @@ use super::passes::refined_mesh;
 use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Extra, Trace};
+use crate::ambient::GroupRays;
 use crate::checkpoint::Header;
 use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
@@ -143,12 +144,12 @@ fn final_solve<'m>(
         last_save: Instant::now(),
         header,
     };
-    // The display's ambient term needs its transport: estimated here, on the
-    // rank that displays, so its cost counts as solve time (the trace's own
-    // time does not).
+    // The display's ambient term (and the transport tier) needs the
+    // transport: estimated here, so its cost counts as solve time (the
+    // trace's own time does not), every rank casting its share of the rays.
     let t = Instant::now();
-    if opts.ambient == AmbientTerm::Carried && comm.rank() == 0 {
-        mesh.ambient_transport();
+    if opts.ambient == AmbientTerm::Carried || opts.transport_below > 0.0 {
+        shared_transport(mesh, comm);
     }
     let ambient = t.elapsed().as_secs_f64();
     let stats = shoot_until(mesh, &opts.stop, 0.0, comm, source, solver, &mut hooks)?;
@@ -160,6 +161,34 @@ fn final_solve<'m>(
         solve,
         ambient,
     })
+}
+
+/// Builds `mesh`'s ambient transport with every rank of `comm` casting
+/// the rays of its groups (group g on rank g mod N) and gathering the
+/// counts: the same bits as one rank casting them all.
+fn shared_transport(mesh: &Mesh, comm: &dyn Collectives) {
+    mesh.ambient.get_or_init(|| {
+        crate::ambient::Transport::built(mesh, |plan| {
+            let (rank, ranks) = (comm.rank(), comm.size());
+            let mine: Vec<usize> = (rank..plan.groups()).step_by(ranks).collect();
+            let mut words = Vec::new();
+            for row in plan.cast_these(&mine) {
+                row.pack(&mut words);
+            }
+            let mut rows: Vec<GroupRays> = comm
+                .all_gather_u32(&words, None)
+                .iter()
+                .flat_map(|w| GroupRays::unpack_all(w).unwrap_or_default())
+                .collect();
+            rows.sort_by_key(|r| r.group);
+            // Every rank runs the same binary on the same mesh, so this
+            // cannot fail; if it ever did, cast them all here.
+            if rows.len() != plan.groups() {
+                return plan.cast_all();
+            }
+            rows
+        })
+    });
 }
 
 /// Solves `scene` over the ranks of `comm` (every rank calls this with the
