@@ -114,6 +114,8 @@ struct Solved<'m> {
     solve: f64,
     /// Of `solve`: the ambient term's transport.
     ambient: f64,
+    /// The transport's gather (not a form-factor exchange).
+    ambient_traffic: Traffic,
 }
 
 /// Runs the final solve with the trace, progress and checkpoint hooks.
@@ -148,10 +150,13 @@ fn final_solve<'m>(
     // transport: estimated here, so its cost counts as solve time (the
     // trace's own time does not), every rank casting its share of the rays.
     let t = Instant::now();
+    let before = comm.traffic();
     if opts.ambient == AmbientTerm::Carried || opts.transport_below > 0.0 {
         shared_transport(mesh, comm);
     }
     let ambient = t.elapsed().as_secs_f64();
+    // Its gather is not a form-factor exchange: the report's bytes leave it out.
+    let ambient_traffic = comm.traffic().since(before);
     let stats = shoot_until(mesh, &opts.stop, 0.0, comm, source, solver, &mut hooks)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
@@ -160,6 +165,7 @@ fn final_solve<'m>(
         trace,
         solve,
         ambient,
+        ambient_traffic,
     })
 }
 
@@ -250,7 +256,11 @@ pub fn render_on(
     timings.solve = solved.solve;
     timings.ambient = solved.ambient;
     source.release_cache();
-    let excluded = solved.trace.traffic.plus(before);
+    let excluded = solved
+        .trace
+        .traffic
+        .plus(before)
+        .plus(solved.ambient_traffic);
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
