@@ -258,15 +258,6 @@ impl Transport {
         self.group_of[patch as usize] as usize
     }
 
-    /// The share of group `from`'s diffuse light that lands on the front of
-    /// group `to` (0 where none of its rays did).
-    pub fn share(&self, from: usize, to: usize) -> f64 {
-        self.row(from)
-            .iter()
-            .find(|(g, _)| *g as usize == to)
-            .map_or(0.0, |(_, s)| *s)
-    }
-
     /// Where group `g`'s diffuse light lands: (group, share), by group.
     pub fn row(&self, g: usize) -> &[(u32, f64)] {
         &self.landings[self.offsets[g]..self.offsets[g + 1]]
@@ -432,7 +423,7 @@ fn landings_of(
         // Light meeting a back face is absorbed there (one-sided surfaces
         // are black behind).
         if mesh.polygons[hit.polygon as usize].normal.dot(dir) < 0.0 {
-            hits.push(group_at(mesh, group_of, hit.polygon, origin + dir * hit.t));
+            hits.push(group_of[patch_at(mesh, hit.polygon, origin + dir * hit.t) as usize]);
         } else {
             out.back += 1;
         }
@@ -445,12 +436,6 @@ fn landings_of(
         }
     }
     out
-}
-
-/// The group of the point `x` of polygon `polygon`: that of the patch
-/// holding it.
-fn group_at(mesh: &Mesh, group_of: &[u32], polygon: u32, x: Vec3) -> u32 {
-    group_of[patch_at(mesh, polygon, x) as usize]
 }
 
 /// The patch of polygon `polygon` that holds its point `x`: on a quad, the

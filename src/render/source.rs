@@ -703,6 +703,15 @@ impl GpuFormFactors<'_> {
         self.choice.by_transport(power)
     }
 
+    /// Times a row that drew nothing (a cache hit or a transport row): all
+    /// of it is summing, busy on this rank.
+    fn note_quick_row(&mut self, start: Instant, cpu: parallel::CpuSpan) {
+        let spent = start.elapsed();
+        self.timings.sum += spent;
+        self.busy.push(spent.as_secs_f64());
+        self.busy_cpu.push(cpu.own(self.comm));
+    }
+
     /// A weak shooter's row along the ambient term's transport: its group's
     /// ray-sampled shares, each spread over the receiving group's elements
     /// by area (F = share * A_j / A_group), the patch shooting its mean
@@ -753,10 +762,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
         let cpu = parallel::CpuSpan::start(self.comm);
         if self.choice.by_transport(region.power) {
             self.transport_row(shooter, region, out);
-            let spent = start.elapsed();
-            self.timings.sum += spent;
-            self.busy.push(spent.as_secs_f64());
-            self.busy_cpu.push(cpu.own(self.comm));
+            self.note_quick_row(start, cpu);
             return Ok(());
         }
         let tier = self.choice.tier_for(region.power);
@@ -765,10 +771,7 @@ impl FormFactorSource for GpuFormFactors<'_> {
             row.combine(region, out);
             self.last_blocked = back_share(self.mesh, shooter, row, region);
             self.timings.cached += 1;
-            let spent = start.elapsed();
-            self.timings.sum += spent;
-            self.busy.push(spent.as_secs_f64());
-            self.busy_cpu.push(cpu.own(self.comm));
+            self.note_quick_row(start, cpu);
             return Ok(());
         }
         let before = self.timings.drawing();

@@ -457,12 +457,24 @@ impl<'m> Solver<'m> {
     /// channel, as a fraction of the emitted power in [`UNSHOT_ONE`] fixed
     /// point (summed over ranks it is theirs, whatever the ranks).
     pub fn net_unshot_of(&self, patches: &[u32]) -> NetUnshot {
+        self.net_unshot_over(
+            patches
+                .iter()
+                .map(|&i| i as usize)
+                .filter(|&i| self.owns(i as u32)),
+        )
+    }
+
+    /// The signed unshot power of `patches` per channel, over the emitted
+    /// power in [`UNSHOT_ONE`] fixed point, each patch rounded on its own
+    /// (so sums over ranks do not depend on how patches are dealt).
+    fn net_unshot_over(&self, patches: impl Iterator<Item = usize>) -> NetUnshot {
         let mut out = [0i64; 3];
         if self.emitted_power <= 0.0 {
             return out;
         }
-        for &i in patches.iter().filter(|&&i| self.owns(i)) {
-            let (b, a) = (&self.unshot[i as usize], self.patch_area[i as usize]);
+        for i in patches {
+            let (b, a) = (&self.unshot[i], self.patch_area[i]);
             for (o, x) in out.iter_mut().zip(b) {
                 *o += crate::numeric::round_i64(x * a / self.emitted_power * UNSHOT_ONE);
             }
@@ -474,11 +486,10 @@ impl<'m> Solver<'m> {
     /// held (a group shooting as one: see `render::shoot`).
     pub fn clear_unshot(&mut self, patches: &[u32]) {
         let mesh = self.mesh;
-        let (rank, ranks) = (self.rank, self.ranks);
-        for &i in patches
-            .iter()
-            .filter(|&&i| crate::parallel::patch_owner(i, ranks) == rank)
-        {
+        for &i in patches {
+            if !self.owns(i) {
+                continue;
+            }
             self.unshot[i as usize] = [0.0; 3];
             for k in mesh.patches[i as usize].elements.clone() {
                 self.element_unshot[k as usize] = [0.0; 3];
@@ -489,17 +500,7 @@ impl<'m> Solver<'m> {
     /// This rank's signed unshot power per channel (see [`NetUnshot`]); the
     /// sum over ranks is the whole solution's.
     pub fn local_net_unshot(&self) -> NetUnshot {
-        let mut out = [0i64; 3];
-        if self.emitted_power <= 0.0 {
-            return out;
-        }
-        for i in self.own_patches() {
-            let (b, a) = (&self.unshot[i], self.patch_area[i]);
-            for c in 0..3 {
-                out[c] += crate::numeric::round_i64(b[c] * a / self.emitted_power * UNSHOT_ONE);
-            }
-        }
-        out
+        self.net_unshot_over(self.own_patches())
     }
 
     /// Unshot power / emitted power (one rank: this solver's; see [`Solver::local_unshot_fixed`]).
