@@ -37,7 +37,8 @@ use glam::Vec3;
 pub const PATCH_GROUPS: usize = 8192;
 
 /// Rays cast in all, shared evenly by the groups (within [`MIN_RAYS`] and
-/// [`MAX_RAYS`] a group).
+/// [`MAX_RAYS`] a group); as many again at most go to the emitters' groups
+/// (see [`Plan::rays_of`]).
 const RAY_BUDGET: usize = 1 << 18;
 /// The fewest rays a group casts.
 const MIN_RAYS: usize = 64;
@@ -128,10 +129,33 @@ pub struct Plan<'m> {
     /// Per group, its elements and their cumulative areas (to pick points
     /// in proportion to area).
     members: Vec<Vec<(u32, f64)>>,
-    rays: usize,
+    /// Per group, the rays it casts.
+    rays: Vec<u32>,
 }
 
 impl Plan<'_> {
+    /// Per group, its rays: the budget shared evenly, and the emitters'
+    /// groups up to [`MAX_RAYS`] each from a second budget as big. Early in
+    /// a solve nearly all the unshot light is the emitters' own: their
+    /// shares carry most of the display then, and few rays leave them noisy
+    /// (the Cornell box's 16 light patches at 209 rays each put its mean
+    /// error at 1.5-2.6 % until they had shot). Taking those rays from the
+    /// other groups made the later displays worse (docs/accuracy.md).
+    fn rays_of(mesh: &Mesh, group_of: &[u32], count: usize) -> Vec<u32> {
+        let even = (RAY_BUDGET / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
+        let mut emits = vec![false; count];
+        for (p, &g) in mesh.patches.iter().zip(group_of) {
+            let exitance = mesh.polygons[p.polygon as usize].exitance;
+            emits[g as usize] |= exitance.iter().any(|&x| x > 0.0);
+        }
+        let emitters = emits.iter().filter(|&&e| e).count();
+        let more = (RAY_BUDGET / emitters.max(1)).clamp(even, MAX_RAYS);
+        emits
+            .iter()
+            .map(|&e| if e { more } else { even } as u32)
+            .collect()
+    }
+
     /// The number of groups.
     pub fn groups(&self) -> usize {
         self.members.len()
@@ -144,7 +168,7 @@ impl Plan<'_> {
             &self.group_of,
             &self.members[g],
             g as u64,
-            self.rays,
+            self.rays[g] as usize,
         )
     }
 
@@ -191,7 +215,7 @@ impl Transport {
                 *r = r.map(|x| x / a);
             }
         }
-        let rays = (RAY_BUDGET / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
+        let rays = Plan::rays_of(mesh, &group_of, count);
         let plan = Plan {
             mesh,
             group_of,
@@ -200,7 +224,10 @@ impl Transport {
         };
         let rows = cast(&plan);
         let Plan {
-            group_of, members, ..
+            group_of,
+            members,
+            rays,
+            ..
         } = plan;
         let mut offsets = Vec::with_capacity(count + 1);
         offsets.push(0);
@@ -220,7 +247,8 @@ impl Transport {
             element_offsets.push(elements.len());
         }
         log::info!(
-            "ambient term: {count} groups, {rays} rays each, {} landings, {:.3} s",
+            "ambient term: {count} groups, {} rays, {} landings, {:.3} s",
+            rays.iter().map(|&r| u64::from(r)).sum::<u64>(),
             landings.len(),
             start.elapsed().as_secs_f64()
         );
@@ -607,6 +635,24 @@ mod tests {
     }
 
     #[test]
+    fn the_emitters_groups_cast_more_rays_from_a_budget_of_their_own() {
+        let mut mesh = cube(0.5, 16);
+        mesh.polygons[0].exitance = [1.0; 3];
+        let group_of = groups(&mesh);
+        let rays = Plan::rays_of(&mesh, &group_of, 6 * 256);
+        let even = (RAY_BUDGET / (6 * 256)) as u32;
+        for (p, (&g, &r)) in mesh.patches.iter().zip(group_of.iter().zip(&rays)) {
+            let want = if p.polygon == 0 { 1024 } else { even };
+            assert_eq!(r, want, "group {g}");
+        }
+        let extra: u32 = rays.iter().map(|&r| r - even).sum();
+        assert!(extra as usize <= RAY_BUDGET);
+        // No emitter: every group casts the even share.
+        mesh.polygons[0].exitance = [0.0; 3];
+        assert!(Plan::rays_of(&mesh, &group_of, 6 * 256).iter().all(|&r| r == even));
+    }
+
+    #[test]
     fn the_same_shares_on_every_run() {
         let mesh = cube(0.5, 2);
         let (a, b) = (Transport::new(&mesh), Transport::new(&mesh));
@@ -641,7 +687,7 @@ mod tests {
             mesh: &mesh,
             group_of: groups(&mesh),
             members: vec![Vec::new(); 1],
-            rays: 4,
+            rays: vec![4],
         }
         .cast(0)
         .pack(&mut words);

@@ -697,6 +697,14 @@ fn back_share(mesh: &Mesh, shooter: u32, row: &Row, region: &ShotRegion) -> f64 
 }
 
 impl GpuFormFactors<'_> {
+    /// Has every shooter but the emitters' patches draw at the coarse tier,
+    /// if there is one: for the refinement passes, which only measure
+    /// (which patches cast penumbrae, which receivers hold their light
+    /// unevenly), and whose shots the final solve draws again.
+    pub fn measuring(&mut self) {
+        self.choice.measuring = true;
+    }
+
     /// Whether a shooter of unshot power `power` shoots along the ambient
     /// term's transport (`--transport-below`).
     pub fn by_transport(&self, power: f64) -> bool {
@@ -765,7 +773,9 @@ impl FormFactorSource for GpuFormFactors<'_> {
             self.note_quick_row(start, cpu);
             return Ok(());
         }
-        let tier = self.choice.tier_for(region.power);
+        let polygon = &self.mesh.polygons[self.mesh.patches[shooter as usize].polygon as usize];
+        let emitter = polygon.exitance.iter().any(|&x| x > 0.0);
+        let tier = self.choice.tier_for(region.power, emitter);
         let key = RowKey::new(shooter, region.centre, tier);
         if let Some(row) = self.cache.get(&key) {
             row.combine(region, out);

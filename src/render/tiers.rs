@@ -17,6 +17,9 @@ pub struct TierChoice {
     /// Shooters with less unshot power than this (W, sum over RGB) shoot
     /// along the ambient term's transport, drawing nothing.
     pub transport_below: f64,
+    /// Every shooter but the emitters' patches draws coarse (the refinement
+    /// passes, which only measure: see `passes::one_pass`).
+    pub measuring: bool,
 }
 
 impl TierChoice {
@@ -26,6 +29,7 @@ impl TierChoice {
             tiers: 1 + opts.coarse_tier().is_some() as usize,
             coarse_below: opts.coarse_below * emitted_power,
             transport_below: opts.transport_below * emitted_power,
+            measuring: false,
         }
     }
 
@@ -34,9 +38,10 @@ impl TierChoice {
         power < self.transport_below
     }
 
-    /// The tier a shooter of unshot power `power` draws in.
-    pub fn tier_for(&self, power: f64) -> usize {
-        if self.tiers > 1 && power < self.coarse_below {
+    /// The tier a shooter of unshot power `power` draws in (`emitter`:
+    /// whether its polygon emits).
+    pub fn tier_for(&self, power: f64, emitter: bool) -> usize {
+        if self.tiers > 1 && (power < self.coarse_below || (self.measuring && !emitter)) {
             1
         } else {
             0
@@ -269,8 +274,8 @@ mod tests {
         let opts = RenderOptions::default();
         let c = TierChoice::new(&opts, 100.0);
         assert_eq!(c.tiers, 2);
-        assert_eq!(c.tier_for(0.29), 1);
-        assert_eq!(c.tier_for(0.3), 0);
+        assert_eq!(c.tier_for(0.29, false), 1);
+        assert_eq!(c.tier_for(0.3, false), 0);
         let none = TierChoice::new(
             &RenderOptions {
                 coarse_below: 0.0,
@@ -279,8 +284,22 @@ mod tests {
             },
             100.0,
         );
-        assert_eq!(none.tier_for(0.0), 0);
+        assert_eq!(none.tier_for(0.0, false), 0);
         assert_eq!(TierChoice::resolutions(&opts).len(), 2);
+        // Measuring (the refinement passes): strong shooters draw coarse
+        // too, the emitters' patches fine, and without a coarse tier nothing changes.
+        let measuring = TierChoice {
+            measuring: true,
+            ..c
+        };
+        assert_eq!(measuring.tier_for(50.0, false), 1);
+        assert_eq!(measuring.tier_for(50.0, true), 0);
+        assert_eq!(measuring.tier_for(0.1, true), 1);
+        let measuring_none = TierChoice {
+            measuring: true,
+            ..none
+        };
+        assert_eq!(measuring_none.tier_for(50.0, false), 0);
     }
 
     #[test]
