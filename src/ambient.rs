@@ -649,7 +649,9 @@ mod tests {
         assert!(extra as usize <= RAY_BUDGET);
         // No emitter: every group casts the even share.
         mesh.polygons[0].exitance = [0.0; 3];
-        assert!(Plan::rays_of(&mesh, &group_of, 6 * 256).iter().all(|&r| r == even));
+        assert!(Plan::rays_of(&mesh, &group_of, 6 * 256)
+            .iter()
+            .all(|&r| r == even));
     }
 
     #[test]
