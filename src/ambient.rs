@@ -429,7 +429,21 @@ fn landings_of(
     }
     let mut rng = Rng(seed.wrapping_mul(0x2545_f491_4f6c_dd1d) ^ 0x5eed_a3b1);
     let mut hits: Vec<u32> = Vec::with_capacity(rays);
-    for r in 0..rays {
+    // Directions: a Hammersley set of `rays` points, shifted by a random
+    // offset (a Cranley-Patterson rotation: each point still uniform), dealt
+    // to the area's slices in a random order, so both the points and the
+    // directions are stratified and neither is tied to the other. At the
+    // same rays a node's carried light scatters about 2.5x less between
+    // seeds than with independent directions (docs/accuracy.md).
+    let shift = [unit(&mut rng), unit(&mut rng)];
+    let mut order: Vec<u32> = (0..rays as u32).collect();
+    for k in (1..order.len()).rev() {
+        order.swap(k, rng.below(k + 1));
+    }
+    let inv = 1.0 / rays as f32;
+    for (r, &i) in order.iter().enumerate() {
+        let d1 = ((i as f32 + 0.5) * inv + shift[0]).fract();
+        let d2 = (i.reverse_bits() as f32 * (1.0 / 4_294_967_296.0) + shift[1]).fract();
         // Stratified in area: ray r picks its point in the r-th slice.
         let at = (r as f64 + unit(&mut rng) as f64) / rays as f64 * total;
         let k = members
@@ -443,7 +457,7 @@ fn landings_of(
         };
         let (p, _) = point_in(corners, unit(&mut rng), unit(&mut rng));
         let poly = &mesh.polygons[e.polygon as usize];
-        let dir = cosine_direction(poly.normal, poly.tangent, unit(&mut rng), unit(&mut rng));
+        let dir = cosine_direction(poly.normal, poly.tangent, d1, d2);
         let origin = p + poly.normal * mesh.ray_offset;
         let Some(hit) = nearest_other(mesh, origin, dir, e.polygon) else {
             continue; // leaves the scene
