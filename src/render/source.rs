@@ -521,7 +521,10 @@ impl<'a> GpuFormFactors<'a> {
         // Refinement by need: a near receiver partly hidden from the
         // shooter's centre means visibility varies across the shooter, so
         // each group of its elements looks for itself.
-        if !(self.split && columns > 1 && formfactor::needs_split(sums[0], sums[1])) {
+        // The refinement passes measure with one hemisphere a shot, as
+        // coarse as the shot (the emitters' shots split as in the solve).
+        let split = self.split && !(self.choice.measuring && tier > 0);
+        if !(split && columns > 1 && formfactor::needs_split(sums[0], sums[1])) {
             let scales = self.normalisers(shooter, 0..columns, [sums[2], sums[4]], &sums[5..]);
             row.scale_columns(&scales);
             row.blocked = vec![sums[3] as f64 / formfactor::SHARE_ONE; columns];
