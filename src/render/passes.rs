@@ -109,10 +109,10 @@ fn one_pass(
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<(Vec<refine::Decision>, u64, f64), RenderError> {
     let mut source = GpuFormFactors::new(gpu, mesh, opts, comm, scene.extent())?;
-    // Coarse hemispheres measure what the pass decides by as well, at
-    // 1.3-2.5x less pass time (README "Refinement by need"); the emitters
-    // draw fine, as a coarse light over-refined the 64 cubes (8100 ->
-    // 12 900 elements).
+    // Coarse, unsplit hemispheres measure what the pass decides by as
+    // well, in 2-6x less pass time (README "Refinement by need"); the
+    // emitters draw fine, as a coarse light over-refined the 64 cubes
+    // (8100 -> 12 900 elements).
     source.measuring();
     let started = Instant::now();
     // No overshooting here: the passes only measure the shooters, and

@@ -701,9 +701,10 @@ fn back_share(mesh: &Mesh, shooter: u32, row: &Row, region: &ShotRegion) -> f64 
 
 impl GpuFormFactors<'_> {
     /// Has every shooter but the emitters' patches draw at the coarse tier,
-    /// if there is one: for the refinement passes, which only measure
-    /// (which patches cast penumbrae, which receivers hold their light
-    /// unevenly), and whose shots the final solve draws again.
+    /// if there is one, with one hemisphere a shot (no split): for the
+    /// refinement passes, which only measure (which patches cast penumbrae,
+    /// which receivers hold their light unevenly), and whose shots the
+    /// final solve draws again.
     pub fn measuring(&mut self) {
         self.choice.measuring = true;
     }
