@@ -35,6 +35,9 @@ import math
 import os
 import sys
 import tempfile
+
+# The highest reflectance a texel may give (src/scene/texture.rs).
+MAX_REFLECTANCE = 0.95
 import time
 
 
@@ -113,12 +116,22 @@ def main():
                     obj.write(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}\n")
         reflectance = {"type": "rgb", "value": node["reflectance"]}
         if tex:
-            if any(abs(f - 1.0) > 1e-6 for f in tex["factor"]):
-                sys.exit(f"reference.py: node {node['name']}: a texture factor other than 1 is not supported")
             image = os.path.join(os.path.dirname(os.path.abspath(args.nodes)), tex["image"])
+            raw = False
+            if any(abs(f - 1.0) > 1e-6 for f in tex["factor"]):
+                # The renderer multiplies the linear texel by the factor
+                # (capped as a reflectance): bake that into a linear image.
+                import numpy as np
+                bmp = mi.Bitmap(image).convert(mi.Bitmap.PixelFormat.RGB,
+                                               mi.Struct.Type.Float32, srgb_gamma=False)
+                factor = np.array(tex["factor"][:3], dtype=np.float32)
+                scaled = np.minimum(np.array(bmp) * factor, MAX_REFLECTANCE).astype(np.float32)
+                image = os.path.join(tmp, f"tex{i}.exr")
+                mi.Bitmap(scaled).write(image)
+                raw = True
             wrap = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp"}[tex["wrap"][0]]
             reflectance = {"type": "bitmap", "filename": image, "wrap_mode": wrap,
-                           "filter_type": "bilinear", "raw": False}
+                           "filter_type": "bilinear", "raw": raw}
             textures[i] = mi.load_dict(reflectance)
         shape = {"type": "obj", "filename": path, "face_normals": True,
                  "bsdf": {"type": "diffuse", "reflectance": reflectance}}
