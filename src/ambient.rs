@@ -145,8 +145,7 @@ impl Plan<'_> {
         let even = (RAY_BUDGET / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
         let mut emits = vec![false; count];
         for (p, &g) in mesh.patches.iter().zip(group_of) {
-            let exitance = mesh.polygons[p.polygon as usize].exitance;
-            emits[g as usize] |= exitance.iter().any(|&x| x > 0.0);
+            emits[g as usize] |= mesh.polygons[p.polygon as usize].emits();
         }
         let emitters = emits.iter().filter(|&&e| e).count();
         let more = (RAY_BUDGET / emitters.max(1)).clamp(even, MAX_RAYS);

@@ -104,6 +104,13 @@ pub struct MeshPolygon {
     pub element_grid: [u32; 2],
 }
 
+impl MeshPolygon {
+    /// Whether the polygon emits light.
+    pub fn emits(&self) -> bool {
+        self.exitance.iter().any(|&x| x > 0.0)
+    }
+}
+
 /// A shooting patch.
 #[derive(Clone, Debug)]
 pub struct Patch {

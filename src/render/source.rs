@@ -777,9 +777,10 @@ impl FormFactorSource for GpuFormFactors<'_> {
             self.note_quick_row(start, cpu);
             return Ok(());
         }
-        let polygon = &self.mesh.polygons[self.mesh.patches[shooter as usize].polygon as usize];
-        let emitter = polygon.exitance.iter().any(|&x| x > 0.0);
-        let tier = self.choice.tier_for(region.power, emitter);
+        let polygon = self.mesh.patches[shooter as usize].polygon as usize;
+        let tier = self
+            .choice
+            .tier_for(region.power, self.mesh.polygons[polygon].emits());
         let key = RowKey::new(shooter, region.centre, tier);
         if let Some(row) = self.cache.get(&key) {
             row.combine(region, out);

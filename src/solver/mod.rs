@@ -320,10 +320,7 @@ impl<'m> Solver<'m> {
             emission_unshot: mesh
                 .patches
                 .iter()
-                .map(|p| {
-                    let e = mesh.polygons[p.polygon as usize].exitance;
-                    e.iter().any(|&x| x > 0.0)
-                })
+                .map(|p| mesh.polygons[p.polygon as usize].emits())
                 .collect(),
             direct_known: true,
             patch_area: mesh.patches.iter().map(|p| p.area).collect(),
