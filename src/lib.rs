@@ -41,6 +41,7 @@ pub mod launch;
 pub mod lights;
 pub mod mesh;
 pub mod numeric;
+pub mod occlusion;
 pub mod output;
 pub mod parallel;
 pub mod raytrace;

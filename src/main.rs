@@ -191,6 +191,12 @@ pub struct SolveArgs {
     /// results are identical, only the time changes).
     #[arg(long)]
     no_cache: bool,
+    /// Draw every polygon in view, even those nearer ones certainly hide
+    /// (by default one rank leaves them undrawn: in cluttered scenes most
+    /// of what a hemisphere holds is hidden). The results are identical,
+    /// only the time changes.
+    #[arg(long)]
+    no_occlusion_cull: bool,
     /// The memory each rank aims to stay within, GB: the form-factor row
     /// cache takes only what the scene, the mesh and the drawing leave of it
     /// (at most 1 GiB a rank). It changes no number, only the time.
@@ -250,6 +256,7 @@ impl SolveArgs {
                 ..MeshSettings::default()
             },
             raster_pieces: self.raster_pieces,
+            occlusion_cull: !self.no_occlusion_cull,
             projection: self.projection,
             tessellation_tolerance: self.tessellation_tolerance,
             cache_rows: !self.no_cache,

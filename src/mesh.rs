@@ -966,6 +966,10 @@ pub struct ShooterFrame {
     /// Only polygons within this distance of the centre are drawn (infinite
     /// but for a split shot's groups, which look only at near receivers).
     pub reach: f32,
+    /// Polygons within this distance of the centre are drawn even when
+    /// hidden (occlusion culling leaves them): the hidden cells of near
+    /// receivers decide whether a shot splits.
+    pub near: f32,
 }
 
 impl ShooterFrame {
@@ -985,12 +989,18 @@ impl ShooterFrame {
             normal,
             polygon,
             reach: f32::INFINITY,
+            near: 0.0,
         }
     }
 
     /// This frame drawing only polygons within `reach` of its centre.
     pub fn within(self, reach: f32) -> Self {
         Self { reach, ..self }
+    }
+
+    /// This frame drawing every polygon within `near` of its centre, hidden or not.
+    pub fn keeping_near(self, near: f32) -> Self {
+        Self { near, ..self }
     }
 }
 

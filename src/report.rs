@@ -137,6 +137,9 @@ pub struct Settings {
     pub mesh: crate::mesh::MeshSettings,
     /// Pieces per quad polygon edge drawn by the hemisphere rasteriser (0: every element).
     pub raster_pieces: u32,
+    /// Whether one rank left undrawn the polygons nearer ones hide (the
+    /// same bits either way).
+    pub occlusion_cull: bool,
     /// How cells were found: `exact` or `tessellated`.
     pub projection: crate::settings::Projection,
     /// The tessellated projection's tolerance in cells (null with `exact`).
@@ -242,8 +245,12 @@ pub struct Timings {
     pub select_shooter: f64,
     /// Finding the cell rectangles to draw, on the CPU (summed over shots).
     pub bounds: f64,
-    /// Mean rectangles drawn per shot.
+    /// Mean rectangles found in view per shot (bounded; some then culled).
     pub rects_per_shot: f64,
+    /// Mean rectangles per shot left undrawn as hidden behind nearer
+    /// geometry (occlusion culling, one rank only; of `rects_per_shot`).
+    #[serde(default)]
+    pub occluded_per_shot: f64,
     /// Shots whose form factors came from the row cache (a patch shooting again).
     pub cached_shots: u64,
     /// The row cache each rank could hold, bytes: what its memory budget

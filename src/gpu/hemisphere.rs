@@ -73,6 +73,9 @@ pub struct RasterStats {
     /// Proxies whose cell rectangle was computed: over several ranks, only
     /// those of polygons that may show in the rank's tiles.
     pub bounded: u32,
+    /// Of `rects`, those left undrawn as hidden behind nearer geometry
+    /// ([`HemisphereRasterizer::set_cull_occluded`]).
+    pub occluded: u32,
     /// Uploading, drawing and waiting for the GPU.
     pub rasterise: Duration,
     /// Mapping the item buffer and copying it out.
@@ -109,6 +112,10 @@ pub struct HemisphereRasterizer {
     tess: Option<Tessellation>,
     /// Whether to count coverage this shot.
     count_coverage: bool,
+    /// Whether to leave out polygons hidden behind nearer ones (one rank only).
+    cull_occluded: bool,
+    /// The occlusion cull's map, reused from shot to shot.
+    occlusion: crate::occlusion::OcclusionMap,
     /// The last shot's coverage per element (empty unless counting).
     coverage: Vec<u32>,
     elements: usize,
@@ -204,6 +211,8 @@ impl HemisphereRasterizer {
             module,
             tess: None,
             count_coverage: false,
+            cull_occluded: true,
+            occlusion: crate::occlusion::OcclusionMap::new(res),
             coverage: Vec::new(),
             elements: mesh.elements.len(),
         })
@@ -319,6 +328,16 @@ impl HemisphereRasterizer {
     /// cell, but for rays grazing a silhouette edge).
     pub fn set_cull_solids(&mut self, on: bool) {
         self.cull_solids = on;
+    }
+
+    /// Whether to leave undrawn the polygons that nearer pieces certainly
+    /// hide in every cell they could cover (`crate::occlusion`; on by
+    /// default). Only a rank that draws the whole hemisphere culls: with
+    /// its tiles alone a rank could drop part of a polygon that others
+    /// see, and its elements' covered cells would then be short. A culled
+    /// polygon's elements are all hidden, so no form factor changes.
+    pub fn set_cull_occluded(&mut self, on: bool) {
+        self.cull_occluded = on;
     }
 
     /// Which solids `shooter` is outside of (their back faces need no drawing).
@@ -590,6 +609,7 @@ impl HemisphereRasterizer {
                 self.res,
                 self.far,
                 ownership,
+                self.cull_occluded.then_some(&mut self.occlusion),
                 &mut self.instances,
             );
         }
@@ -607,6 +627,7 @@ impl HemisphereRasterizer {
                 None => collected.rects as u32,
             },
             bounded: collected.bounded as u32,
+            occluded: collected.occluded as u32,
             rasterise,
             readback: read_start.elapsed(),
         })

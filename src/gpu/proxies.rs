@@ -5,6 +5,7 @@
 
 use crate::hemisphere::{cell_bounds, Resolution};
 use crate::mesh::{Mesh, ShooterFrame};
+use crate::occlusion::{OcclusionMap, Piece};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use std::ops::Range;
@@ -242,9 +243,14 @@ impl Proxies {
         res: Resolution,
         far: f32,
         ownership: Option<Ownership>,
+        occlusion: Option<&mut OcclusionMap>,
         instances: &mut Vec<Instance>,
     ) -> Collected {
         instances.clear();
+        // What the occlusion cull needs: per polygon drawn its rectangles'
+        // range and nearest possible distance (only on one rank drawing
+        // the whole hemisphere).
+        let culling = occlusion.is_some() && ownership.is_none();
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
         } else {
@@ -253,7 +259,7 @@ impl Proxies {
         let (corners, element, quads) = (&self.corners, &self.element, &self.quads);
         // Returns the rectangles drawn (each cut to a rank's tiles counts
         // once) and the proxies bounded.
-        let visit = |polys: &[PolygonProxies], first: usize, out: &mut Vec<Instance>| {
+        let visit = |polys: &[PolygonProxies], first: usize, out: &mut Drawn| {
             let mut done = Collected::default();
             let mut k = 0;
             while k < polys.len() {
@@ -284,10 +290,11 @@ impl Proxies {
                 let lookup = poly.quad.map_or_else(Lookup::default, |q| {
                     Lookup::new(&quads[q as usize], shooter, n)
                 });
+                let start = out.instances.len();
                 for i in poly.proxies.clone() {
                     let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
                     done.rects += push_piece(
-                        out,
+                        &mut out.instances,
                         &d,
                         n,
                         element[i as usize],
@@ -297,12 +304,35 @@ impl Proxies {
                         ownership,
                     );
                 }
+                if culling {
+                    let end = out.instances.len();
+                    out.polygons.push((start, end, nearest(poly, shooter)));
+                }
             }
             done
         };
-        if threads <= 1 {
-            return visit(&self.polygons, 0, instances);
+        let mut drawn = Drawn {
+            instances: std::mem::take(instances),
+            ..Drawn::default()
+        };
+        let mut done = if threads <= 1 {
+            visit(&self.polygons, 0, &mut drawn)
+        } else {
+            self.visit_in_parallel(threads, &visit, &mut drawn)
+        };
+        if let (Some(map), true) = (occlusion, culling) {
+            done.occluded = drawn.cull_hidden(map, threads);
         }
+        *instances = drawn.instances;
+        done
+    }
+
+    /// `visit` over contiguous runs of polygons with about equal proxy
+    /// counts on `threads` threads, the parts joined in order into `drawn`.
+    fn visit_in_parallel<F>(&self, threads: usize, visit: &F, drawn: &mut Drawn) -> Collected
+    where
+        F: Fn(&[PolygonProxies], usize, &mut Drawn) -> Collected + Sync,
+    {
         // Contiguous runs of polygons with about equal proxy counts.
         let per = self.corners.len().div_ceil(threads) as u32;
         let mut bounds = vec![0usize];
@@ -314,13 +344,13 @@ impl Proxies {
         bounds.push(self.polygons.len());
         bounds.dedup();
         let polygons = &self.polygons;
-        let parts: Vec<(Vec<Instance>, Collected)> = std::thread::scope(|scope| {
+        let parts: Vec<(Drawn, Collected)> = std::thread::scope(|scope| {
             let handles: Vec<_> = bounds
                 .windows(2)
                 .map(|w| {
                     let (lo, hi) = (w[0], w[1]);
                     scope.spawn(move || {
-                        let mut out = Vec::new();
+                        let mut out = Drawn::default();
                         let done = visit(&polygons[lo..hi], lo, &mut out);
                         (out, done)
                     })
@@ -334,12 +364,106 @@ impl Proxies {
         });
         let mut done = Collected::default();
         for (part, n) in parts {
-            instances.extend_from_slice(&part);
+            let offset = drawn.instances.len();
+            drawn.instances.extend_from_slice(&part.instances);
+            drawn.polygons.extend(
+                part.polygons
+                    .iter()
+                    .map(|&(a, b, d)| (a + offset, b + offset, d)),
+            );
             done.rects += n.rects;
             done.bounded += n.bounded;
         }
         done
     }
+}
+
+/// A shot's rectangles as they are collected, and what the occlusion cull
+/// needs of them (filled only when culling).
+#[derive(Default)]
+struct Drawn {
+    instances: Vec<Instance>,
+    /// Per polygon drawn: its rectangles (start, end) and the least
+    /// distance any point of it can be from the shooter (`None`: never
+    /// culled, see [`nearest`]).
+    polygons: Vec<(usize, usize, Option<f32>)>,
+}
+
+impl Drawn {
+    /// Leaves out every polygon whose rectangles the map (filled here from
+    /// the rectangles themselves) says are covered nearer; returns how many
+    /// rectangles went. A whole polygon or nothing: its elements are then
+    /// all hidden, so their covered cells (the hybrid visibility's
+    /// denominator, and a patch's visibility for its elements no cell
+    /// centre hit) change no receiver's form factor. The order of the rest
+    /// is kept.
+    fn cull_hidden(&mut self, map: &mut OcclusionMap, threads: usize) -> usize {
+        fn piece(i: &Instance) -> Piece<'_> {
+            Piece {
+                rect: i.rect,
+                edges: &i.edges,
+                plane: i.plane,
+            }
+        }
+        map.clear();
+        map.add_all(&self.instances, piece, threads);
+        // Each polygon's verdict (read-only, so in parallel), then the
+        // survivors moved down in order.
+        let instances = &self.instances;
+        let map = &*map;
+        let per = self.polygons.len().div_ceil(threads.max(1)).max(1);
+        let verdicts = |part: &[(usize, usize, Option<f32>)]| -> Vec<bool> {
+            part.iter()
+                .map(|&(start, end, nearest)| {
+                    nearest.is_some_and(|nearest| {
+                        instances[start..end]
+                            .iter()
+                            .all(|i| map.hides(&piece(i), nearest))
+                    })
+                })
+                .collect()
+        };
+        let hidden: Vec<bool> = if threads <= 1 {
+            verdicts(&self.polygons)
+        } else {
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = self
+                    .polygons
+                    .chunks(per)
+                    .map(|part| scope.spawn(move || verdicts(part)))
+                    .collect();
+                handles
+                    .into_iter()
+                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            })
+        };
+        let mut kept = 0;
+        let mut culled = 0;
+        for (&(start, end, _), hide) in self.polygons.iter().zip(hidden) {
+            if hide {
+                culled += end - start;
+            } else {
+                self.instances.copy_within(start..end, kept);
+                kept += end - start;
+            }
+        }
+        self.instances.truncate(kept);
+        culled
+    }
+}
+
+/// The least distance from the shooter's centre that any point of `poly`
+/// can have: the larger of its plane's distance and its bounding sphere's;
+/// `None` (never culled) for a polygon that may hold near receivers,
+/// within `shooter.near`, whose hidden cells the split decision counts.
+fn nearest(poly: &PolygonProxies, shooter: &ShooterFrame) -> Option<f32> {
+    let sphere = (poly.centre - shooter.centre).length() - poly.radius;
+    if sphere <= shooter.near {
+        return None;
+    }
+    let plane = poly.normal.dot(poly.corner - shooter.centre).abs();
+    Some(sphere.max(plane))
 }
 
 /// What [`Proxies::collect_rects`] did: work counted, not timed.
@@ -349,6 +473,8 @@ pub(super) struct Collected {
     pub(super) rects: usize,
     /// Proxies whose cell rectangle was computed (the bounds pass's work).
     pub(super) bounded: usize,
+    /// Rectangles left out as hidden behind nearer ones (of `rects`).
+    pub(super) occluded: usize,
 }
 
 /// asin of `x` in [0, 0.9] as atan2(x, sqrt(1 - x^2)), within 5e-7 rad
@@ -732,8 +858,8 @@ mod tests {
             for shooter in [frame, frame.within(1.5)] {
                 for &o in owners.iter().skip(k % 3).step_by(3) {
                     let (mut a, mut b) = (Vec::new(), Vec::new());
-                    let got = proxies.collect_rects(&shooter, &outside, res, 1e3, o, &mut a);
-                    let want = never.collect_rects(&shooter, &outside, res, 1e3, o, &mut b);
+                    let got = proxies.collect_rects(&shooter, &outside, res, 1e3, o, None, &mut a);
+                    let want = never.collect_rects(&shooter, &outside, res, 1e3, o, None, &mut b);
                     assert_eq!(got, want, "patch {k}");
                     assert!(
                         bytemuck::cast_slice::<Instance, u8>(&a)

@@ -429,6 +429,7 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.update = stats.update.as_secs_f64();
     timings.bounds = t.bounds.as_secs_f64();
     timings.rects_per_shot = t.rects as f64 / shots.max(1) as f64;
+    timings.occluded_per_shot = t.occluded as f64 / shots.max(1) as f64;
     timings.cached_shots = t.cached;
     timings.row_cache_bytes = t.cache_budget;
     timings.split_shots = t.split;
@@ -516,6 +517,7 @@ pub fn build_report(
             max_shots: opts.stop.max_shots,
             mesh: opts.mesh_settings(),
             raster_pieces: opts.raster_pieces,
+            occlusion_cull: opts.occlusion_cull,
             projection: opts.projection,
             tessellation_tolerance: (opts.projection == Projection::Tessellated)
                 .then_some(opts.tessellation_tolerance),

@@ -35,6 +35,9 @@ pub struct RenderOptions {
     /// What the hemisphere rasteriser draws: quad polygons as at most N x N
     /// pieces (the element is found per fragment), or every element (0).
     pub raster_pieces: u32,
+    /// Whether a shot on one rank leaves undrawn the polygons that nearer
+    /// ones certainly hide (`crate::occlusion`; the same bits either way).
+    pub occlusion_cull: bool,
     /// How the hemisphere is tiled and over which rank grid. Under MPI the
     /// grid comes from the rank count and only the tile size is used; in one
     /// process every rank's tiles are drawn in turn (one tile by default).
@@ -110,6 +113,7 @@ impl Default for RenderOptions {
             stop: StopRule::default(),
             mesh: MeshSettings::default(),
             raster_pieces: DEFAULT_RASTER_PIECES,
+            occlusion_cull: true,
             projection: Projection::Exact,
             tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
             layout: None,

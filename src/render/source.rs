@@ -32,8 +32,10 @@ pub struct PhaseTimes {
     /// Of `sum`: the far receivers' shadow rays (see
     /// `GpuFormFactors::add_far_receivers`).
     pub far: Duration,
-    /// Rectangles drawn.
+    /// Rectangles in view (bounded, before the occlusion cull).
     pub rects: u64,
+    /// Of those, rectangles the occlusion cull left undrawn.
+    pub occluded: u64,
     /// Proxies whose cell rectangle this rank computed (the bounds pass's
     /// work: over several ranks, only polygons that may show in its tiles).
     pub bounded: u64,
@@ -85,6 +87,7 @@ impl Tier {
             raster.use_tessellation(&gpu.device, opts.tessellation_tolerance)?;
         }
         raster.set_count_coverage(opts.form_factor == FormFactorMethod::Hybrid);
+        raster.set_cull_occluded(opts.occlusion_cull);
         Ok(Self {
             raster,
             cells: TierCells::new(res, layout, ranks, opts.form_factor),
@@ -167,8 +170,10 @@ pub struct GpuFormFactors<'a> {
     cache: RowCache,
     /// Whether shots split where visibility varies across the shooter.
     split: bool,
-    /// Per patch, whether the last hemisphere's cells covered it.
+    /// Per patch, whether the last hemisphere's cells saw it (a visible cell).
     seen: Vec<bool>,
+    /// Per patch: whether the far receivers' rays saw it in this shot.
+    rayed: Vec<bool>,
     /// The receivers as hybrid rows and the marking of patches seen read
     /// them (compact: see [`formfactor::ReceiverTable`]).
     receivers: formfactor::ReceiverTable,
@@ -235,6 +240,7 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, per_rank_cache, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
+            rayed: vec![false; mesh.patches.len()],
             receivers: formfactor::ReceiverTable::new(mesh),
             far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh
@@ -292,7 +298,16 @@ impl<'a> GpuFormFactors<'a> {
         tier: usize,
         reach: f32,
     ) -> Result<Duration, RenderError> {
-        let frame = self.mesh.shooter_frame_at(shooter, centre).within(reach);
+        // Near receivers are drawn even when hidden: their hidden cells
+        // decide whether the shot splits (`formfactor::needs_split`).
+        let (_, near) = formfactor::near_receivers(self.mesh, shooter);
+        let sp = self.mesh.patches[shooter as usize].centre;
+        let keep = (near as f32 + centre.distance(sp)) * (1.0 + 1e-4);
+        let frame = self
+            .mesh
+            .shooter_frame_at(shooter, centre)
+            .within(reach)
+            .keeping_near(keep);
         self.last_tier = tier;
         self.last_centre = centre;
         let layout = self.tiers[tier].cells.layout;
@@ -430,10 +445,24 @@ impl<'a> GpuFormFactors<'a> {
                     && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
                 {
                     self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
+                    self.rayed[k] = true;
                 }
             }
         }
         if self.pairs.len() > before {
+            // A patch the rays saw takes their verdict alone: the cells
+            // it covered (all hidden, or it would have been seen) go, so
+            // its elements' visibilities do not depend on whether a
+            // hidden polygon was drawn (the occlusion cull) or not.
+            let (receivers, rayed) = (&self.receivers, &mut self.rayed);
+            let mut index = 0;
+            self.pairs.retain(|&(j, _)| {
+                index += 1;
+                index > before || !rayed[receivers.patch(j) as usize]
+            });
+            for &(j, _) in &self.pairs {
+                rayed[receivers.patch(j) as usize] = false;
+            }
             // Two sorted runs (the cells' pairs, then these in patch
             // order): the stable sort finds them and merges in one pass.
             self.pairs.sort_by_key(|p| p.0);
@@ -441,11 +470,25 @@ impl<'a> GpuFormFactors<'a> {
         self.timings.far += start.elapsed();
     }
 
-    /// Marks in `self.seen` the patches the last hemisphere's cells covered.
+    /// The receivers of the last hemisphere with a visible cell (or a far
+    /// receiver's ray): the work a hybrid row does per receiver, counted
+    /// alike whether hidden polygons were drawn or culled.
+    fn visible_receivers(&self) -> u64 {
+        self.pairs
+            .iter()
+            .filter(|p| formfactor::unpack(p.1).0 > 0)
+            .count() as u64
+    }
+
+    /// Marks in `self.seen` the patches the last hemisphere's cells saw (a
+    /// visible cell, not only covered ones: whether a hidden patch was drawn
+    /// at all depends on the occlusion cull, and must not change its rays).
     fn mark_seen(&mut self) {
         self.seen.iter_mut().for_each(|s| *s = false);
-        for &(j, _) in &self.pairs {
-            self.seen[self.receivers.patch(j) as usize] = true;
+        for &(j, x) in &self.pairs {
+            if formfactor::unpack(x).0 > 0 {
+                self.seen[self.receivers.patch(j) as usize] = true;
+            }
         }
     }
 
@@ -462,6 +505,7 @@ impl<'a> GpuFormFactors<'a> {
         )?;
         self.timings.bounds += stats.bounds;
         self.timings.rects += stats.rects as u64;
+        self.timings.occluded += stats.occluded as u64;
         self.timings.bounded += stats.bounded as u64;
         self.timings.cells += tier.cells.cells_at(own) as u64;
         self.timings.rasterise += stats.rasterise;
@@ -508,7 +552,7 @@ impl<'a> GpuFormFactors<'a> {
         };
         let centre = self.last_centre;
         self.add_far_receivers(shooter, centre, tier, f32::INFINITY, |_| true);
-        self.timings.receivers += self.pairs.len() as u64;
+        self.timings.receivers += self.visible_receivers();
         let mut row =
             formfactor::hybrid_row(self.mesh, &self.receivers, shooter, &self.pairs, 0..columns);
         if let Some(p) = self.penumbra.get_mut(shooter as usize) {
@@ -548,7 +592,7 @@ impl<'a> GpuFormFactors<'a> {
             // Its own far receivers, near ones only (few rays).
             let within = reach + self.max_patch_radius;
             self.add_far_receivers(shooter, *at, tier, within, &is_near);
-            self.timings.receivers += self.pairs.len() as u64;
+            self.timings.receivers += self.visible_receivers();
             let mut part = formfactor::hybrid_row(
                 self.mesh,
                 &self.receivers,

@@ -309,3 +309,48 @@ fn skipping_the_back_faces_of_solids_changes_no_cell() {
         "{differing} of {cells} cells differ"
     );
 }
+
+#[test]
+fn the_occlusion_cull_changes_no_number() {
+    // Polygons hidden behind nearer ones in every cell they could cover are
+    // left undrawn on one rank; their elements are all hidden, so no form
+    // factor may change, with either method, split shots, coarse shots and
+    // near receivers (which stay drawn) included. Cluttered scenes, where
+    // the cull leaves out most of what is in view.
+    for (name, method) in [
+        ("cubes-4", radiosity::settings::FormFactorMethod::Hybrid),
+        (
+            "family-floor-1",
+            radiosity::settings::FormFactorMethod::Hybrid,
+        ),
+        (
+            "family-many-2",
+            radiosity::settings::FormFactorMethod::Hybrid,
+        ),
+        ("cubes-4", radiosity::settings::FormFactorMethod::Hemisphere),
+    ] {
+        let scene = radiosity::scene::open(name).expect("built-in scene");
+        let mut opts = RenderOptions {
+            width: 0,
+            form_factor: method,
+            ..RenderOptions::default()
+        };
+        opts.stop.max_shots = 150;
+        let run = |opts: &RenderOptions| {
+            render(gpu(), &scene, opts, Duration::ZERO, &mut |_| {}).expect("render")
+        };
+        let culled = run(&opts);
+        opts.occlusion_cull = false;
+        let drawn = run(&opts);
+        assert!(
+            culled.report.timings.occluded_per_shot > 0.0,
+            "{name}: nothing culled"
+        );
+        assert_eq!(drawn.report.timings.occluded_per_shot, 0.0);
+        assert!(
+            culled.radiosity == drawn.radiosity,
+            "{name} {method:?}: radiosities differ with the occlusion cull"
+        );
+        assert_eq!(culled.report.energy, drawn.report.energy, "{name}");
+    }
+}
