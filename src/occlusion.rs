@@ -51,17 +51,62 @@ pub struct OcclusionMap {
     /// Per cell (row-major): the distance within which something covers its
     /// centre (infinite: nothing known).
     depth: Vec<f32>,
-    /// Cell-centre directions (`hemisphere::direction_table`, the shader's).
-    trig: Vec<[f32; 2]>,
+    /// Per row: sin and cos of its centre's polar angle; per column: cos
+    /// and sin of its centre's azimuth (`hemisphere::direction_table`, the
+    /// shader's directions).
+    rows: Vec<[f32; 2]>,
+    cols_cos: Vec<f32>,
+    cols_sin: Vec<f32>,
+}
+
+/// A piece's plane and its edges' planes seen along one row of cells: each
+/// as (a, b, c) with n . d = a cos(theta) + b sin(theta) + c (a degenerate
+/// edge as one no direction fails, so the tests below have no branches).
+struct RowPlanes {
+    edges: [[f32; 3]; 4],
+    plane: [f32; 3],
+}
+
+impl RowPlanes {
+    fn new(piece: &Piece, [sp, cp]: [f32; 2]) -> Self {
+        let along = |n: &[f32]| [sp * n[0], sp * n[1], cp * n[2]];
+        Self {
+            edges: piece.edges.map(|e| {
+                if e[0] * e[0] + e[1] * e[1] + e[2] * e[2] >= 0.25 {
+                    along(&e)
+                } else {
+                    [0.0, 0.0, 1.0]
+                }
+            }),
+            plane: along(&piece.plane),
+        }
+    }
+
+    /// The least edge test of the direction (cos, sin) of a column.
+    #[inline(always)]
+    fn least(&self, ct: f32, st: f32) -> f32 {
+        let [a, b, c, d] = self.edges.map(|e| e[0] * ct + e[1] * st + e[2]);
+        a.min(b).min(c.min(d))
+    }
+
+    /// The cosine between the direction and the piece's plane normal.
+    #[inline(always)]
+    fn cosine(&self, ct: f32, st: f32) -> f32 {
+        self.plane[0] * ct + self.plane[1] * st + self.plane[2]
+    }
 }
 
 impl OcclusionMap {
     /// An empty map for hemispheres of `res`.
     pub fn new(res: Resolution) -> Self {
+        let table = crate::hemisphere::direction_table(res);
+        let (rows, cols) = table.split_at(res.rows as usize);
         Self {
             res,
             depth: vec![f32::INFINITY; res.cells()],
-            trig: crate::hemisphere::direction_table(res),
+            rows: rows.to_vec(),
+            cols_cos: cols.iter().map(|c| c[0]).collect(),
+            cols_sin: cols.iter().map(|c| c[1]).collect(),
         }
     }
 
@@ -72,31 +117,67 @@ impl OcclusionMap {
 
     /// Takes in a piece that is drawn: every cell whose centre direction is
     /// inside all its edge planes is covered at its distance there.
-    pub fn add(&mut self, piece: &Piece) {
+    /// Returns the cells the piece's rectangle holds.
+    pub fn add(&mut self, piece: &Piece) -> usize {
         let rows = 0..self.res.rows as usize;
-        add_to_rows(self.res, &self.trig, &mut self.depth, rows, piece);
+        let mut band = Band {
+            map: &self.rows,
+            cos: &self.cols_cos,
+            sin: &self.cols_sin,
+            depth: &mut self.depth,
+            rows,
+        };
+        band.add(piece)
     }
 
     /// [`OcclusionMap::add`] for every item's piece, the rows divided
     /// between `threads` threads (the same map as one thread makes).
-    pub fn add_all<T: Sync>(&mut self, items: &[T], piece: fn(&T) -> Piece<'_>, threads: usize) {
+    /// Returns the cells the rectangles hold, in all.
+    pub fn add_all<T: Sync>(
+        &mut self,
+        items: &[T],
+        piece: fn(&T) -> Piece<'_>,
+        threads: usize,
+    ) -> usize {
         if threads <= 1 {
-            items.iter().for_each(|item| self.add(&piece(item)));
-            return;
+            return items.iter().map(|item| self.add(&piece(item))).sum();
         }
-        let (res, trig) = (self.res, &self.trig);
-        let cols = res.cols as usize;
-        let band = (res.rows as usize).div_ceil(threads.max(1)).max(1);
+        let cols = self.res.cols as usize;
+        let band = (self.res.rows as usize).div_ceil(threads).max(1);
+        let (rows, cos, sin) = (&self.rows, &self.cols_cos, &self.cols_sin);
         std::thread::scope(|scope| {
-            for (k, depth) in self.depth.chunks_mut(band * cols).enumerate() {
-                let rows = k * band..k * band + depth.len() / cols;
-                scope.spawn(move || {
-                    for item in items {
-                        add_to_rows(res, trig, depth, rows.clone(), &piece(item));
-                    }
-                });
-            }
-        });
+            let handles: Vec<_> = self
+                .depth
+                .chunks_mut(band * cols)
+                .enumerate()
+                .map(|(k, depth)| {
+                    let range = k * band..k * band + depth.len() / cols;
+                    scope.spawn(move || {
+                        let mut part = Band {
+                            map: rows,
+                            cos,
+                            sin,
+                            depth,
+                            rows: range,
+                        };
+                        items
+                            .iter()
+                            .map(|item| part.add(&piece(item)))
+                            .sum::<usize>()
+                    })
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .sum()
+        })
+    }
+
+    /// How many cell centres `rect` holds (what drawing it costs).
+    pub fn cells_held(&self, rect: [f32; 4]) -> usize {
+        let (p0, p1) = row_span(self.res, rect, 0..self.res.rows as usize);
+        (p1 - p0) * column_runs(self.res, rect).map(|r| r.len()).sum::<usize>()
     }
 
     /// Whether every cell the piece could draw is covered nearer than the
@@ -104,74 +185,92 @@ impl OcclusionMap {
     /// its plane is seen edge-on).
     pub fn hides(&self, piece: &Piece, nearest: f32) -> bool {
         let cols = self.res.cols as usize;
-        cells(self.res, &self.trig, piece.rect).all(|(cell, d)| {
-            if piece.edges.iter().any(|e| dot(e, d) < -INSIDE) {
-                return true;
-            }
-            let cos = dot(&piece.plane, d);
-            let t = piece.plane[3] / cos;
-            let t = if cos.abs() >= GRAZING && t.is_finite() {
-                if t <= 0.0 {
-                    // Behind the hemisphere: no fragment.
-                    return true;
-                }
-                t.max(nearest)
-            } else {
-                nearest
-            };
-            self.depth[cell[1] * cols + cell[0]] * (1.0 + DEPTH_MARGIN) < t
+        let (p0, p1) = row_span(self.res, piece.rect, 0..self.res.rows as usize);
+        (p0..p1).all(|p| {
+            let planes = RowPlanes::new(piece, self.rows[p]);
+            let depth = &self.depth[p * cols..(p + 1) * cols];
+            column_runs(self.res, piece.rect).all(|run| {
+                run.into_iter().all(|t| {
+                    let (ct, st) = (self.cols_cos[t], self.cols_sin[t]);
+                    if planes.least(ct, st) < -INSIDE {
+                        return true;
+                    }
+                    let cos = planes.cosine(ct, st);
+                    let t_hit = piece.plane[3] / cos;
+                    let at = if cos.abs() >= GRAZING && t_hit.is_finite() {
+                        if t_hit <= 0.0 {
+                            // Behind the hemisphere: no fragment.
+                            return true;
+                        }
+                        t_hit.max(nearest)
+                    } else {
+                        nearest
+                    };
+                    depth[t] * (1.0 + DEPTH_MARGIN) < at
+                })
+            })
         })
     }
 }
 
-/// The cells (column wrapped, row) of `res` whose centres `rect` holds, with
-/// their centre directions from `trig` (`hemisphere::direction_table`).
-fn cells(
-    res: Resolution,
-    trig: &[[f32; 2]],
-    rect: [f32; 4],
-) -> impl Iterator<Item = ([usize; 2], [f32; 3])> + '_ {
-    let lo = |x: f32| (x - 0.5).ceil() as i64;
-    let hi = |x: f32| (x - 0.5).floor() as i64;
-    let (rows, cols) = (res.rows as i64, res.cols as i64);
-    let (t0, t1) = (lo(rect[0]), hi(rect[1]).min(lo(rect[0]) + cols - 1));
-    let (p0, p1) = (lo(rect[2]).max(0), hi(rect[3]).min(rows - 1));
-    (p0..=p1).flat_map(move |p| {
-        let [sp, cp] = trig[p as usize];
-        (t0..=t1).map(move |t| {
-            let t = t.rem_euclid(cols) as usize;
-            let [ct, st] = trig[rows as usize + t];
-            ([t, p as usize], [sp * ct, sp * st, cp])
-        })
-    })
+/// Some rows of a map, for one thread to fill.
+struct Band<'a> {
+    map: &'a [[f32; 2]],
+    cos: &'a [f32],
+    sin: &'a [f32],
+    /// The rows `rows` of the map's depths.
+    depth: &'a mut [f32],
+    rows: std::ops::Range<usize>,
 }
 
-/// Adds a piece's cover to `depth`, the map's rows `rows` (row-major).
-fn add_to_rows(
-    res: Resolution,
-    trig: &[[f32; 2]],
-    depth: &mut [f32],
-    rows: std::ops::Range<usize>,
-    piece: &Piece,
-) {
-    let cols = res.cols as usize;
-    let mut rect = piece.rect;
-    rect[2] = rect[2].max(rows.start as f32);
-    rect[3] = rect[3].min(rows.end as f32);
-    for (cell, d) in cells(res, trig, rect) {
-        if piece.edges.iter().all(|e| dot(e, d) >= INSIDE) {
-            let cos = dot(&piece.plane, d);
-            let t = piece.plane[3] / cos;
-            if cos.abs() >= GRAZING && t > 0.0 {
-                let k = (cell[1] - rows.start) * cols + cell[0];
-                depth[k] = depth[k].min(t);
+impl Band<'_> {
+    fn add(&mut self, piece: &Piece) -> usize {
+        let cols = self.cos.len();
+        let res = Resolution {
+            rows: self.map.len() as u32,
+            cols: cols as u32,
+        };
+        let (p0, p1) = row_span(res, piece.rect, self.rows.clone());
+        let mut held = 0;
+        for p in p0..p1 {
+            let planes = RowPlanes::new(piece, self.map[p]);
+            let row = &mut self.depth[(p - self.rows.start) * cols..][..cols];
+            for run in column_runs(res, piece.rect) {
+                held += run.len();
+                let (cos, sin) = (&self.cos[run.clone()], &self.sin[run.clone()]);
+                // Branch-free, so the loop vectorises.
+                for ((d, &ct), &st) in row[run].iter_mut().zip(cos).zip(sin) {
+                    let c = planes.cosine(ct, st);
+                    let t_hit = piece.plane[3] / c;
+                    let covers =
+                        planes.least(ct, st) >= INSIDE && c.abs() >= GRAZING && t_hit > 0.0;
+                    *d = if covers { d.min(t_hit) } else { *d };
+                }
             }
         }
+        held
     }
 }
 
-fn dot(e: &[f32], d: [f32; 3]) -> f32 {
-    e[0] * d[0] + e[1] * d[1] + e[2] * d[2]
+/// The rows (a half-open range within `within`) whose centres `rect` holds.
+fn row_span(res: Resolution, rect: [f32; 4], within: std::ops::Range<usize>) -> (usize, usize) {
+    let lo = ((rect[2] - 0.5).ceil().max(0.0) as usize).max(within.start);
+    let hi = (((rect[3] - 0.5).floor() + 1.0).clamp(0.0, res.rows as f32) as usize).min(within.end);
+    (lo, hi.max(lo))
+}
+
+/// The columns whose centres `rect` holds, as at most two runs of column
+/// indices (a rectangle past either end of the columns wraps around).
+fn column_runs(res: Resolution, rect: [f32; 4]) -> impl Iterator<Item = std::ops::Range<usize>> {
+    let cols = res.cols as i64;
+    let lo = (rect[0] - 0.5).ceil() as i64;
+    let hi = ((rect[1] - 0.5).floor() as i64).min(lo + cols - 1);
+    // Unwrapped [lo, hi] shifted into [0, 2 cols), then cut at cols.
+    let shift = lo.div_euclid(cols) * cols;
+    let (a, b) = (lo - shift, hi - shift);
+    let first = (a.min(cols) as usize)..((b + 1).clamp(0, cols) as usize);
+    let second = 0..((b + 1 - cols).clamp(0, cols) as usize);
+    [first, second].into_iter().filter(|r| !r.is_empty())
 }
 
 #[cfg(test)]

@@ -116,6 +116,9 @@ pub struct HemisphereRasterizer {
     cull_occluded: bool,
     /// The occlusion cull's map, reused from shot to shot.
     occlusion: crate::occlusion::OcclusionMap,
+    /// Shots to draw without the cull before trying it again (it did not
+    /// pay on the last shot that tried it).
+    cull_wait: u32,
     /// The last shot's coverage per element (empty unless counting).
     coverage: Vec<u32>,
     elements: usize,
@@ -213,6 +216,7 @@ impl HemisphereRasterizer {
             count_coverage: false,
             cull_occluded: true,
             occlusion: crate::occlusion::OcclusionMap::new(res),
+            cull_wait: 0,
             coverage: Vec::new(),
             elements: mesh.elements.len(),
         })
@@ -599,6 +603,8 @@ impl HemisphereRasterizer {
             clip: !lattice,
         });
         self.find_outside(shooter);
+        let cull = self.cull_occluded && self.cull_wait == 0;
+        self.cull_wait = self.cull_wait.saturating_sub(1);
         let mut collected = super::proxies::Collected::default();
         if self.tess.is_some() {
             self.collect_triangles(shooter);
@@ -609,9 +615,17 @@ impl HemisphereRasterizer {
                 self.res,
                 self.far,
                 ownership,
-                self.cull_occluded.then_some(&mut self.occlusion),
+                cull.then_some(&mut self.occlusion),
                 &mut self.instances,
             );
+            // Where the cull left little out, the next shots (most likely
+            // of nearby shooters) skip it: its cost is that of drawing
+            // every rectangle's cells on the CPU. The bits are the same.
+            if let Some(c) = collected.culled {
+                if (c.cells as f64) < CULL_PAYS * c.held as f64 {
+                    self.cull_wait = CULL_RETRY;
+                }
+            }
         }
         let bounds = start.elapsed();
         self.upload(device, queue, layout, own, lattice)?;
@@ -633,6 +647,14 @@ impl HemisphereRasterizer {
         })
     }
 }
+
+/// The occlusion cull pays where it leaves out at least this share of the
+/// cells the shot's rectangles hold (on lavapipe a fragment costs several
+/// times what the cull's test of a cell costs on the CPU).
+const CULL_PAYS: f64 = 0.1;
+
+/// Shots drawn without the cull after one where it did not pay.
+const CULL_RETRY: u32 = 16;
 
 /// The most rectangles one draw call draws (see [`HemisphereRasterizer::submit`]).
 const DRAW_INSTANCES: u32 = 1 << 12;

@@ -321,7 +321,9 @@ impl Proxies {
             self.visit_in_parallel(threads, &visit, &mut drawn)
         };
         if let (Some(map), true) = (occlusion, culling) {
-            done.occluded = drawn.cull_hidden(map, threads);
+            let culled = drawn.cull_hidden(map, threads);
+            done.occluded = culled.rects;
+            done.culled = Some(culled);
         }
         *instances = drawn.instances;
         done
@@ -396,8 +398,8 @@ impl Drawn {
     /// all hidden, so their covered cells (the hybrid visibility's
     /// denominator, and a patch's visibility for its elements no cell
     /// centre hit) change no receiver's form factor. The order of the rest
-    /// is kept.
-    fn cull_hidden(&mut self, map: &mut OcclusionMap, threads: usize) -> usize {
+    /// is kept. Returns what went, and the cells all the rectangles held.
+    fn cull_hidden(&mut self, map: &mut OcclusionMap, threads: usize) -> Culled {
         fn piece(i: &Instance) -> Piece<'_> {
             Piece {
                 rect: i.rect,
@@ -406,7 +408,7 @@ impl Drawn {
             }
         }
         map.clear();
-        map.add_all(&self.instances, piece, threads);
+        let held = map.add_all(&self.instances, piece, threads);
         // Each polygon's verdict (read-only, so in parallel), then the
         // survivors moved down in order.
         let instances = &self.instances;
@@ -439,10 +441,17 @@ impl Drawn {
             })
         };
         let mut kept = 0;
-        let mut culled = 0;
+        let mut culled = Culled {
+            held,
+            ..Culled::default()
+        };
         for (&(start, end, _), hide) in self.polygons.iter().zip(hidden) {
             if hide {
-                culled += end - start;
+                culled.rects += end - start;
+                culled.cells += self.instances[start..end]
+                    .iter()
+                    .map(|i| map.cells_held(i.rect))
+                    .sum::<usize>();
             } else {
                 self.instances.copy_within(start..end, kept);
                 kept += end - start;
@@ -475,6 +484,19 @@ pub(super) struct Collected {
     pub(super) bounded: usize,
     /// Rectangles left out as hidden behind nearer ones (of `rects`).
     pub(super) occluded: usize,
+    /// What the occlusion cull did, when it ran.
+    pub(super) culled: Option<Culled>,
+}
+
+/// What one occlusion cull left out, against what it looked at.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(super) struct Culled {
+    /// Rectangles left out.
+    pub(super) rects: usize,
+    /// The cell centres those rectangles held.
+    pub(super) cells: usize,
+    /// The cell centres every rectangle in view held (the cull's own work).
+    pub(super) held: usize,
 }
 
 /// asin of `x` in [0, 0.9] as atan2(x, sqrt(1 - x^2)), within 5e-7 rad
