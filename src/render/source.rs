@@ -100,6 +100,9 @@ impl Tier {
 /// `GpuFormFactors::add_far_receivers`).
 pub const FAR_CELLS: f32 = 4.0;
 
+/// Far receivers' scans of at least this many patches use every core.
+const PARALLEL_FAR: usize = 16_384;
+
 /// One of this rank's patches as the far receivers' scan reads it: every
 /// shot tests every patch, and reading these from the patches, polygons
 /// and elements was a cache miss apiece (most of the scan's time in big
@@ -389,7 +392,7 @@ impl<'a> GpuFormFactors<'a> {
         centre: glam::Vec3,
         tier: usize,
         within: f32,
-        keep: impl Fn(u32) -> bool,
+        keep: impl Fn(u32) -> bool + Sync,
     ) {
         let start = Instant::now();
         let mesh = self.mesh;
@@ -402,52 +405,84 @@ impl<'a> GpuFormFactors<'a> {
         let origin = centre + n * mesh.ray_offset;
         self.mark_seen();
         let before = self.pairs.len();
-        // Most candidates in a cluttered scene are hidden, by the same
-        // occluder as the patch before them (see `Bvh::occluded_hinted`).
-        let mut hint = None;
-        for fp in &self.far_patches {
-            let k = fp.patch as usize;
-            if k == shooter as usize || self.seen[k] {
-                continue;
-            }
-            let d = fp.centre - centre;
-            let dist2 = d.length_squared();
-            if dist2 > within * within {
-                continue;
-            }
-            let rn = fp.normal;
-            let cos_r = -rn.dot(d);
-            if n.dot(d) <= 0.0 || cos_r <= 0.0 {
-                continue;
-            }
-            let solid_angle = fp.area * cos_r / (dist2 * dist2.sqrt());
-            let p = &mesh.patches[k];
-            if solid_angle > FAR_CELLS * cell || !p.elements.clone().any(&keep) {
-                continue;
-            }
-            // One ray to the patch's centre first: most such patches are
-            // hidden, and a patch this small hidden at its centre is taken
-            // as hidden whole.
-            let to = p.centre + rn * mesh.ray_offset - origin;
-            let skip = [sp.polygon, p.polygon];
-            if mesh
-                .occluders
-                .occluded_hinted(origin, to, 0.0, 1.0, skip, &mut hint)
-            {
-                continue;
-            }
-            let one_cell = solid_angle <= cell;
-            for j in p.elements.clone() {
-                let e = &mesh.elements[j as usize];
-                let to = e.centre + rn * mesh.ray_offset - origin;
-                if keep(j)
-                    && n.dot(to) > 0.0
-                    && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
+        let seen = &self.seen;
+        // The elements the rays see, in patch order, from a run of patches.
+        let scan = |part: &[FarPatch]| -> Vec<u32> {
+            let mut found = Vec::new();
+            // Most candidates in a cluttered scene are hidden, by the same
+            // occluder as the patch before them (see `Bvh::occluded_hinted`).
+            let mut hint = None;
+            for fp in part {
+                let k = fp.patch as usize;
+                if k == shooter as usize || seen[k] {
+                    continue;
+                }
+                let d = fp.centre - centre;
+                let dist2 = d.length_squared();
+                if dist2 > within * within {
+                    continue;
+                }
+                let rn = fp.normal;
+                let cos_r = -rn.dot(d);
+                if n.dot(d) <= 0.0 || cos_r <= 0.0 {
+                    continue;
+                }
+                let solid_angle = fp.area * cos_r / (dist2 * dist2.sqrt());
+                let p = &mesh.patches[k];
+                if solid_angle > FAR_CELLS * cell || !p.elements.clone().any(&keep) {
+                    continue;
+                }
+                // One ray to the patch's centre first: most such patches are
+                // hidden, and a patch this small hidden at its centre is taken
+                // as hidden whole.
+                let to = p.centre + rn * mesh.ray_offset - origin;
+                let skip = [sp.polygon, p.polygon];
+                if mesh
+                    .occluders
+                    .occluded_hinted(origin, to, 0.0, 1.0, skip, &mut hint)
                 {
-                    self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
-                    self.rayed[k] = true;
+                    continue;
+                }
+                let one_cell = solid_angle <= cell;
+                for j in p.elements.clone() {
+                    let e = &mesh.elements[j as usize];
+                    let to = e.centre + rn * mesh.ray_offset - origin;
+                    if keep(j)
+                        && n.dot(to) > 0.0
+                        && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
+                    {
+                        found.push(j);
+                    }
                 }
             }
+            found
+        };
+        // Runs of patches on every core, joined in order (the hint only
+        // saves time, so the verdicts are the same however it is split).
+        let threads = if self.far_patches.len() >= PARALLEL_FAR {
+            parallel::cores().min(8)
+        } else {
+            1
+        };
+        let found: Vec<u32> = if threads <= 1 {
+            scan(&self.far_patches)
+        } else {
+            let per = self.far_patches.len().div_ceil(threads);
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = self
+                    .far_patches
+                    .chunks(per)
+                    .map(|part| scope.spawn(|| scan(part)))
+                    .collect();
+                handles
+                    .into_iter()
+                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            })
+        };
+        for j in found {
+            self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
+            self.rayed[self.receivers.patch(j) as usize] = true;
         }
         if self.pairs.len() > before {
             // A patch the rays saw takes their verdict alone: the cells
