@@ -65,6 +65,7 @@ fn measured(gpu: &Gpu, poly: &[Vec3], res: Resolution, tessellated: bool) -> Res
         &TileLayout::whole(res),
         (0, 0),
         &mut items,
+        None,
     )?;
     let dff = res.delta_form_factors();
     Ok(items

@@ -383,6 +383,9 @@ pub struct RankStats {
     /// Proxies whose cell rectangle it computed (the bounds pass's work;
     /// over several ranks, only polygons that may show in its tiles).
     pub bounded: u64,
+    /// Bytes it received agreeing with the other ranks on which hidden
+    /// polygons to leave undrawn (the occlusion cull; not in `bytes_received`).
+    pub occlusion_bytes_received: u64,
     /// This process's peak resident memory, bytes (Linux `VmHWM`; 0 where
     /// unknown), when the solve was gathered.
     pub peak_resident_bytes: u64,

@@ -8,7 +8,7 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
-use super::proxies::{in_view, Instance, Lookup, Ownership, Proxies};
+use super::proxies::{in_view, Agree, Instance, Lookup, Ownership, Proxies};
 use super::target::RenderTarget;
 use super::GpuError;
 use crate::hemisphere::{Resolution, TileLayout, EMPTY};
@@ -576,7 +576,11 @@ impl HemisphereRasterizer {
 
     /// Renders the cells of the tiles that rank `own` of `layout` owns, as seen
     /// from `shooter`, into `items` (row-major, R_phi x R_theta). Cells other
-    /// ranks own are [`EMPTY`].
+    /// ranks own are [`EMPTY`]. With `agree` (every rank's messages, in
+    /// rank order: one rank drawing the whole hemisphere, or every rank of
+    /// a run, each its tiles) polygons hidden in every rank's cells are
+    /// left undrawn ([`HemisphereRasterizer::set_cull_occluded`]); every
+    /// rank must then pass one, and each calls it once a shot or never.
     pub fn render(
         &mut self,
         device: &wgpu::Device,
@@ -585,6 +589,7 @@ impl HemisphereRasterizer {
         layout: &TileLayout,
         own: (u32, u32),
         items: &mut Vec<u32>,
+        agree: Option<Agree<'_>>,
     ) -> Result<RasterStats, GpuError> {
         let start = Instant::now();
         // With 1 x 1 tiles over several ranks, draw only this rank's cells,
@@ -603,7 +608,9 @@ impl HemisphereRasterizer {
             clip: !lattice,
         });
         self.find_outside(shooter);
-        let cull = self.cull_occluded && self.cull_wait == 0;
+        // Every rank decides alike (the wait follows the share summed over
+        // ranks), so all take part in the agreement or none.
+        let cull = self.cull_occluded && self.cull_wait == 0 && agree.is_some();
         self.cull_wait = self.cull_wait.saturating_sub(1);
         let mut collected = super::proxies::Collected::default();
         if self.tess.is_some() {
@@ -615,16 +622,16 @@ impl HemisphereRasterizer {
                 self.res,
                 self.far,
                 ownership,
-                cull.then_some(&mut self.occlusion),
+                agree
+                    .filter(|_| cull)
+                    .map(|agree| (&mut self.occlusion, agree)),
                 &mut self.instances,
             );
             // Where the cull left little out, the next shots (most likely
             // of nearby shooters) skip it: its cost is that of drawing
             // every rectangle's cells on the CPU. The bits are the same.
-            if let Some(c) = collected.culled {
-                if (c.cells as f64) < CULL_PAYS * c.held as f64 {
-                    self.cull_wait = CULL_RETRY;
-                }
+            if collected.culled.is_some_and(|c| c.share < CULL_PAYS) {
+                self.cull_wait = CULL_RETRY;
             }
         }
         let bounds = start.elapsed();

@@ -6,6 +6,7 @@
 
 mod hemisphere;
 mod proxies;
+pub use proxies::Agree;
 mod target;
 mod view;
 

@@ -243,14 +243,15 @@ impl Proxies {
         res: Resolution,
         far: f32,
         ownership: Option<Ownership>,
-        occlusion: Option<&mut OcclusionMap>,
+        occlusion: Option<(&mut OcclusionMap, Agree<'_>)>,
         instances: &mut Vec<Instance>,
     ) -> Collected {
         instances.clear();
         // What the occlusion cull needs: per polygon drawn its rectangles'
-        // range and nearest possible distance (only on one rank drawing
-        // the whole hemisphere).
-        let culling = occlusion.is_some() && ownership.is_none();
+        // range and nearest possible distance. Over several ranks each
+        // draws its tiles' pieces only (not the packed lattice of 1 x 1
+        // tiles, whose rectangles are not cut to the rank's cells).
+        let culling = occlusion.is_some() && ownership.is_none_or(|o| o.clip);
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
         } else {
@@ -306,7 +307,8 @@ impl Proxies {
                 }
                 if culling {
                     let end = out.instances.len();
-                    out.polygons.push((start, end, nearest(poly, shooter)));
+                    out.polygons
+                        .push((start, end, nearest(poly, shooter), at as u32));
                 }
             }
             done
@@ -320,8 +322,8 @@ impl Proxies {
         } else {
             self.visit_in_parallel(threads, &visit, &mut drawn)
         };
-        if let (Some(map), true) = (occlusion, culling) {
-            let culled = drawn.cull_hidden(map, threads);
+        if let (Some((map, agree)), true) = (occlusion, culling) {
+            let culled = drawn.cull_hidden(map, threads, agree, self.polygons.len());
             done.occluded = culled.rects;
             done.culled = Some(culled);
         }
@@ -371,7 +373,7 @@ impl Proxies {
             drawn.polygons.extend(
                 part.polygons
                     .iter()
-                    .map(|&(a, b, d)| (a + offset, b + offset, d)),
+                    .map(|&(a, b, d, k)| (a + offset, b + offset, d, k)),
             );
             done.rects += n.rects;
             done.bounded += n.bounded;
@@ -385,10 +387,10 @@ impl Proxies {
 #[derive(Default)]
 struct Drawn {
     instances: Vec<Instance>,
-    /// Per polygon drawn: its rectangles (start, end) and the least
-    /// distance any point of it can be from the shooter (`None`: never
-    /// culled, see [`nearest`]).
-    polygons: Vec<(usize, usize, Option<f32>)>,
+    /// Per polygon drawn: its rectangles (start, end), the least distance
+    /// any point of it can be from the shooter (`None`: never culled, see
+    /// [`nearest`]) and its index.
+    polygons: Vec<(usize, usize, Option<f32>, u32)>,
 }
 
 impl Drawn {
@@ -399,7 +401,13 @@ impl Drawn {
     /// denominator, and a patch's visibility for its elements no cell
     /// centre hit) change no receiver's form factor. The order of the rest
     /// is kept. Returns what went, and the cells all the rectangles held.
-    fn cull_hidden(&mut self, map: &mut OcclusionMap, threads: usize) -> Culled {
+    fn cull_hidden(
+        &mut self,
+        map: &mut OcclusionMap,
+        threads: usize,
+        agree: Agree<'_>,
+        polygons: usize,
+    ) -> Culled {
         fn piece(i: &Instance) -> Piece<'_> {
             Piece {
                 rect: i.rect,
@@ -409,14 +417,15 @@ impl Drawn {
         }
         map.clear();
         let held = map.add_all(&self.instances, piece, threads);
-        // Each polygon's verdict (read-only, so in parallel), then the
-        // survivors moved down in order.
+        // Each polygon's verdict in this rank's cells (read-only, so in
+        // parallel).
         let instances = &self.instances;
         let map = &*map;
         let per = self.polygons.len().div_ceil(threads.max(1)).max(1);
-        let verdicts = |part: &[(usize, usize, Option<f32>)]| -> Vec<bool> {
+        type Record = (usize, usize, Option<f32>, u32);
+        let verdicts = |part: &[Record]| -> Vec<bool> {
             part.iter()
-                .map(|&(start, end, nearest)| {
+                .map(|&(start, end, nearest, _)| {
                     nearest.is_some_and(|nearest| {
                         instances[start..end]
                             .iter()
@@ -440,26 +449,88 @@ impl Drawn {
                     .collect()
             })
         };
-        let mut kept = 0;
+        // What every rank saw: a polygon is left out only where it is
+        // hidden in every rank's cells (a rank that does not draw it has
+        // none of its cells), so its elements are hidden in all.
+        let cells_of = |r: &Record| -> usize {
+            instances[r.0..r.1]
+                .iter()
+                .map(|i| map.cells_held(i.rect))
+                .sum()
+        };
+        let hidden_cells: usize = self
+            .polygons
+            .iter()
+            .zip(&hidden)
+            .filter(|(_, &h)| h)
+            .map(|(r, _)| cells_of(r))
+            .sum();
+        let mut message = split_u64(held as u64).to_vec();
+        message.extend(split_u64(hidden_cells as u64));
+        message.extend(
+            self.polygons
+                .iter()
+                .zip(&hidden)
+                .filter(|(_, &h)| !h)
+                .map(|(r, _)| r.3),
+        );
+        let all = agree(&message);
+        let mut seen = vec![0u64; polygons.div_ceil(64)];
+        let (mut all_held, mut all_hidden) = (0u64, 0u64);
+        for part in &all {
+            let Some((head, ids)) = part.split_first_chunk::<4>() else {
+                continue;
+            };
+            all_held += join_u64(head[0], head[1]);
+            all_hidden += join_u64(head[2], head[3]);
+            for &k in ids {
+                if let Some(w) = seen.get_mut(k as usize / 64) {
+                    *w |= 1 << (k % 64);
+                }
+            }
+        }
+        let shown = |k: u32| seen[k as usize / 64] & (1 << (k % 64)) != 0;
         let mut culled = Culled {
             held,
+            share: all_hidden as f64 / all_held.max(1) as f64,
             ..Culled::default()
         };
-        for (&(start, end, _), hide) in self.polygons.iter().zip(hidden) {
-            if hide {
-                culled.rects += end - start;
-                culled.cells += self.instances[start..end]
-                    .iter()
-                    .map(|i| map.cells_held(i.rect))
-                    .sum::<usize>();
-            } else {
-                self.instances.copy_within(start..end, kept);
-                kept += end - start;
+        let out: Vec<bool> = self
+            .polygons
+            .iter()
+            .zip(hidden)
+            .map(|(r, hide)| {
+                let out = hide && !shown(r.3);
+                if out {
+                    culled.rects += r.1 - r.0;
+                    culled.cells += cells_of(r);
+                }
+                out
+            })
+            .collect();
+        // The survivors moved down, in order.
+        let mut kept = 0;
+        for (r, out) in self.polygons.iter().zip(out) {
+            if !out {
+                self.instances.copy_within(r.0..r.1, kept);
+                kept += r.1 - r.0;
             }
         }
         self.instances.truncate(kept);
         culled
     }
+}
+
+/// How the ranks agree on what to leave out: every rank's message, in rank
+/// order (one rank: its own).
+pub type Agree<'a> = &'a mut dyn FnMut(&[u32]) -> Vec<Vec<u32>>;
+
+fn split_u64(x: u64) -> [u32; 2] {
+    [x as u32, (x >> 32) as u32]
+}
+
+fn join_u64(lo: u32, hi: u32) -> u64 {
+    lo as u64 | (hi as u64) << 32
 }
 
 /// The least distance from the shooter's centre that any point of `poly`
@@ -497,6 +568,9 @@ pub(super) struct Culled {
     pub(super) cells: usize,
     /// The cell centres every rectangle in view held (the cull's own work).
     pub(super) held: usize,
+    /// Over every rank: the share of the cells the rectangles held that
+    /// lay in polygons hidden in the rank's cells (what the cull can save).
+    pub(super) share: f64,
 }
 
 /// asin of `x` in [0, 0.9] as atan2(x, sqrt(1 - x^2)), within 5e-7 rad

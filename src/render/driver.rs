@@ -256,11 +256,13 @@ pub fn render_on(
     timings.solve = solved.solve;
     timings.ambient = solved.ambient;
     source.release_cache();
+    // The occlusion cull's agreements are counted apart (per rank).
     let excluded = solved
         .trace
         .traffic
         .plus(before)
-        .plus(solved.ambient_traffic);
+        .plus(solved.ambient_traffic)
+        .plus(source.timings.cull_traffic);
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
@@ -396,6 +398,7 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, traffic: Traffic, cpu: f64
         traffic.cpu_seconds,
         traffic.calls as f64,
         t.bounded as f64,
+        t.cull_traffic.received as f64,
     ]
 }
 
@@ -420,6 +423,7 @@ fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
         mpi_cpu_seconds: v[14],
         mpi_calls: v[15] as u64,
         bounded: v[16] as u64,
+        occlusion_bytes_received: v[17] as u64,
     }
 }
 

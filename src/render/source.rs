@@ -8,7 +8,7 @@ use super::exchange::Exchanger;
 use super::options::{RenderError, RenderOptions};
 use super::tiers::{layout_for, TierCells, TierChoice};
 use crate::formfactor::{self, Row};
-use crate::gpu::{Gpu, GpuError, HemisphereRasterizer};
+use crate::gpu::{self, Gpu, GpuError, HemisphereRasterizer};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, EMPTY, FIXED_ONE};
 use crate::mesh::{Mesh, ShooterFrame};
 use crate::parallel::{self, Collectives};
@@ -36,6 +36,8 @@ pub struct PhaseTimes {
     pub rects: u64,
     /// Of those, rectangles the occlusion cull left undrawn.
     pub occluded: u64,
+    /// What the ranks' agreements on the cull moved (not the exchange's).
+    pub cull_traffic: parallel::Traffic,
     /// Proxies whose cell rectangle this rank computed (the bounds pass's
     /// work: over several ranks, only polygons that may show in its tiles).
     pub bounded: u64,
@@ -530,6 +532,22 @@ impl<'a> GpuFormFactors<'a> {
     /// Draws this rank's tiles `own` of the last tier's hemisphere.
     fn draw(&mut self, frame: &ShooterFrame, own: (u32, u32)) -> Result<(), GpuError> {
         let tier = &mut self.tiers[self.last_tier];
+        // The occlusion cull's agreement: one process drawing the whole
+        // hemisphere needs nobody; ranks of a run gather every rank's
+        // verdicts (that traffic kept apart from the exchange's). One
+        // process standing in for a rank grid draws no culls.
+        let comm = self.comm;
+        let whole = comm.size() == 1 && tier.cells.layout.ranks() == 1;
+        let mut cull_traffic = parallel::Traffic::default();
+        let mut agree = |message: &[u32]| -> Vec<Vec<u32>> {
+            if comm.size() == 1 {
+                return vec![message.to_vec()];
+            }
+            let before = comm.traffic();
+            let all = comm.all_gather_u32(message, None);
+            cull_traffic = cull_traffic.plus(comm.traffic().since(before));
+            all
+        };
         let stats = tier.raster.render(
             &self.gpu.device,
             &self.gpu.queue,
@@ -537,7 +555,9 @@ impl<'a> GpuFormFactors<'a> {
             &tier.cells.layout,
             own,
             &mut self.items,
+            (whole || comm.size() > 1).then_some(&mut agree as gpu::Agree<'_>),
         )?;
+        self.timings.cull_traffic = self.timings.cull_traffic.plus(cull_traffic);
         self.timings.bounds += stats.bounds;
         self.timings.rects += stats.rects as u64;
         self.timings.occluded += stats.occluded as u64;

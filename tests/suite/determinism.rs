@@ -286,10 +286,10 @@ fn skipping_the_back_faces_of_solids_changes_no_cell() {
     for patch in (0..mesh.patches.len()).step_by(mesh.patches.len() / 40) {
         let frame = mesh.shooter_frame(patch as u32);
         let s = culled
-            .render(&g.device, &g.queue, &frame, &layout, (0, 0), &mut a)
+            .render(&g.device, &g.queue, &frame, &layout, (0, 0), &mut a, None)
             .expect("render");
         let t = full
-            .render(&g.device, &g.queue, &frame, &layout, (0, 0), &mut b)
+            .render(&g.device, &g.queue, &frame, &layout, (0, 0), &mut b, None)
             .expect("render");
         rects[0] += s.rects;
         rects[1] += t.rects;

@@ -579,20 +579,38 @@ fn ranks_divide_the_hemisphere_cells_and_say_what_they_repeat() {
 }
 
 #[test]
-fn a_cluttered_scene_gives_the_same_bits_culled_on_one_rank_and_drawn_on_five() {
+fn a_cluttered_scene_gives_the_same_bits_culled_on_one_rank_and_on_five() {
     // The 4096-cube room: one rank culls the hidden polygons
     // (`crate::occlusion`) and scans its 69 000 patches for far receivers
-    // on every core; five ranks draw every polygon in their tiles and scan
-    // their 14 000 patches each on one thread. The same bits.
+    // on every core; five ranks cull what is hidden in every rank's tiles
+    // (agreed by a gather) and scan their 14 000 patches each on one
+    // thread. The same bits.
     let dir = tempfile::tempdir().expect("temp dir");
     let args = ["--max-shots", "12", "--refine", "0"];
     let one = mpirun_scene(1, dir.path(), "one", "cubes-16", &args);
     assert!(
-        one["timings"]["occluded_per_shot"].as_f64().expect("occluded") > 1000.0,
+        one["timings"]["occluded_per_shot"]
+            .as_f64()
+            .expect("occluded")
+            > 1000.0,
         "little was culled: {}",
         one["timings"]["occluded_per_shot"]
     );
     let five = mpirun_scene(5, dir.path(), "five", "cubes-16", &args);
-    assert_eq!(five["timings"]["occluded_per_shot"].as_f64(), Some(0.0));
     same_result(&one, &five, "five ranks");
+    // Five ranks agree to leave out what is hidden in all their tiles.
+    let culled = five["timings"]["occluded_per_shot"]
+        .as_f64()
+        .expect("occluded");
+    assert!(culled > 100.0, "five ranks culled {culled} a shot");
+    // With 1 x 1 tiles (the packed lattice) no rank culls; the same bits.
+    let lattice = mpirun_scene(
+        2,
+        dir.path(),
+        "lattice",
+        "cubes-16",
+        &[&args[..], &["--tile", "1x1"]].concat(),
+    );
+    same_result(&one, &lattice, "lattice");
+    assert_eq!(lattice["timings"]["occluded_per_shot"].as_f64(), Some(0.0));
 }

@@ -78,7 +78,15 @@ fn look_with(
     for ry in 0..layout.py {
         for rx in 0..layout.px {
             raster
-                .render(&g.device, &g.queue, &frame, &layout, (rx, ry), &mut items)
+                .render(
+                    &g.device,
+                    &g.queue,
+                    &frame,
+                    &layout,
+                    (rx, ry),
+                    &mut items,
+                    None,
+                )
                 .expect("render");
             for (i, &id) in items.iter().enumerate() {
                 let (p, t) = (
