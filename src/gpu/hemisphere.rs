@@ -581,6 +581,9 @@ impl HemisphereRasterizer {
     /// a run, each its tiles) polygons hidden in every rank's cells are
     /// left undrawn ([`HemisphereRasterizer::set_cull_occluded`]); every
     /// rank must then pass one, and each calls it once a shot or never.
+    // The device and queue apart (wgpu's examples' style, so tests inject
+    // them), the tiles, the output and the ranks' agreement: all needed.
+    #[allow(clippy::too_many_arguments)]
     pub fn render(
         &mut self,
         device: &wgpu::Device,
