@@ -192,9 +192,9 @@ pub struct SolveArgs {
     #[arg(long)]
     no_cache: bool,
     /// Draw every polygon in view, even those nearer ones certainly hide
-    /// (by default one rank leaves them undrawn: in cluttered scenes most
-    /// of what a hemisphere holds is hidden). The results are identical,
-    /// only the time changes.
+    /// (by default those hidden in every rank's tiles are left undrawn: in
+    /// cluttered scenes most of what a hemisphere holds is hidden). The
+    /// results are identical, only the time changes.
     #[arg(long)]
     no_occlusion_cull: bool,
     /// The memory each rank aims to stay within, GB: the form-factor row

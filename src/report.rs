@@ -248,7 +248,7 @@ pub struct Timings {
     /// Mean rectangles found in view per shot (bounded; some then culled).
     pub rects_per_shot: f64,
     /// Mean rectangles per shot left undrawn as hidden behind nearer
-    /// geometry (occlusion culling, one rank only; of `rects_per_shot`).
+    /// geometry (occlusion culling; rank 0's, of `rects_per_shot`).
     #[serde(default)]
     pub occluded_per_shot: f64,
     /// Shots whose form factors came from the row cache (a patch shooting again).

@@ -112,7 +112,7 @@ pub struct HemisphereRasterizer {
     tess: Option<Tessellation>,
     /// Whether to count coverage this shot.
     count_coverage: bool,
-    /// Whether to leave out polygons hidden behind nearer ones (one rank only).
+    /// Whether to leave out polygons hidden behind nearer ones.
     cull_occluded: bool,
     /// The occlusion cull's map, reused from shot to shot.
     occlusion: crate::occlusion::OcclusionMap,
@@ -336,10 +336,11 @@ impl HemisphereRasterizer {
 
     /// Whether to leave undrawn the polygons that nearer pieces certainly
     /// hide in every cell they could cover (`crate::occlusion`; on by
-    /// default). Only a rank that draws the whole hemisphere culls: with
-    /// its tiles alone a rank could drop part of a polygon that others
-    /// see, and its elements' covered cells would then be short. A culled
-    /// polygon's elements are all hidden, so no form factor changes.
+    /// default), in every rank's tiles: a polygon hidden in one rank's
+    /// tiles may show in another's (and its elements' covered cells would
+    /// then be short), so the ranks agree through the `agree` that
+    /// [`HemisphereRasterizer::render`] is given. A culled polygon's
+    /// elements are all hidden, so no form factor changes.
     pub fn set_cull_occluded(&mut self, on: bool) {
         self.cull_occluded = on;
     }

@@ -35,8 +35,9 @@ pub struct RenderOptions {
     /// What the hemisphere rasteriser draws: quad polygons as at most N x N
     /// pieces (the element is found per fragment), or every element (0).
     pub raster_pieces: u32,
-    /// Whether a shot on one rank leaves undrawn the polygons that nearer
-    /// ones certainly hide (`crate::occlusion`; the same bits either way).
+    /// Whether shots leave undrawn the polygons that nearer ones certainly
+    /// hide in every rank's tiles (`crate::occlusion`; the same bits
+    /// either way).
     pub occlusion_cull: bool,
     /// How the hemisphere is tiled and over which rank grid. Under MPI the
     /// grid comes from the rank count and only the tile size is used; in one
