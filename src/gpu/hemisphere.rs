@@ -652,7 +652,7 @@ impl HemisphereRasterizer {
                 None => collected.rects as u32,
             },
             bounded: collected.bounded as u32,
-            occluded: collected.occluded as u32,
+            occluded: collected.culled.map_or(0, |c| c.rects as u32),
             rasterise,
             readback: read_start.elapsed(),
         })

@@ -323,9 +323,7 @@ impl Proxies {
             self.visit_in_parallel(threads, &visit, &mut drawn)
         };
         if let (Some((map, agree)), true) = (occlusion, culling) {
-            let culled = drawn.cull_hidden(map, threads, agree, self.polygons.len());
-            done.occluded = culled.rects;
-            done.culled = Some(culled);
+            done.culled = Some(drawn.cull_hidden(map, threads, agree, self.polygons.len()));
         }
         *instances = drawn.instances;
         done
@@ -400,7 +398,7 @@ impl Drawn {
     /// all hidden, so their covered cells (the hybrid visibility's
     /// denominator, and a patch's visibility for its elements no cell
     /// centre hit) change no receiver's form factor. The order of the rest
-    /// is kept. Returns what went, and the cells all the rectangles held.
+    /// is kept. Returns what went.
     fn cull_hidden(
         &mut self,
         map: &mut OcclusionMap,
@@ -418,52 +416,35 @@ impl Drawn {
         map.clear();
         let held = map.add_all(&self.instances, piece, threads);
         // Each polygon's verdict in this rank's cells (read-only, so in
-        // parallel).
-        let instances = &self.instances;
+        // parallel where the scene is big).
+        let (instances, records) = (&self.instances, &self.polygons);
         let map = &*map;
-        let per = self.polygons.len().div_ceil(threads.max(1)).max(1);
-        type Record = (usize, usize, Option<f32>, u32);
-        let verdicts = |part: &[Record]| -> Vec<bool> {
-            part.iter()
-                .map(|&(start, end, nearest, _)| {
-                    nearest.is_some_and(|nearest| {
-                        instances[start..end]
-                            .iter()
-                            .all(|i| map.hides(&piece(i), nearest))
-                    })
-                })
-                .collect()
+        let verdict = |k: usize, hide: &mut bool| {
+            let (start, end, nearest, _) = records[k];
+            *hide = nearest.is_some_and(|nearest| {
+                instances[start..end]
+                    .iter()
+                    .all(|i| map.hides(&piece(i), nearest))
+            });
         };
-        let hidden: Vec<bool> = if threads <= 1 {
-            verdicts(&self.polygons)
+        let mut hidden = vec![false; records.len()];
+        if threads <= 1 {
+            hidden
+                .iter_mut()
+                .enumerate()
+                .for_each(|(k, h)| verdict(k, h));
         } else {
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = self
-                    .polygons
-                    .chunks(per)
-                    .map(|part| scope.spawn(move || verdicts(part)))
-                    .collect();
-                handles
-                    .into_iter()
-                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            })
-        };
+            crate::sampling::in_parallel(&mut hidden, verdict);
+        }
         // What every rank saw: a polygon is left out only where it is
         // hidden in every rank's cells (a rank that does not draw it has
         // none of its cells), so its elements are hidden in all.
-        let cells_of = |r: &Record| -> usize {
-            instances[r.0..r.1]
-                .iter()
-                .map(|i| map.cells_held(i.rect))
-                .sum()
-        };
-        let hidden_cells: usize = self
-            .polygons
+        let hidden_cells: usize = records
             .iter()
             .zip(&hidden)
             .filter(|(_, &h)| h)
-            .map(|(r, _)| cells_of(r))
+            .flat_map(|(r, _)| &instances[r.0..r.1])
+            .map(|i| map.cells_held(i.rect))
             .sum();
         let mut message = split_u64(held as u64).to_vec();
         message.extend(split_u64(hidden_cells as u64));
@@ -491,27 +472,15 @@ impl Drawn {
         }
         let shown = |k: u32| seen[k as usize / 64] & (1 << (k % 64)) != 0;
         let mut culled = Culled {
-            held,
+            rects: 0,
             share: all_hidden as f64 / all_held.max(1) as f64,
-            ..Culled::default()
         };
-        let out: Vec<bool> = self
-            .polygons
-            .iter()
-            .zip(hidden)
-            .map(|(r, hide)| {
-                let out = hide && !shown(r.3);
-                if out {
-                    culled.rects += r.1 - r.0;
-                    culled.cells += cells_of(r);
-                }
-                out
-            })
-            .collect();
         // The survivors moved down, in order.
         let mut kept = 0;
-        for (r, out) in self.polygons.iter().zip(out) {
-            if !out {
+        for (r, hide) in self.polygons.iter().zip(hidden) {
+            if hide && !shown(r.3) {
+                culled.rects += r.1 - r.0;
+            } else {
                 self.instances.copy_within(r.0..r.1, kept);
                 kept += r.1 - r.0;
             }
@@ -553,8 +522,6 @@ pub(super) struct Collected {
     pub(super) rects: usize,
     /// Proxies whose cell rectangle was computed (the bounds pass's work).
     pub(super) bounded: usize,
-    /// Rectangles left out as hidden behind nearer ones (of `rects`).
-    pub(super) occluded: usize,
     /// What the occlusion cull did, when it ran.
     pub(super) culled: Option<Culled>,
 }
@@ -562,12 +529,8 @@ pub(super) struct Collected {
 /// What one occlusion cull left out, against what it looked at.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(super) struct Culled {
-    /// Rectangles left out.
+    /// Rectangles left out (of [`Collected::rects`]).
     pub(super) rects: usize,
-    /// The cell centres those rectangles held.
-    pub(super) cells: usize,
-    /// The cell centres every rectangle in view held (the cull's own work).
-    pub(super) held: usize,
     /// Over every rank: the share of the cells the rectangles held that
     /// lay in polygons hidden in the rank's cells (what the cull can save).
     pub(super) share: f64,

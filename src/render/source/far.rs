@@ -14,8 +14,10 @@ use std::time::Instant;
 /// `GpuFormFactors::add_far_receivers`).
 pub const FAR_CELLS: f32 = 4.0;
 
-/// Far receivers' scans of at least this many patches use every core.
+/// Far receivers' scans of at least this many patches use every core, in
+/// runs of [`FAR_RUN`] patches.
 const PARALLEL_FAR: usize = 16_384;
+const FAR_RUN: usize = 4096;
 
 /// One of this rank's patches as the far receivers' scan reads it: every
 /// shot tests every patch, and reading these from the patches, polygons
@@ -133,26 +135,13 @@ impl GpuFormFactors<'_> {
         };
         // Runs of patches on every core, joined in order (the hint only
         // saves time, so the verdicts are the same however it is split).
-        let threads = if self.far_patches.len() >= PARALLEL_FAR {
-            parallel::cores().min(8)
-        } else {
-            1
-        };
-        let found: Vec<u32> = if threads <= 1 {
+        let found: Vec<u32> = if self.far_patches.len() < PARALLEL_FAR {
             scan(&self.far_patches)
         } else {
-            let per = self.far_patches.len().div_ceil(threads);
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = self
-                    .far_patches
-                    .chunks(per)
-                    .map(|part| scope.spawn(|| scan(part)))
-                    .collect();
-                handles
-                    .into_iter()
-                    .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            })
+            let runs: Vec<&[FarPatch]> = self.far_patches.chunks(FAR_RUN).collect();
+            let mut parts = vec![Vec::new(); runs.len()];
+            crate::sampling::in_parallel(&mut parts, |k, part| *part = scan(runs[k]));
+            parts.concat()
         };
         for j in found {
             self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
