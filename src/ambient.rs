@@ -39,7 +39,11 @@ pub const PATCH_GROUPS: usize = 8192;
 /// Rays cast in all, shared evenly by the groups (within [`MIN_RAYS`] and
 /// [`MAX_RAYS`] a group); as many again at most go to the emitters' groups
 /// (see [`Plan::rays_of`]).
-const RAY_BUDGET: usize = 1 << 18;
+pub const RAY_BUDGET: usize = 1 << 18;
+/// The budget of a refinement pass's transport ([`Transport::built_within`]):
+/// a pass's solution is shown only until the final solve's first shot, and
+/// its hemispheres are drawn coarse too.
+pub const PASS_RAY_BUDGET: usize = RAY_BUDGET / 2;
 /// The fewest rays a group casts.
 const MIN_RAYS: usize = 64;
 /// The most rays a group casts (a share's standard error is then at most
@@ -141,14 +145,14 @@ impl Plan<'_> {
     /// (the Cornell box's 16 light patches at 209 rays each put its mean
     /// error at 1.5-2.6 % until they had shot). Taking those rays from the
     /// other groups made the later displays worse (docs/accuracy.md).
-    fn rays_of(mesh: &Mesh, group_of: &[u32], count: usize) -> Vec<u32> {
-        let even = (RAY_BUDGET / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
+    fn rays_of(mesh: &Mesh, group_of: &[u32], count: usize, budget: usize) -> Vec<u32> {
+        let even = (budget / count.max(1)).clamp(MIN_RAYS, MAX_RAYS);
         let mut emits = vec![false; count];
         for (p, &g) in mesh.patches.iter().zip(group_of) {
             emits[g as usize] |= mesh.polygons[p.polygon as usize].emits();
         }
         let emitters = emits.iter().filter(|&&e| e).count();
-        let more = (RAY_BUDGET / emitters.max(1)).clamp(even, MAX_RAYS);
+        let more = (budget / emitters.max(1)).clamp(even, MAX_RAYS);
         emits
             .iter()
             .map(|&e| if e { more } else { even } as u32)
@@ -195,6 +199,16 @@ impl Transport {
     /// [`Plan::cast`] of every group in group order (it may split the
     /// groups between ranks and gather their counts: the same bits).
     pub fn built(mesh: &Mesh, cast: impl FnOnce(&Plan) -> Vec<GroupRays>) -> Self {
+        Self::built_within(mesh, RAY_BUDGET, cast)
+    }
+
+    /// [`Transport::built`] with `budget` rays shared evenly by the groups
+    /// (and as many again at most for the emitters'; see [`Plan::rays_of`]).
+    pub fn built_within(
+        mesh: &Mesh,
+        budget: usize,
+        cast: impl FnOnce(&Plan) -> Vec<GroupRays>,
+    ) -> Self {
         let start = std::time::Instant::now();
         let group_of = groups(mesh);
         let count = group_of.iter().map(|&g| g as usize + 1).max().unwrap_or(0);
@@ -214,7 +228,7 @@ impl Transport {
                 *r = r.map(|x| x / a);
             }
         }
-        let rays = Plan::rays_of(mesh, &group_of, count);
+        let rays = Plan::rays_of(mesh, &group_of, count, budget);
         let plan = Plan {
             mesh,
             group_of,
@@ -652,7 +666,7 @@ mod tests {
         let mut mesh = cube(0.5, 16);
         mesh.polygons[0].exitance = [1.0; 3];
         let group_of = groups(&mesh);
-        let rays = Plan::rays_of(&mesh, &group_of, 6 * 256);
+        let rays = Plan::rays_of(&mesh, &group_of, 6 * 256, RAY_BUDGET);
         let even = (RAY_BUDGET / (6 * 256)) as u32;
         for (p, (&g, &r)) in mesh.patches.iter().zip(group_of.iter().zip(&rays)) {
             let want = if p.polygon == 0 { 1024 } else { even };
@@ -662,7 +676,7 @@ mod tests {
         assert!(extra as usize <= RAY_BUDGET);
         // No emitter: every group casts the even share.
         mesh.polygons[0].exitance = [0.0; 3];
-        assert!(Plan::rays_of(&mesh, &group_of, 6 * 256)
+        assert!(Plan::rays_of(&mesh, &group_of, 6 * 256, RAY_BUDGET)
             .iter()
             .all(|&r| r == even));
     }

@@ -178,6 +178,10 @@ pub struct TracePoint {
     pub unshot_fraction: f64,
     /// Per node, exactly as the top-level `surfaces`.
     pub surfaces: Vec<Surface>,
+    /// The refinement pass (from 0) whose coarse solution this is; absent
+    /// for the final solve's points. A pass's `shots` count its own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pass: Option<u32>,
 }
 
 /// Problem sizes.
@@ -202,8 +206,13 @@ pub struct Refinement {
     pub passes: u32,
     /// Shots those passes took (not counted in `shots`).
     pub shots: u64,
-    /// Seconds they took (included in `timings.solve` and the trace's times).
+    /// Seconds they took (included in `timings.solve` and the trace's times),
+    /// their meshes' ambient transports included.
     pub seconds: f64,
+    /// Of `seconds`: the ambient transports' estimates (each pass's mesh
+    /// has its own, so it shows its solution from its first shot).
+    #[serde(default)]
+    pub transport_seconds: f64,
     /// Polygons whose patch grid (shooters) was refined at least once.
     pub shooter_polygons: u32,
     /// Doublings of patch grids for shooters, over all polygons and passes.

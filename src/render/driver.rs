@@ -3,11 +3,10 @@
 
 use super::hooks::{Progress, SolveHooks};
 use super::options::{fingerprint, RenderError, RenderOptions};
-use super::passes::refined_mesh;
+use super::passes::{refined_mesh, shared_transport, wants_transport, Refined};
 use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Extra, Trace};
-use crate::ambient::GroupRays;
 use crate::checkpoint::Header;
 use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
@@ -16,9 +15,9 @@ use crate::parallel::{Collectives, Exchange, Single, Traffic};
 use crate::render::image::{solution_image, view_for};
 use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
+    TracePoint,
 };
 use crate::scene::Scene;
-use crate::settings::AmbientTerm;
 use crate::settings::Projection;
 use crate::solver::Solver;
 use std::time::{Duration, Instant};
@@ -61,7 +60,7 @@ fn solve_mesh(
     comm: &dyn Collectives,
     fingerprint: &str,
     progress: &mut dyn FnMut(&Progress),
-) -> Result<(Mesh, Refinement, Vec<u32>), RenderError> {
+) -> Result<Refined, RenderError> {
     let Some(c) = &opts.resume else {
         return refined_mesh(gpu, scene, opts, comm, progress);
     };
@@ -71,8 +70,13 @@ fn solve_mesh(
             c.header.scene
         )));
     }
-    let mesh = Mesh::build_refined(scene, &opts.mesh_settings(), &c.header.factors);
-    Ok((mesh, c.header.refinement.clone(), c.header.factors.clone()))
+    Ok(Refined {
+        mesh: Mesh::build_refined(scene, &opts.mesh_settings(), &c.header.factors),
+        refinement: c.header.refinement.clone(),
+        factors: c.header.factors.clone(),
+        // The checkpoint's trace holds the passes' points.
+        trace: Vec::new(),
+    })
 }
 
 /// A solver at the start of the final solve (or where a checkpoint left
@@ -81,11 +85,12 @@ fn start_solver<'m>(
     mesh: &'m Mesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
-    refinement: &Refinement,
+    (refinement, passes): (&Refinement, Vec<TracePoint>),
 ) -> Result<(Solver<'m>, Trace<'m>, f64), RenderError> {
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     solver.set_overshoot(opts.overshoot);
     let mut trace = Trace::default();
+    trace.points = passes;
     // The refinement passes (and, resuming, the solve before the checkpoint)
     // count as solve time (set-up excluded), so the trace's times are the
     // honest time to each accuracy.
@@ -151,8 +156,8 @@ fn final_solve<'m>(
     // trace's own time does not), every rank casting its share of the rays.
     let t = Instant::now();
     let before = comm.traffic();
-    if opts.ambient == AmbientTerm::Carried || opts.transport_below > 0.0 {
-        shared_transport(mesh, comm);
+    if wants_transport(opts) {
+        shared_transport(mesh, crate::ambient::RAY_BUDGET, comm);
     }
     let ambient = t.elapsed().as_secs_f64();
     // Its gather is not a form-factor exchange: the report's bytes leave it out.
@@ -167,34 +172,6 @@ fn final_solve<'m>(
         ambient,
         ambient_traffic,
     })
-}
-
-/// Builds `mesh`'s ambient transport with every rank of `comm` casting
-/// the rays of its groups (group g on rank g mod N) and gathering the
-/// counts: the same bits as one rank casting them all.
-fn shared_transport(mesh: &Mesh, comm: &dyn Collectives) {
-    mesh.ambient.get_or_init(|| {
-        crate::ambient::Transport::built(mesh, |plan| {
-            let (rank, ranks) = (comm.rank(), comm.size());
-            let mine: Vec<usize> = (rank..plan.groups()).step_by(ranks).collect();
-            let mut words = Vec::new();
-            for row in plan.cast_these(&mine) {
-                row.pack(&mut words);
-            }
-            let mut rows: Vec<GroupRays> = comm
-                .all_gather_u32(&words, None)
-                .iter()
-                .flat_map(|w| GroupRays::unpack_all(w).unwrap_or_default())
-                .collect();
-            rows.sort_by_key(|r| r.group);
-            // Every rank runs the same binary on the same mesh, so this
-            // cannot fail; if it ever did, cast them all here.
-            if rows.len() != plan.groups() {
-                return plan.cast_all();
-            }
-            rows
-        })
-    });
 }
 
 /// Solves `scene` over the ranks of `comm` (every rank calls this with the
@@ -216,7 +193,12 @@ pub fn render_on(
     };
     let t = Instant::now();
     let fingerprint = fingerprint(scene, opts);
-    let (mesh, refinement, factors) = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
+    let Refined {
+        mesh,
+        refinement,
+        factors,
+        trace: passes,
+    } = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
     // The passes' solves count as solve time, below.
     timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
     if comm.rank() == 0 {
@@ -227,7 +209,7 @@ pub fn render_on(
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
     timings.setup = t.elapsed().as_secs_f64();
     crate::report::log_memory("the rasteriser's set-up");
-    let (mut solver, trace, so_far) = start_solver(&mesh, opts, comm, &refinement)?;
+    let (mut solver, trace, so_far) = start_solver(&mesh, opts, comm, (&refinement, passes))?;
     crate::report::log_memory("the solver's set-up");
     let header = Header {
         scene: scene.name.clone(),
@@ -254,7 +236,8 @@ pub fn render_on(
         progress,
     )?;
     timings.solve = solved.solve;
-    timings.ambient = solved.ambient;
+    // The transport is estimated before the first pass, or here.
+    timings.ambient = refinement.transport_seconds + solved.ambient;
     source.release_cache();
     // The occlusion cull's agreements are counted apart (per rank).
     let excluded = solved

@@ -6,36 +6,52 @@ use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
 use super::shoot::{shoot_until, AfterShot};
 use super::source::GpuFormFactors;
-use super::trace::{gather_whole, Extra};
+use super::trace::{gather_whole, Extra, Trace};
+use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
 use crate::gpu::Gpu;
 use crate::lights::KeptField;
 use crate::mesh::Mesh;
 use crate::parallel::Collectives;
 use crate::refine::{self, PatchStats};
-use crate::report::Refinement;
+use crate::report::{Refinement, TracePoint};
 use crate::scene::Scene;
+use crate::settings::AmbientTerm;
 use crate::solver::Solver;
 use std::time::Instant;
 
 /// Shading errors are summed over ranks in fixed point up to this.
 const SHADING_CAP: f64 = 16.0;
 
+/// What refinement by need leaves the final solve.
+pub struct Refined {
+    /// The mesh to solve.
+    pub mesh: Mesh,
+    /// What the passes did.
+    pub refinement: Refinement,
+    /// Per polygon, its patch-grid factor.
+    pub factors: Vec<u32>,
+    /// The passes' convergence trace (rank 0's; each point says its pass):
+    /// every pass's solution is shown from its first shot, as the final
+    /// solve's is, and the trace's times run on through the passes.
+    pub trace: Vec<TracePoint>,
+}
+
 /// The mesh a render solves: refinement by need (`crate::refine`), i.e.
 /// coarse solves, each followed by a decision that doubles some polygons'
 /// patch grids, until nothing asks for more or [`RenderOptions::mesh_settings`]' `refine`
-/// passes have run. Returns the mesh, what the passes did and the
-/// per-polygon patch-grid factors. Every rank calls this with the same arguments.
+/// passes have run. Every rank calls this with the same arguments.
 pub fn refined_mesh(
     gpu: &Gpu,
     scene: &Scene,
     opts: &RenderOptions,
     comm: &dyn Collectives,
     progress: &mut dyn FnMut(&Progress),
-) -> Result<(Mesh, Refinement, Vec<u32>), RenderError> {
+) -> Result<Refined, RenderError> {
     let settings = opts.mesh_settings();
     let n = scene.polygons.len();
     let mut factors = vec![1u32; n];
     let mut summary = Refinement::default();
+    let mut trace = Vec::new();
     let levels = settings.refine;
     let mut shooters = vec![false; n];
     let mut receivers = vec![false; n];
@@ -52,11 +68,30 @@ pub fn refined_mesh(
             summary.start = [mesh.patches.len(), mesh.elements.len()];
         }
         crate::report::log_memory("a pass's mesh");
-        let (decided, shots, seconds) = one_pass(gpu, scene, &mesh, opts, comm, progress)?;
+        // Every pass shows its solution from its first shot, so the
+        // transport comes first (solve time, as the final solve's does).
+        let t = Instant::now();
+        if wants_transport(opts) {
+            shared_transport(&mesh, PASS_RAY_BUDGET, comm);
+        }
+        let transport = t.elapsed().as_secs_f64();
+        summary.seconds += transport;
+        summary.transport_seconds += transport;
+        let measured = one_pass(
+            gpu,
+            scene,
+            &mesh,
+            opts,
+            comm,
+            (pass, summary.seconds),
+            progress,
+        )?;
         crate::report::log_memory("a pass's solve");
         summary.passes += 1;
-        summary.shots += shots;
-        summary.seconds += seconds;
+        summary.shots += measured.shots;
+        summary.seconds += measured.seconds;
+        trace.extend(measured.trace);
+        let decided = measured.decided;
         let mut changed = 0;
         for (i, d) in decided.iter().enumerate() {
             if d.refine() {
@@ -80,10 +115,12 @@ pub fn refined_mesh(
                 "refinement pass {}: {} patches, {} shots; {changed} polygons refined ({s} for their shooters, {r} for uneven receivers, {sh} for their shading)",
                 pass + 1,
                 mesh.patches.len(),
-                shots,
+                measured.shots,
             );
         }
         if changed == 0 {
+            // The final solve estimates its own transport, with the full budget.
+            mesh.ambient.take();
             last = Some(mesh);
             break;
         }
@@ -95,19 +132,79 @@ pub fn refined_mesh(
     let mesh =
         last.unwrap_or_else(|| Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref()));
     summary.end = [mesh.patches.len(), mesh.elements.len()];
-    Ok((mesh, summary, factors))
+    Ok(Refined {
+        mesh,
+        refinement: summary,
+        factors,
+        trace,
+    })
 }
 
-/// One coarse solve of `mesh`: which polygons' patch grids to double (and
-/// why), the shots it took and its solve seconds (set-up left out).
+/// Whether a solve with `opts` needs the ambient transport: the carried
+/// ambient term shows it, and the transport tier shoots along it.
+pub fn wants_transport(opts: &RenderOptions) -> bool {
+    opts.ambient == AmbientTerm::Carried || opts.transport_below > 0.0
+}
+
+/// Gives `mesh` its ambient transport (once), of `budget` rays
+/// ([`Transport::built_within`]), every rank of `comm` casting every N-th
+/// group's rays and all gathering the counts: the same bits as one rank
+/// casting them all.
+pub(super) fn shared_transport(mesh: &Mesh, budget: usize, comm: &dyn Collectives) {
+    mesh.ambient.get_or_init(|| {
+        Transport::built_within(mesh, budget, |plan| {
+            let (rank, ranks) = (comm.rank(), comm.size());
+            let mine: Vec<usize> = (rank..plan.groups()).step_by(ranks).collect();
+            let mut words = Vec::new();
+            for row in plan.cast_these(&mine) {
+                row.pack(&mut words);
+            }
+            let mut rows: Vec<GroupRays> = comm
+                .all_gather_u32(&words, None)
+                .iter()
+                .flat_map(|w| GroupRays::unpack_all(w).unwrap_or_default())
+                .collect();
+            rows.sort_by_key(|r| r.group);
+            // Every rank runs the same binary on the same mesh, so this
+            // cannot fail; if it ever did, cast them all here.
+            if rows.len() != plan.groups() {
+                return plan.cast_all();
+            }
+            rows
+        })
+    });
+}
+
+/// [`AfterShot`] for solvers of `mesh` (the closure's solver then has
+/// `mesh`'s lifetime, which a trace of it needs).
+fn after_shot<'m, F: FnMut(&Solver<'m>, f64)>(_mesh: &'m Mesh, f: F) -> AfterShot<F> {
+    AfterShot(f)
+}
+
+/// What one coarse solve measured.
+struct Measured {
+    /// Which polygons' patch grids to double, and why.
+    decided: Vec<refine::Decision>,
+    /// Shots taken.
+    shots: u64,
+    /// Solve seconds (set-up and the trace's own time left out).
+    seconds: f64,
+    /// Its convergence trace.
+    trace: Vec<TracePoint>,
+}
+
+/// One coarse solve of `mesh`, pass `pass`, after `before` seconds of solve:
+/// which polygons' patch grids to double (and why), its shots, seconds and
+/// trace.
 fn one_pass(
     gpu: &Gpu,
     scene: &Scene,
     mesh: &Mesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
+    (pass, before): (u32, f64),
     progress: &mut dyn FnMut(&Progress),
-) -> Result<(Vec<refine::Decision>, u64, f64), RenderError> {
+) -> Result<Measured, RenderError> {
     let mut source = GpuFormFactors::new(gpu, mesh, opts, comm, scene.extent())?;
     // Coarse, unsplit hemispheres measure what the pass decides by as
     // well, in 2-6x less pass time (README "Refinement by need"); the
@@ -120,6 +217,7 @@ fn one_pass(
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     // Shots after the last one strong enough to be refined change nothing.
     let floor = refine::SHOOTER_TOL * solver.emitted_power();
+    let mut trace = Trace::default();
     let stats = shoot_until(
         mesh,
         &opts.stop,
@@ -127,7 +225,13 @@ fn one_pass(
         comm,
         &mut source,
         &mut solver,
-        &mut AfterShot(|s: &Solver, u: f64| {
+        &mut after_shot(mesh, |s, u| {
+            // The pass's solution is what a stop now would show: the trace
+            // records it as the final solve's (its own time left out).
+            if trace.due(s.shots()) {
+                let seconds = before + started.elapsed().saturating_sub(trace.spent).as_secs_f64();
+                trace.record_at(comm, s, &scene.nodes, opts.ambient, seconds);
+            }
             if comm.rank() == 0 {
                 progress(&Progress {
                     shots: s.shots(),
@@ -137,6 +241,11 @@ fn one_pass(
             }
         }),
     )?;
+    let seconds = started.elapsed().saturating_sub(trace.spent).as_secs_f64();
+    let mut points = trace.points;
+    for p in &mut points {
+        p.pass = Some(pass);
+    }
     // Every rank saw its own receivers' penumbrae and holds its own
     // patches' light: sum them (exactly: fixed point, the rest are 0).
     let emitted = solver.emitted_power();
@@ -192,5 +301,10 @@ fn one_pass(
         settings.receiver_tol,
         settings.shading_tol,
     );
-    Ok((decided, solver.shots(), started.elapsed().as_secs_f64()))
+    Ok(Measured {
+        decided,
+        shots: solver.shots(),
+        seconds,
+        trace: points,
+    })
 }

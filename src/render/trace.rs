@@ -162,6 +162,7 @@ impl<'m> Trace<'m> {
                 seconds,
                 unshot_fraction,
                 surfaces,
+                pass: None,
             });
         }
         self.spent += t.elapsed();
@@ -187,7 +188,10 @@ impl<'m> Trace<'m> {
     /// The points so far, the last made equal to `report` (which the trace keeps going after).
     pub fn ending_with(&self, report: &Report, seconds: f64) -> Vec<TracePoint> {
         let mut points = self.points.clone();
-        if points.last().is_some_and(|p| p.shots == report.shots) {
+        if points
+            .last()
+            .is_some_and(|p| p.pass.is_none() && p.shots == report.shots)
+        {
             points.pop();
         }
         points.push(TracePoint {
@@ -195,6 +199,7 @@ impl<'m> Trace<'m> {
             seconds,
             unshot_fraction: report.unshot_fraction,
             surfaces: report.surfaces.clone(),
+            pass: None,
         });
         points
     }

@@ -116,7 +116,15 @@ fn trace_ends_at_the_report_and_its_error_falls() {
     let mut opts = tight(1e-7);
     opts.ambient = radiosity::settings::AmbientTerm::Off;
     let r = solve_file(&path, &opts);
-    let trace = &r.report.convergence;
+    let whole = &r.report.convergence;
+    assert!(whole.windows(2).all(|w| w[0].seconds <= w[1].seconds));
+    // The refinement pass's points come first, each saying its pass; the
+    // final solve starts again from B = E.
+    let passes = whole.iter().take_while(|p| p.pass.is_some()).count();
+    assert_eq!(r.report.refinement.passes, 1);
+    assert!(passes >= 1, "the pass shows its solution");
+    let trace = &whole[passes..];
+    assert!(trace.iter().all(|p| p.pass.is_none()));
     let last = trace.last().expect("a trace");
     assert_eq!(last.shots, r.report.shots);
     assert_eq!(last.surfaces, r.report.surfaces);
@@ -142,7 +150,6 @@ fn trace_ends_at_the_report_and_its_error_falls() {
         assert!(w[1] <= w[0] + 1e-12, "error rose: {errors:?}");
     }
     assert!(errors[0] > 0.01 && errors[errors.len() - 1] == 0.0);
-    assert!(trace.windows(2).all(|w| w[0].seconds <= w[1].seconds));
 }
 
 #[test]

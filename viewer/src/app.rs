@@ -517,9 +517,12 @@ impl Viewer {
         if let Some(reference) = &self.reference {
             // The trace's per-node radiosities against the reference: the
             // same error `radiosity accuracy` charts.
+            // The refinement passes' points count their own shots: against
+            // shots only the final solve's are drawn, against time all.
             let (mean, worst): (Vec<[f64; 2]>, Vec<[f64; 2]>) = snap
                 .trace
                 .iter()
+                .filter(|p| self.plot_time || p.pass.is_none())
                 .filter_map(|p| {
                     let (m, w) = radiosity::report::relative_error(&p.surfaces, reference);
                     (m > 0.0 && w > 0.0).then(|| {

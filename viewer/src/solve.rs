@@ -184,15 +184,17 @@ fn solve(
 ) -> Result<Option<Settings>, String> {
     let opts = &settings.options;
     let single = Single;
-    let (mesh, _, _) =
+    let refined =
         refined_mesh(gpu, scene, opts, &single, &mut |_| {}).map_err(|e| e.to_string())?;
-    let mesh = Arc::new(mesh);
+    let mesh = Arc::new(refined.mesh);
+    // The passes' points and time come first, as in a render's report.
+    let passes = (refined.trace, refined.refinement.seconds);
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())
         .map_err(|e| e.to_string())?;
     let mut solver = Solver::partitioned(&mesh, 0, 1);
     solver.set_overshoot(opts.overshoot);
     let mut shots = ShotLoop::new(&mesh, &single, opts.stop, 0.0);
-    let mut pub_ = Publisher::start(shared, &mesh, &solver, opts, wake)?;
+    let mut pub_ = Publisher::start(shared, &mesh, &solver, opts, wake, passes)?;
     let mut control = Control {
         pause_at: settings.pause_at,
         ..Control::default()
@@ -256,14 +258,19 @@ struct Publisher<'s, 'm, W: Fn()> {
 }
 
 impl<'s, 'm, W: Fn()> Publisher<'s, 'm, W> {
-    /// Publishes the start of a solve (B = E) and returns the publisher.
+    /// Publishes the start of a solve (B = E) and returns the publisher,
+    /// whose trace starts with the refinement passes' points and whose
+    /// time with theirs (`passes`).
     fn start(
         shared: &'s Mutex<Snapshot>,
         mesh: &Arc<Mesh>,
         solver: &Solver,
         opts: &RenderOptions,
         wake: &'s W,
+        passes: (Vec<radiosity::report::TracePoint>, f64),
     ) -> Result<Self, String> {
+        let mut trace = Trace::default();
+        trace.points = passes.0;
         let res = opts.resolution;
         {
             let mut s = shared.lock().map_err(|_| "state lock poisoned")?;
@@ -274,6 +281,7 @@ impl<'s, 'm, W: Fn()> Publisher<'s, 'm, W> {
                 ..Snapshot::default()
             };
             s.radiance = Arc::new(solver.display_radiance(opts.ambient));
+            s.trace = Arc::new(trace.points.clone());
         }
         wake();
         Ok(Self {
@@ -281,8 +289,8 @@ impl<'s, 'm, W: Fn()> Publisher<'s, 'm, W> {
             wake,
             ambient: opts.ambient,
             last_publish: Instant::now(),
-            solve_time: Duration::ZERO,
-            trace: Trace::default(),
+            solve_time: Duration::from_secs_f64(passes.1.max(0.0)),
+            trace,
         })
     }
 

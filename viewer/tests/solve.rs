@@ -199,12 +199,20 @@ fn the_viewer_and_the_renderer_give_the_same_numbers() {
         .map(|b| b.map(|x| (x / std::f64::consts::PI) as f32))
         .collect();
     assert_eq!(*s.radiance, radiance, "per-element radiance");
-    // The trace at the same shot counts (the report's last point is the
-    // final result, which the viewer's trace need not have reached).
+    // The trace at the same shot counts of the same pass or final solve
+    // (the report's last point is the final result, which the viewer's
+    // trace need not have reached).
     let report_trace = &rendered.report.convergence;
     let mut compared = 0;
+    assert!(
+        s.trace.iter().any(|p| p.pass.is_some()),
+        "the pass's points"
+    );
     for p in s.trace.iter() {
-        if let Some(q) = report_trace.iter().find(|q| q.shots == p.shots) {
+        if let Some(q) = report_trace
+            .iter()
+            .find(|q| (q.pass, q.shots) == (p.pass, p.shots))
+        {
             assert_eq!(p.surfaces, q.surfaces, "trace at {} shots", p.shots);
             assert_eq!(p.unshot_fraction, q.unshot_fraction);
             compared += 1;
