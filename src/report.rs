@@ -237,6 +237,10 @@ pub struct Refinement {
     pub end: [usize; 2],
     /// Patches and elements of the first (coarsest) mesh.
     pub start: [usize; 2],
+    /// A pass was interrupted: the final mesh is that pass's, refined no
+    /// further, and the solve went on from (or stopped at) its solution.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub interrupted: bool,
 }
 
 /// Seconds spent per phase.

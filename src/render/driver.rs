@@ -3,7 +3,7 @@
 
 use super::hooks::{Progress, SolveHooks};
 use super::options::{fingerprint, RenderError, RenderOptions};
-use super::passes::{refined_mesh, shared_transport, wants_transport, Refined};
+use super::passes::{refined_mesh, shared_transport, wants_transport, Handoff, Refined};
 use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Extra, Trace};
@@ -76,6 +76,7 @@ fn solve_mesh(
         factors: c.header.factors.clone(),
         // The checkpoint's trace holds the passes' points.
         trace: Vec::new(),
+        interrupted: None,
     })
 }
 
@@ -85,12 +86,21 @@ fn start_solver<'m>(
     mesh: &'m Mesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
-    (refinement, passes): (&Refinement, Vec<TracePoint>),
+    (refinement, passes, handoff): (&Refinement, Vec<TracePoint>, Option<Handoff>),
 ) -> Result<(Solver<'m>, Trace<'m>, f64), RenderError> {
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     solver.set_overshoot(opts.overshoot);
     let mut trace = Trace::default();
     trace.points = passes;
+    // An interrupted pass's solution is where the solve goes on from.
+    if let Some(h) = handoff {
+        solver
+            .restore(&h.state)
+            .map_err(|e| RenderError::Settings(format!("an interrupted pass's state: {e}")))?;
+        solver.set_energy_record(h.energy);
+        let points = std::mem::take(&mut trace.points);
+        trace.resume(points, h.state.shots);
+    }
     // The refinement passes (and, resuming, the solve before the checkpoint)
     // count as solve time (set-up excluded), so the trace's times are the
     // honest time to each accuracy.
@@ -198,6 +208,7 @@ pub fn render_on(
         refinement,
         factors,
         trace: passes,
+        interrupted,
     } = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
     // The passes' solves count as solve time, below.
     timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
@@ -209,7 +220,8 @@ pub fn render_on(
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, comm, scene.extent())?;
     timings.setup = t.elapsed().as_secs_f64();
     crate::report::log_memory("the rasteriser's set-up");
-    let (mut solver, trace, so_far) = start_solver(&mesh, opts, comm, (&refinement, passes))?;
+    let (mut solver, trace, so_far) =
+        start_solver(&mesh, opts, comm, (&refinement, passes, interrupted))?;
     crate::report::log_memory("the solver's set-up");
     let header = Header {
         scene: scene.name.clone(),

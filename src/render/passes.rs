@@ -4,7 +4,7 @@
 
 use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
-use super::shoot::{shoot_until, AfterShot};
+use super::shoot::{shoot_until, Flags, LoopHooks};
 use super::source::GpuFormFactors;
 use super::trace::{gather_whole, Extra, Trace};
 use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
@@ -16,7 +16,8 @@ use crate::refine::{self, PatchStats};
 use crate::report::{Refinement, TracePoint};
 use crate::scene::Scene;
 use crate::settings::AmbientTerm;
-use crate::solver::Solver;
+use crate::solver::{Solver, SolverState};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Shading errors are summed over ranks in fixed point up to this.
@@ -34,6 +35,9 @@ pub struct Refined {
     /// every pass's solution is shown from its first shot, as the final
     /// solve's is, and the trace's times run on through the passes.
     pub trace: Vec<TracePoint>,
+    /// When a pass was interrupted: its solver's state, on `mesh` (that
+    /// pass's, refined no further), for the final solve to continue from.
+    pub interrupted: Option<Handoff>,
 }
 
 /// The mesh a render solves: refinement by need (`crate::refine`), i.e.
@@ -91,6 +95,24 @@ pub fn refined_mesh(
         summary.shots += measured.shots;
         summary.seconds += measured.seconds;
         trace.extend(measured.trace);
+        if let Some(handoff) = measured.interrupted {
+            summary.interrupted = true;
+            summary.end = [mesh.patches.len(), mesh.elements.len()];
+            if comm.rank() == 0 {
+                log::warn!(
+                    "interrupted during refinement pass {} (after {} shots): its solution on its mesh is kept, refined no further",
+                    pass + 1,
+                    measured.shots
+                );
+            }
+            return Ok(Refined {
+                mesh,
+                refinement: summary,
+                factors,
+                trace,
+                interrupted: Some(handoff),
+            });
+        }
         let decided = measured.decided;
         let mut changed = 0;
         for (i, d) in decided.iter().enumerate() {
@@ -137,6 +159,7 @@ pub fn refined_mesh(
         refinement: summary,
         factors,
         trace,
+        interrupted: None,
     })
 }
 
@@ -175,12 +198,6 @@ pub(super) fn shared_transport(mesh: &Mesh, budget: usize, comm: &dyn Collective
     });
 }
 
-/// [`AfterShot`] for solvers of `mesh` (the closure's solver then has
-/// `mesh`'s lifetime, which a trace of it needs).
-fn after_shot<'m, F: FnMut(&Solver<'m>, f64)>(_mesh: &'m Mesh, f: F) -> AfterShot<F> {
-    AfterShot(f)
-}
-
 /// What one coarse solve measured.
 struct Measured {
     /// Which polygons' patch grids to double, and why.
@@ -191,6 +208,62 @@ struct Measured {
     seconds: f64,
     /// Its convergence trace.
     trace: Vec<TracePoint>,
+    /// Its solver's state when it was interrupted (then nothing was decided).
+    interrupted: Option<Handoff>,
+}
+
+/// The hooks of a pass's shooting loop: its trace (the pass's solution is
+/// what a stop now would keep, shown as the final solve's is, its own time
+/// left out), progress, and interrupts (a pass stops at once, and the
+/// render keeps its solution: [`Refined::interrupted`]).
+struct PassHooks<'a, 'm> {
+    comm: &'a dyn Collectives,
+    nodes: &'a [String],
+    ambient: AmbientTerm,
+    interrupt: Option<&'a AtomicBool>,
+    trace: Trace<'m>,
+    /// Solve seconds before this pass.
+    before: f64,
+    started: Instant,
+    progress: &'a mut dyn FnMut(&Progress),
+}
+
+impl<'m> LoopHooks<'m> for PassHooks<'_, 'm> {
+    fn after_shot(&mut self, s: &Solver<'m>, u: f64) {
+        if self.trace.due(s.shots()) {
+            let seconds = self.before
+                + self
+                    .started
+                    .elapsed()
+                    .saturating_sub(self.trace.spent)
+                    .as_secs_f64();
+            self.trace
+                .record_at(self.comm, s, self.nodes, self.ambient, seconds);
+        }
+        if self.comm.rank() == 0 {
+            (self.progress)(&Progress {
+                shots: s.shots(),
+                unshot_fraction: u,
+                elapsed: self.started.elapsed(),
+            });
+        }
+    }
+
+    fn flags(&self) -> Flags {
+        Flags {
+            stop: self.interrupt.is_some_and(|i| i.load(Ordering::Relaxed)),
+            save: false,
+        }
+    }
+}
+
+/// A pass's solver state, handed to the final solve when the pass was
+/// interrupted: the render then writes (and checkpoints) that solution.
+pub struct Handoff {
+    /// The pass's solver state (this rank's patches hold theirs).
+    pub state: SolverState,
+    /// Its energy record.
+    pub energy: [f64; 3],
 }
 
 /// One coarse solve of `mesh`, pass `pass`, after `before` seconds of solve:
@@ -217,7 +290,16 @@ fn one_pass(
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     // Shots after the last one strong enough to be refined change nothing.
     let floor = refine::SHOOTER_TOL * solver.emitted_power();
-    let mut trace = Trace::default();
+    let mut hooks = PassHooks {
+        comm,
+        nodes: &scene.nodes,
+        ambient: opts.ambient,
+        interrupt: opts.interrupt.as_deref(),
+        trace: Trace::default(),
+        before,
+        started,
+        progress,
+    };
     let stats = shoot_until(
         mesh,
         &opts.stop,
@@ -225,26 +307,29 @@ fn one_pass(
         comm,
         &mut source,
         &mut solver,
-        &mut after_shot(mesh, |s, u| {
-            // The pass's solution is what a stop now would show: the trace
-            // records it as the final solve's (its own time left out).
-            if trace.due(s.shots()) {
-                let seconds = before + started.elapsed().saturating_sub(trace.spent).as_secs_f64();
-                trace.record_at(comm, s, &scene.nodes, opts.ambient, seconds);
-            }
-            if comm.rank() == 0 {
-                progress(&Progress {
-                    shots: s.shots(),
-                    unshot_fraction: u,
-                    elapsed: started.elapsed(),
-                });
-            }
-        }),
+        &mut hooks,
     )?;
-    let seconds = started.elapsed().saturating_sub(trace.spent).as_secs_f64();
-    let mut points = trace.points;
+    let seconds = started
+        .elapsed()
+        .saturating_sub(hooks.trace.spent)
+        .as_secs_f64();
+    let mut points = hooks.trace.points;
     for p in &mut points {
         p.pass = Some(pass);
+    }
+    if stats.interrupted {
+        // Every rank stopped at the same shot (the vote): its solution
+        // is what the render keeps, on this pass's mesh, refined no further.
+        return Ok(Measured {
+            decided: Vec::new(),
+            shots: solver.shots(),
+            seconds,
+            trace: points,
+            interrupted: Some(Handoff {
+                state: solver.state(),
+                energy: solver.energy_record(),
+            }),
+        });
     }
     // Every rank saw its own receivers' penumbrae and holds its own
     // patches' light: sum them (exactly: fixed point, the rest are 0).
@@ -306,5 +391,6 @@ fn one_pass(
         shots: solver.shots(),
         seconds,
         trace: points,
+        interrupted: None,
     })
 }

@@ -186,3 +186,70 @@ fn a_solve_with_lights_sun_and_sky_resumes_to_the_same_bits_and_other_lights_are
         "{err}"
     );
 }
+
+/// A signal during the refinement pass stops the pass at once (it used to
+/// run the pass to its end, minutes on Sponza, and then keep the final
+/// mesh's empty start), and the render keeps the pass's solution: the mesh
+/// is the pass's, refined no further, the report is the pass's last
+/// trace point bit for bit, and the checkpoint goes on from it.
+#[test]
+fn an_interrupt_during_the_refinement_pass_keeps_the_pass_solution() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("cornell.ckpt");
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    opts.stop.threshold = 2e-3;
+    opts.checkpoint = Some(CheckpointPlan {
+        path: path.clone(),
+        every: None,
+    });
+    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    // The pass takes over 40 shots; the signal comes after its fifth.
+    let stopped = cornell(&opts, Some(5));
+    assert!(stopped.interrupted);
+    let r = &stopped.report;
+    assert!(r.refinement.interrupted);
+    assert_eq!((r.refinement.passes, r.refinement.shots), (1, 5));
+    assert_eq!(r.shots, 5);
+    assert_eq!(
+        [r.counts.patches, r.counts.elements],
+        r.refinement.start,
+        "the pass's mesh"
+    );
+    let trace = &r.convergence;
+    let (last, passes) = trace.split_last().expect("a trace");
+    assert!(passes.iter().all(|p| p.pass == Some(0)));
+    assert_eq!(passes.len(), 5, "a point per pass shot");
+    assert_eq!(last.surfaces, r.surfaces);
+    assert_eq!(
+        passes[4].surfaces, r.surfaces,
+        "the report is the pass's solution"
+    );
+    let saved = Checkpoint::read(&path).expect("checkpoint written");
+    assert_eq!(saved.state.shots, 5);
+
+    // Resumed, it goes on to converge on the pass's mesh.
+    opts.interrupt = None;
+    opts.resume = Some(Arc::new(saved));
+    let resumed = cornell(&opts, None);
+    let q = &resumed.report;
+    assert!(!resumed.interrupted && q.converged);
+    assert!(q.refinement.interrupted);
+    assert_eq!([q.counts.patches, q.counts.elements], r.refinement.start);
+    assert!(q.shots > 5);
+    // As a solve of that mesh from the start does (the box is open at the
+    // front: a third of the light leaves), its energy record carried over.
+    opts.resume = None;
+    opts.mesh.refine = 0;
+    let plain = cornell(&opts, None);
+    let p = &plain.report;
+    assert_eq!([p.counts.patches, p.counts.elements], r.refinement.start);
+    let (a, b) = (q.energy.balance, p.energy.balance);
+    assert!((a - b).abs() < 2e-3, "energy balance {a} against {b}");
+    for (x, y) in q.surfaces.iter().zip(&p.surfaces) {
+        let (x, y): (f64, f64) = (x.radiosity.iter().sum(), y.radiosity.iter().sum());
+        assert!((x / y - 1.0).abs() < 0.01, "{x} against {y}");
+    }
+}
