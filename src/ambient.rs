@@ -541,8 +541,14 @@ fn inverse_bilinear(c: &[Vec3; 4], x: Vec3) -> (f32, f32) {
             break;
         }
         let (ru, rv) = (du.dot(r), dv.dot(r));
-        u = (u + (d * ru - b * rv) / det).clamp(0.0, 1.0);
-        v = (v + (a * rv - b * ru) / det).clamp(0.0, 1.0);
+        let (su, sv) = ((d * ru - b * rv) / det, (a * rv - b * ru) / det);
+        u = (u + su).clamp(0.0, 1.0);
+        v = (v + sv).clamp(0.0, 1.0);
+        // Converged (a parallelogram, bilinear only in name, takes one
+        // step): the remaining steps would move it by rounding alone.
+        if su.abs().max(sv.abs()) < 1e-6 {
+            break;
+        }
     }
     (u, v)
 }
