@@ -76,6 +76,7 @@ fn solve_mesh(
         factors: c.header.factors.clone(),
         // The checkpoint's trace holds the passes' points.
         trace: Vec::new(),
+        bookkeeping: 0.0,
         interrupted: None,
     })
 }
@@ -208,10 +209,11 @@ pub fn render_on(
         refinement,
         factors,
         trace: passes,
+        bookkeeping,
         interrupted,
     } = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
-    // The passes' solves count as solve time, below.
-    timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds).max(0.0);
+    // The passes' solves count as solve time, below; their traces' bookkeeping nowhere.
+    timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds - bookkeeping).max(0.0);
     if comm.rank() == 0 {
         log_mesh(scene, &mesh);
     }

@@ -35,6 +35,9 @@ pub struct Refined {
     /// every pass's solution is shown from its first shot, as the final
     /// solve's is, and the trace's times run on through the passes.
     pub trace: Vec<TracePoint>,
+    /// Seconds the passes' trace bookkeeping took: neither solve time (as
+    /// the final solve's is not) nor mesh time.
+    pub bookkeeping: f64,
     /// When a pass was interrupted: its solver's state, on `mesh` (that
     /// pass's, refined no further), for the final solve to continue from.
     pub interrupted: Option<Handoff>,
@@ -56,6 +59,7 @@ pub fn refined_mesh(
     let mut factors = vec![1u32; n];
     let mut summary = Refinement::default();
     let mut trace = Vec::new();
+    let mut bookkeeping = 0.0;
     let levels = settings.refine;
     let mut shooters = vec![false; n];
     let mut receivers = vec![false; n];
@@ -95,6 +99,7 @@ pub fn refined_mesh(
         summary.shots += measured.shots;
         summary.seconds += measured.seconds;
         trace.extend(measured.trace);
+        bookkeeping += measured.bookkeeping;
         if let Some(handoff) = measured.interrupted {
             summary.interrupted = true;
             summary.end = [mesh.patches.len(), mesh.elements.len()];
@@ -110,6 +115,7 @@ pub fn refined_mesh(
                 refinement: summary,
                 factors,
                 trace,
+                bookkeeping,
                 interrupted: Some(handoff),
             });
         }
@@ -159,6 +165,7 @@ pub fn refined_mesh(
         refinement: summary,
         factors,
         trace,
+        bookkeeping,
         interrupted: None,
     })
 }
@@ -208,6 +215,8 @@ struct Measured {
     seconds: f64,
     /// Its convergence trace.
     trace: Vec<TracePoint>,
+    /// Seconds the trace's bookkeeping took (left out of `seconds`).
+    bookkeeping: f64,
     /// Its solver's state when it was interrupted (then nothing was decided).
     interrupted: Option<Handoff>,
 }
@@ -313,6 +322,7 @@ fn one_pass(
         .elapsed()
         .saturating_sub(hooks.trace.spent)
         .as_secs_f64();
+    let bookkeeping = hooks.trace.spent.as_secs_f64();
     let mut points = hooks.trace.points;
     for p in &mut points {
         p.pass = Some(pass);
@@ -325,6 +335,7 @@ fn one_pass(
             shots: solver.shots(),
             seconds,
             trace: points,
+            bookkeeping,
             interrupted: Some(Handoff {
                 state: solver.state(),
                 energy: solver.energy_record(),
@@ -391,6 +402,7 @@ fn one_pass(
         shots: solver.shots(),
         seconds,
         trace: points,
+        bookkeeping,
         interrupted: None,
     })
 }
