@@ -33,7 +33,7 @@ pub use options::{
     CheckpointPlan, FormFactorMethod, Projection, RenderError, RenderOptions, DEFAULT_COARSE_BELOW,
     DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
 };
-pub use passes::refined_mesh;
+pub use passes::{refined_mesh, refined_mesh_shown};
 pub use shoot::{shoot_until, AfterShot, Flags, LoopHooks, LoopStats, ShotLoop, Step, Stopped};
 pub use source::{GpuFormFactors, PhaseTimes};
 pub use trace::{gather_whole, Extra, Trace};

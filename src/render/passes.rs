@@ -54,6 +54,23 @@ pub fn refined_mesh(
     comm: &dyn Collectives,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Refined, RenderError> {
+    refined_mesh_shown(gpu, scene, opts, comm, progress, &mut |_, _| {})
+}
+
+/// Who is shown a pass's solution: called with the pass and its solver.
+pub type ShowPass<'a> = &'a mut dyn FnMut(u32, &Solver);
+
+/// [`refined_mesh`], calling `show` on rank 0 with the pass number and its
+/// solver (rank 0's share; one process's is whole) after every pass shot:
+/// how the viewer shows a pass's solution as it comes.
+pub fn refined_mesh_shown(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    comm: &dyn Collectives,
+    progress: &mut dyn FnMut(&Progress),
+    show: ShowPass<'_>,
+) -> Result<Refined, RenderError> {
     let settings = opts.mesh_settings();
     let n = scene.polygons.len();
     let mut factors = vec![1u32; n];
@@ -92,7 +109,7 @@ pub fn refined_mesh(
             opts,
             comm,
             (pass, summary.seconds),
-            progress,
+            (&mut *progress, &mut *show),
         )?;
         crate::report::log_memory("a pass's solve");
         summary.passes += 1;
@@ -235,6 +252,8 @@ struct PassHooks<'a, 'm> {
     before: f64,
     started: Instant,
     progress: &'a mut dyn FnMut(&Progress),
+    /// The pass, and who is shown its solution after each shot (rank 0).
+    show: (u32, ShowPass<'a>),
 }
 
 impl<'m> LoopHooks<'m> for PassHooks<'_, 'm> {
@@ -255,6 +274,7 @@ impl<'m> LoopHooks<'m> for PassHooks<'_, 'm> {
                 unshot_fraction: u,
                 elapsed: self.started.elapsed(),
             });
+            (self.show.1)(self.show.0, s);
         }
     }
 
@@ -285,7 +305,7 @@ fn one_pass(
     opts: &RenderOptions,
     comm: &dyn Collectives,
     (pass, before): (u32, f64),
-    progress: &mut dyn FnMut(&Progress),
+    (progress, show): (&mut dyn FnMut(&Progress), ShowPass<'_>),
 ) -> Result<Measured, RenderError> {
     let mut source = GpuFormFactors::new(gpu, mesh, opts, comm, scene.extent())?;
     // Coarse, unsplit hemispheres measure what the pass decides by as
@@ -308,6 +328,7 @@ fn one_pass(
         before,
         started,
         progress,
+        show: (pass, show),
     };
     let stats = shoot_until(
         mesh,

@@ -6,8 +6,8 @@ use radiosity::mesh::Mesh;
 use radiosity::parallel::Single;
 use radiosity::render::write::{write_outputs, OutputPaths};
 use radiosity::render::{
-    build_report, refined_mesh, single_process, AfterShot, GpuFormFactors, RenderOptions, ShotLoop,
-    Step, Trace,
+    build_report, refined_mesh_shown, single_process, AfterShot, GpuFormFactors, RenderOptions,
+    ShotLoop, Step, Trace,
 };
 use radiosity::scene::Scene;
 use radiosity::solver::Solver;
@@ -184,8 +184,11 @@ fn solve(
 ) -> Result<Option<Settings>, String> {
     let opts = &settings.options;
     let single = Single;
-    let refined =
-        refined_mesh(gpu, scene, opts, &single, &mut |_| {}).map_err(|e| e.to_string())?;
+    let refined = refined_mesh_shown(gpu, scene, opts, &single, &mut |_| {}, &mut {
+        let mut shower = PassShower::new(shared, opts.ambient, wake);
+        move |pass, solver: &Solver| shower.show(pass, solver)
+    })
+    .map_err(|e| e.to_string())?;
     let mesh = Arc::new(refined.mesh);
     // The passes' points and time come first, as in a render's report.
     let passes = (refined.trace, refined.refinement.seconds);
@@ -242,6 +245,69 @@ fn solve(
         }
         let now_idle = !control.shooting(solver.shots());
         pub_.idle(&solver, &source, now_idle, control.done);
+    }
+}
+
+/// Publishes a refinement pass's solution as it comes (at most every
+/// [`PUBLISH_PERIOD`]), on a copy of the pass's mesh geometry (the view
+/// needs no more; the copy is made once a pass), so the window shows the
+/// pass, as the report's trace does, instead of waiting for the final solve.
+struct PassShower<'s, W: Fn()> {
+    shared: &'s Mutex<Snapshot>,
+    ambient: radiosity::settings::AmbientTerm,
+    wake: &'s W,
+    /// The pass whose mesh was copied, and the copy.
+    mesh: Option<(u32, Arc<Mesh>)>,
+    last_publish: Option<Instant>,
+}
+
+impl<'s, W: Fn()> PassShower<'s, W> {
+    fn new(
+        shared: &'s Mutex<Snapshot>,
+        ambient: radiosity::settings::AmbientTerm,
+        wake: &'s W,
+    ) -> Self {
+        Self {
+            shared,
+            ambient,
+            wake,
+            mesh: None,
+            last_publish: None,
+        }
+    }
+
+    fn show(&mut self, pass: u32, solver: &Solver) {
+        if self
+            .last_publish
+            .is_some_and(|t| t.elapsed() < PUBLISH_PERIOD)
+        {
+            return;
+        }
+        self.last_publish = Some(Instant::now());
+        let mesh = match &self.mesh {
+            Some((p, m)) if *p == pass => m.clone(),
+            _ => {
+                let m = solver.mesh();
+                let copy = Arc::new(Mesh {
+                    polygons: m.polygons.clone(),
+                    patches: m.patches.clone(),
+                    elements: m.elements.clone(),
+                    vertices: m.vertices.clone(),
+                    ..Mesh::default()
+                });
+                self.mesh = Some((pass, copy.clone()));
+                copy
+            }
+        };
+        let radiance = Arc::new(solver.display_radiance(self.ambient));
+        if let Ok(mut s) = self.shared.lock() {
+            s.mesh = Some(mesh);
+            s.radiance = radiance;
+            s.shots = solver.shots();
+            s.unshot_fraction = solver.unshot_fraction();
+            s.version += 1;
+        }
+        (self.wake)();
     }
 }
 
@@ -402,4 +468,38 @@ fn save<W: Fn()>(
 /// Sends a command, ignoring a solve thread that has already ended.
 pub fn send(tx: &Sender<Command>, cmd: Command) {
     let _ = tx.send(cmd);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pass's solution reaches the window on a copy of its mesh's
+    /// geometry, made once a pass, and at most every publish period.
+    #[test]
+    fn a_pass_is_shown_on_its_own_mesh() {
+        let scene = radiosity::scene::open("cornell").expect("scene");
+        let opts = RenderOptions::default();
+        let mesh = Mesh::build_refined(&scene, &opts.mesh_settings(), &[]);
+        let solver = Solver::new(&mesh);
+        let shared = Mutex::new(Snapshot::default());
+        let woken = std::cell::Cell::new(0);
+        let wake = || woken.set(woken.get() + 1);
+        let mut shower = PassShower::new(&shared, opts.ambient, &wake);
+        shower.show(0, &solver);
+        let first = shared.lock().expect("lock").clone();
+        let shown = first.mesh.clone().expect("the pass's mesh");
+        assert_eq!(shown.elements.len(), mesh.elements.len());
+        assert_eq!(*first.radiance, solver.display_radiance(opts.ambient));
+        assert_eq!(woken.get(), 1);
+        // Within the publish period nothing more is published.
+        shower.show(0, &solver);
+        assert_eq!(woken.get(), 1);
+        // The next publish of the same pass reuses its copy.
+        shower.last_publish = None;
+        shower.show(0, &solver);
+        let again = shared.lock().expect("lock").mesh.clone().expect("mesh");
+        assert!(Arc::ptr_eq(&shown, &again));
+        assert!(shared.lock().expect("lock").version > first.version);
+    }
 }
