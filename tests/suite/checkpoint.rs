@@ -68,22 +68,29 @@ fn same_solution(a: &Rendered, b: &Rendered) {
     assert_eq!(points(a), points(b), "the convergence traces differ");
 }
 
-#[test]
-fn an_interrupted_solve_resumes_to_the_same_bits() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let path = dir.path().join("cornell.ckpt");
+/// The Cornell box to unshot 2e-3, saving to `path` when interrupted
+/// (with the flag `interrupt`, or never without it).
+fn interruptible(path: &std::path::Path, interrupt: bool) -> RenderOptions {
     let mut opts = RenderOptions {
         width: 0,
         ..RenderOptions::default()
     };
     opts.stop.threshold = 2e-3;
-    let straight = cornell(&opts, None);
-
     opts.checkpoint = Some(CheckpointPlan {
-        path: path.clone(),
+        path: path.to_path_buf(),
         every: None,
     });
-    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    opts.interrupt = interrupt.then(|| Arc::new(AtomicBool::new(false)));
+    opts
+}
+
+#[test]
+fn an_interrupted_solve_resumes_to_the_same_bits() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("cornell.ckpt");
+    let straight = cornell(&interruptible(&path, false), None);
+
+    let mut opts = interruptible(&path, true);
     let stopped = cornell(&opts, Some(150));
     assert!(stopped.interrupted);
     assert_eq!(stopped.report.shots, 150);
@@ -196,16 +203,7 @@ fn a_solve_with_lights_sun_and_sky_resumes_to_the_same_bits_and_other_lights_are
 fn an_interrupt_during_the_refinement_pass_keeps_the_pass_solution() {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("cornell.ckpt");
-    let mut opts = RenderOptions {
-        width: 0,
-        ..RenderOptions::default()
-    };
-    opts.stop.threshold = 2e-3;
-    opts.checkpoint = Some(CheckpointPlan {
-        path: path.clone(),
-        every: None,
-    });
-    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    let mut opts = interruptible(&path, true);
     // The pass takes over 40 shots; the signal comes after its fifth.
     let stopped = cornell(&opts, Some(5));
     assert!(stopped.interrupted);
