@@ -101,6 +101,20 @@ pub struct AccuracyArgs {
     /// level takes more than a minute).
     #[arg(long, default_value_t = 1 << 24)]
     max_spp: u32,
+    /// Chart these render reports' convergence traces instead of running
+    /// anything (comma-separated JSON reports of one scene), against the
+    /// independent reference `--reference-file`: for scenes too big to run
+    /// every curve here (Sponza). Writes `error-NAME` and `summary.md` to
+    /// --out (default docs/bench/reports).
+    #[arg(long, value_delimiter = ',')]
+    reports: Vec<PathBuf>,
+    /// The independent reference the reports are scored against.
+    #[arg(long)]
+    reference_file: Option<PathBuf>,
+    /// With --reports: leave out the nodes whose reference has a relative
+    /// standard error above this (Sponza's reached 1 % on 113 of 148).
+    #[arg(long, default_value_t = 0.01)]
+    reference_error: f64,
 }
 
 impl AccuracyArgs {
@@ -136,24 +150,24 @@ struct Reference {
 
 /// One point of an error curve.
 #[derive(Clone, Copy)]
-struct Point {
-    seconds: f64,
-    mean: f64,
-    max: f64,
-    shots: u64,
+pub(crate) struct Point {
+    pub(crate) seconds: f64,
+    pub(crate) mean: f64,
+    pub(crate) max: f64,
+    pub(crate) shots: u64,
 }
 
 /// One curve: a configuration's error against time.
-struct Curve {
-    label: String,
+pub(crate) struct Curve {
+    pub(crate) label: String,
     /// Whether the chart shows it (the default, its alternatives and the
     /// path tracer; every curve is in the CSV and the summary).
-    key: bool,
-    method: String,
-    resolution: String,
-    patches: usize,
-    elements: usize,
-    points: Vec<Point>,
+    pub(crate) key: bool,
+    pub(crate) method: String,
+    pub(crate) resolution: String,
+    pub(crate) patches: usize,
+    pub(crate) elements: usize,
+    pub(crate) points: Vec<Point>,
 }
 
 fn error(s: &[Surface], reference: &[Surface]) -> (f64, f64) {
@@ -161,7 +175,7 @@ fn error(s: &[Surface], reference: &[Surface]) -> (f64, f64) {
 }
 
 /// Seconds after which the curve's error stays at or below `level`.
-fn time_to(points: &[Point], level: f64, pick: fn(&Point) -> f64) -> Option<f64> {
+pub(crate) fn time_to(points: &[Point], level: f64, pick: fn(&Point) -> f64) -> Option<f64> {
     let last_above = points.iter().rposition(|p| pick(p) > level);
     match last_above {
         None => points.first().map(|p| p.seconds),
@@ -712,7 +726,7 @@ fn extent(curves: &[&Curve]) -> ((f64, f64), (f64, f64)) {
     (x, y)
 }
 
-fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
+pub(crate) fn chart(out: &Path, scene: &str, curves: &[Curve]) -> Result<()> {
     svg_and_png!(out, format!("error-{scene}"), (1000, 620), |root| draw(
         root, scene, curves
     ));
@@ -869,6 +883,17 @@ fn solver_curves(
 
 /// Runs the accuracy benchmark.
 pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
+    if !args.reports.is_empty() {
+        let reference = args
+            .reference_file
+            .as_deref()
+            .context("--reports needs --reference-file")?;
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("docs/bench/reports"));
+        return crate::charted::run(&args.reports, reference, args.reference_error, &out);
+    }
     let gpu = Gpu::new()?;
     let out_or = |default: &str| args.out.clone().unwrap_or_else(|| PathBuf::from(default));
     if args.regimes {

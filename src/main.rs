@@ -40,6 +40,7 @@ macro_rules! svg_and_png {
 
 mod accuracy;
 mod bench;
+mod charted;
 mod receivers;
 mod regimes;
 mod scaling_report;
