@@ -230,10 +230,11 @@ pub struct SolveArgs {
     /// Shooters whose unshot power is below this fraction of the emitted
     /// power shoot along the ambient term's ray-sampled transport instead of
     /// drawing a hemisphere: their light lands on whole patches (clusters of
-    /// patches in meshes of over 8192), for microseconds a shot. 0 (the
-    /// default): never. See README "Weak shooters along the transport".
-    #[arg(long, default_value_t = 0.0, value_parser = parse_fraction)]
-    transport_below: f64,
+    /// patches in meshes of over 8192), for microseconds a shot. 0: never.
+    /// Default: 1e-4 in meshes of over 8192 patches (where the transport
+    /// clusters them), else 0. See README "Weak shooters along the transport".
+    #[arg(long, value_parser = parse_fraction)]
+    transport_below: Option<f64>,
 }
 
 impl SolveArgs {

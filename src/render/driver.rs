@@ -167,7 +167,7 @@ fn final_solve<'m>(
     // trace's own time does not), every rank casting its share of the rays.
     let t = Instant::now();
     let before = comm.traffic();
-    if wants_transport(opts) {
+    if wants_transport(opts, mesh) {
         shared_transport(mesh, crate::ambient::RAY_BUDGET, comm);
     }
     let ambient = t.elapsed().as_secs_f64();
@@ -531,7 +531,7 @@ pub fn build_report(
             coarse: opts
                 .coarse_tier()
                 .map(|c| (c.to_string(), opts.coarse_below)),
-            transport_below: opts.transport_below,
+            transport_below: opts.transport_below_for(mesh.patches.len()),
         },
         device: gpu.describe(),
         lights: scene

@@ -8,8 +8,8 @@ use crate::mesh::MeshSettings;
 use crate::parallel::Exchange;
 use crate::scene::{Scene, Subdivision};
 pub use crate::settings::{
-    FormFactorMethod, Projection, DEFAULT_COARSE_BELOW, DEFAULT_MEMORY_BUDGET,
-    DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
+    FormFactorMethod, Projection, AUTO_TRANSPORT_BELOW, DEFAULT_COARSE_BELOW,
+    DEFAULT_MEMORY_BUDGET, DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
 };
 use crate::solver::StopRule;
 use std::sync::atomic::AtomicBool;
@@ -80,8 +80,9 @@ pub struct RenderOptions {
     /// power shoot along the ambient term's ray-sampled transport
     /// (`crate::ambient::Transport`) instead of drawing a hemisphere: their
     /// light lands on whole patches (clusters in big meshes), for
-    /// microseconds a shot (0, the default: never).
-    pub transport_below: f64,
+    /// microseconds a shot. 0: never. `None`, the default: automatic
+    /// ([`RenderOptions::transport_below_for`]).
+    pub transport_below: Option<f64>,
     /// Shooters overshoot by rho times the ambient term (Feda & Purgathofer
     /// 1992): fewer shots to the same error, not less time on lavapipe
     /// (off by default).
@@ -131,7 +132,7 @@ impl Default for RenderOptions {
             overshoot: false,
             coarse: None,
             coarse_below: DEFAULT_COARSE_BELOW,
-            transport_below: 0.0,
+            transport_below: None,
             wireframe: false,
             checkpoint: None,
             interrupt: None,
@@ -166,15 +167,31 @@ impl RenderOptions {
         m
     }
 
+    /// The transport tier's threshold (a fraction of the emitted power) for
+    /// a mesh of `patches` patches: the one given, or, by default,
+    /// [`AUTO_TRANSPORT_BELOW`] in meshes of more than
+    /// [`crate::ambient::PATCH_GROUPS`] patches, where the transport
+    /// clusters patches and a weak cluster shoots as one (so the shots a
+    /// solve needs stop growing with the polygon count: Sponza reaches
+    /// unshot 1e-2 in 9 s instead of hours), and 0 (off) in smaller ones,
+    /// where each group is a patch and drawing its hemisphere is cheap.
+    pub fn transport_below_for(&self, patches: usize) -> f64 {
+        self.transport_below
+            .unwrap_or(if patches > crate::ambient::PATCH_GROUPS {
+                AUTO_TRANSPORT_BELOW
+            } else {
+                0.0
+            })
+    }
+
     /// Fails on settings no solve can use.
     pub fn validate(&self) -> Result<(), RenderError> {
         self.resolution
             .validate()
             .map_err(|e| RenderError::Settings(e.to_string()))?;
-        if !(0.0..1.0).contains(&self.transport_below) {
+        if let Some(t) = self.transport_below.filter(|t| !(0.0..1.0).contains(t)) {
             return Err(RenderError::Settings(format!(
-                "transport-below {} must be in [0, 1)",
-                self.transport_below
+                "transport-below {t} must be in [0, 1)"
             )));
         }
         if self.stop.threshold.is_nan() || self.stop.threshold < 0.0 {
@@ -250,10 +267,11 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         opts.coarse_below
     );
     // Only when set, so checkpoints written before the option resume.
-    let settings = if opts.transport_below > 0.0 {
-        format!("{settings} transport {}", opts.transport_below)
-    } else {
-        settings
+    // (The automatic choice follows from the geometry and the subdivision,
+    // which the fingerprint holds.)
+    let settings = match opts.transport_below {
+        Some(t) if t > 0.0 => format!("{settings} transport {t}"),
+        _ => settings,
     };
     crate::checkpoint::fingerprint(&[
         &geometry,

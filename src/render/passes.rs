@@ -96,7 +96,7 @@ pub fn refined_mesh_shown(
         // Every pass shows its solution from its first shot, so the
         // transport comes first (solve time, as the final solve's does).
         let t = Instant::now();
-        if wants_transport(opts) {
+        if wants_transport(opts, &mesh) {
             shared_transport(&mesh, PASS_RAY_BUDGET, comm);
         }
         let transport = t.elapsed().as_secs_f64();
@@ -187,10 +187,10 @@ pub fn refined_mesh_shown(
     })
 }
 
-/// Whether a solve with `opts` needs the ambient transport: the carried
-/// ambient term shows it, and the transport tier shoots along it.
-pub fn wants_transport(opts: &RenderOptions) -> bool {
-    opts.ambient == AmbientTerm::Carried || opts.transport_below > 0.0
+/// Whether a solve of `mesh` with `opts` needs the ambient transport: the
+/// carried ambient term shows it, and the transport tier shoots along it.
+pub fn wants_transport(opts: &RenderOptions, mesh: &Mesh) -> bool {
+    opts.ambient == AmbientTerm::Carried || opts.transport_below_for(mesh.patches.len()) > 0.0
 }
 
 /// Gives `mesh` its ambient transport (once), of `budget` rays

@@ -194,7 +194,7 @@ impl<'a> GpuFormFactors<'a> {
             // Against all the light, the lights' and sky's too: measured
             // against the surfaces' emission alone, a scene lit only by a
             // sun had no weak shot and never drew the coarse tier.
-            choice: TierChoice::new(opts, mesh.source_power()),
+            choice: TierChoice::new(opts, mesh.source_power(), mesh.patches.len()),
             last_tier: 0,
             method: opts.form_factor,
             exchanger: Exchanger::new(comm, opts.exchange, opts.form_factor, patches),

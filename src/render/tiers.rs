@@ -23,12 +23,13 @@ pub struct TierChoice {
 }
 
 impl TierChoice {
-    /// The choice `opts` describes for a mesh emitting `emitted_power`.
-    pub fn new(opts: &RenderOptions, emitted_power: f64) -> Self {
+    /// The choice `opts` describes for a mesh of `patches` patches emitting
+    /// `emitted_power`.
+    pub fn new(opts: &RenderOptions, emitted_power: f64, patches: usize) -> Self {
         Self {
             tiers: 1 + opts.coarse_tier().is_some() as usize,
             coarse_below: opts.coarse_below * emitted_power,
-            transport_below: opts.transport_below * emitted_power,
+            transport_below: opts.transport_below_for(patches) * emitted_power,
             measuring: false,
         }
     }
@@ -272,19 +273,37 @@ mod tests {
     #[test]
     fn weak_shooters_draw_coarse_only_when_there_is_a_coarse_tier() {
         let opts = RenderOptions::default();
-        let c = TierChoice::new(&opts, 100.0);
+        let c = TierChoice::new(&opts, 100.0, 10);
         assert_eq!(c.tiers, 2);
         assert_eq!(c.tier_for(0.29, false), 1);
         assert_eq!(c.tier_for(0.3, false), 0);
         let none = TierChoice::new(
             &RenderOptions {
                 coarse_below: 0.0,
-                transport_below: 0.0,
+                transport_below: Some(0.0),
                 ..opts.clone()
             },
             100.0,
+            10,
         );
         assert_eq!(none.tier_for(0.0, false), 0);
+        // The transport tier: by default only in meshes whose transport
+        // clusters patches; a given threshold holds in any mesh.
+        let big = crate::ambient::PATCH_GROUPS + 1;
+        assert!(!c.by_transport(0.001));
+        let auto = TierChoice::new(&opts, 100.0, big);
+        assert!(auto.by_transport(0.0099) && !auto.by_transport(0.01));
+        assert!(!none.by_transport(0.0));
+        let off = RenderOptions {
+            transport_below: Some(0.0),
+            ..opts.clone()
+        };
+        assert!(!TierChoice::new(&off, 100.0, big).by_transport(0.0));
+        let given = RenderOptions {
+            transport_below: Some(1e-3),
+            ..opts.clone()
+        };
+        assert!(TierChoice::new(&given, 100.0, 10).by_transport(0.099));
         assert_eq!(TierChoice::resolutions(&opts).len(), 2);
         // Measuring (the refinement passes): strong shooters draw coarse
         // too, the emitters' patches fine, and without a coarse tier nothing changes.

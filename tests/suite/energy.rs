@@ -90,7 +90,7 @@ fn weak_shooters_along_the_transport_conserve_energy_on_one_and_two_ranks() {
         let scene = radiosity::scene::open(scene).expect("scene");
         let mut opts = RenderOptions {
             width: 0,
-            transport_below: 1e-3,
+            transport_below: Some(1e-3),
             ..RenderOptions::default()
         };
         opts.mesh.refine = refine;

@@ -257,7 +257,7 @@ fn a_refinement_pass_shows_its_solution_from_its_first_shot() {
 fn weak_shooters_along_the_transport_stay_within_one_percent_mean() {
     let opts = RenderOptions {
         width: 0,
-        transport_below: 1e-4,
+        transport_below: Some(1e-4),
         ..RenderOptions::default()
     };
     for scene in ["cornell", "family-l-room-2", "family-boxes-2"] {
