@@ -17,7 +17,8 @@ pub struct BenchArgs {
     /// Scenes to time (files or built-in names), comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "cornell,cubes-8")]
     scenes: Vec<String>,
-    /// Shots to time per scene.
+    /// Shots to time per scene (every one drawing its hemisphere unless
+    /// --transport-below is given).
     #[arg(long, default_value_t = 200)]
     shots: u64,
     /// Also time the Cornell box's whole solve to this unshot fraction (0: skip).
@@ -67,6 +68,9 @@ pub fn run(args: BenchArgs) -> Result<()> {
         opts.width = 0;
         opts.stop.threshold = 0.0;
         opts.stop.max_shots = args.shots;
+        // It times shots that draw: weak shooters along the transport (by
+        // default in big meshes) only when asked for.
+        opts.transport_below.get_or_insert(0.0);
         let r = render(&gpu, &scene, &opts, t.elapsed(), &mut |_| {})?;
         println!("{}", row(name, &r.report));
         reports.push(r.report);
