@@ -91,17 +91,18 @@ fn start_solver<'m>(
 ) -> Result<(Solver<'m>, Trace<'m>, f64), RenderError> {
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     solver.set_overshoot(opts.overshoot);
-    let mut trace = Trace::default();
-    trace.points = passes;
-    // An interrupted pass's solution is where the solve goes on from.
+    // An interrupted pass's solution is where the solve goes on from (and
+    // the trace's schedule from its shots).
+    let mut shots = 0;
     if let Some(h) = handoff {
         solver
             .restore(&h.state)
             .map_err(|e| RenderError::Settings(format!("an interrupted pass's state: {e}")))?;
         solver.set_energy_record(h.energy);
-        let points = std::mem::take(&mut trace.points);
-        trace.resume(points, h.state.shots);
+        shots = h.state.shots;
     }
+    let mut trace = Trace::default();
+    trace.resume(passes, shots);
     // The refinement passes (and, resuming, the solve before the checkpoint)
     // count as solve time (set-up excluded), so the trace's times are the
     // honest time to each accuracy.

@@ -18,7 +18,7 @@ use crate::scene::Scene;
 use crate::settings::AmbientTerm;
 use crate::solver::{Solver, SolverState};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Shading errors are summed over ranks in fixed point up to this.
 const SHADING_CAP: f64 = 16.0;
@@ -248,8 +248,10 @@ struct PassHooks<'a, 'm> {
     ambient: AmbientTerm,
     interrupt: Option<&'a AtomicBool>,
     trace: Trace<'m>,
-    /// Solve seconds before this pass.
-    before: f64,
+    /// When the solve would have started had the passes before this one
+    /// run back to back (the trace's times run on through the passes).
+    solve_start: Instant,
+    /// When this pass started.
     started: Instant,
     progress: &'a mut dyn FnMut(&Progress),
     /// The pass, and who is shown its solution after each shot (rank 0).
@@ -259,14 +261,8 @@ struct PassHooks<'a, 'm> {
 impl<'m> LoopHooks<'m> for PassHooks<'_, 'm> {
     fn after_shot(&mut self, s: &Solver<'m>, u: f64) {
         if self.trace.due(s.shots()) {
-            let seconds = self.before
-                + self
-                    .started
-                    .elapsed()
-                    .saturating_sub(self.trace.spent)
-                    .as_secs_f64();
             self.trace
-                .record_at(self.comm, s, self.nodes, self.ambient, seconds);
+                .record(self.comm, s, self.nodes, self.ambient, self.solve_start);
         }
         if self.comm.rank() == 0 {
             (self.progress)(&Progress {
@@ -325,7 +321,9 @@ fn one_pass(
         ambient: opts.ambient,
         interrupt: opts.interrupt.as_deref(),
         trace: Trace::default(),
-        before,
+        solve_start: started
+            .checked_sub(Duration::from_secs_f64(before))
+            .unwrap_or(started),
         started,
         progress,
         show: (pass, show),
