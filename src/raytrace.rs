@@ -4,7 +4,7 @@
 //! ([`crate::direct`]); nothing here knows about radiosity. Pure maths.
 
 use crate::scene::Polygon;
-use glam::Vec3;
+use glam::{BVec4A, Vec3, Vec4};
 
 /// A triangle, stored for the Moller-Trumbore test.
 #[derive(Clone, Copy, Debug)]
@@ -34,11 +34,48 @@ pub struct Hit {
     pub polygon: u32,
 }
 
+/// Four nodes of the binary hierarchy side by side, one SIMD lane each (a
+/// node of the 4-wide hierarchy that shadow rays walk): their boxes by
+/// axis, and what each is: a binary leaf (`LEAF_BIT` | its index in
+/// `Bvh::nodes`), another wide node (its index), or nothing (`NO_CHILD`).
+#[derive(Clone, Copy, Debug)]
+struct Wide {
+    lo: [Vec4; 3],
+    hi: [Vec4; 3],
+    child: [u32; 4],
+}
+
+/// A leaf's (up to four) triangles side by side, one SIMD lane each, for
+/// shadow rays: the same numbers as their [`Tri`]s.
+#[derive(Clone, Copy, Debug)]
+struct Packed {
+    v0: [Vec4; 3],
+    e1: [Vec4; 3],
+    e2: [Vec4; 3],
+    polygon: [u32; 4],
+    /// The binary leaf (what a hint names).
+    node: u32,
+    count: u32,
+}
+
+/// Marks a wide node's child that is a leaf of the binary hierarchy.
+const LEAF_BIT: u32 = 1 << 31;
+
+/// An unused lane of a wide node.
+const NO_CHILD: u32 = u32::MAX;
+
 /// A bounding volume hierarchy over a scene's polygons.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
     nodes: Vec<Node>,
     tris: Vec<Tri>,
+    /// The same hierarchy collapsed to four children a node, for shadow
+    /// rays (empty when the root is a leaf). Its leaves are the binary
+    /// ones, so a shadow ray tests the same triangles either way.
+    wide: Vec<Wide>,
+    /// The binary leaves' triangles packed by four (the wide hierarchy's
+    /// leaves: `LEAF_BIT` | an index here).
+    packed: Vec<Packed>,
 }
 
 /// Triangles per leaf, at most.
@@ -76,6 +113,8 @@ impl Bvh {
         let mut bvh = Bvh {
             nodes: Vec::with_capacity(2 * tris.len() / LEAF + 1),
             tris,
+            wide: Vec::new(),
+            packed: Vec::new(),
         };
         if !bvh.tris.is_empty() {
             bvh.nodes.push(Node {
@@ -85,8 +124,82 @@ impl Bvh {
                 count: 0,
             });
             bvh.split(0, 0, bvh.tris.len());
+            if bvh.nodes[0].count == 0 {
+                bvh.widen(0);
+            }
         }
         bvh
+    }
+
+    /// Appends the wide node for the binary inner node `at` and, below it,
+    /// those of its descendants; returns its index. Its lanes are the
+    /// (up to four) descendants left after opening the largest inner one
+    /// until there are four: a shadow ray tests their boxes at once.
+    fn widen(&mut self, at: usize) -> u32 {
+        let node = self.nodes[at];
+        let mut kids = vec![node.first as usize, node.first as usize + 1];
+        while kids.len() < 4 {
+            let area = |k: &usize| {
+                let d = (self.nodes[*k].hi - self.nodes[*k].lo).max(Vec3::ZERO);
+                d.x * d.y + d.y * d.z + d.z * d.x
+            };
+            let open = kids
+                .iter()
+                .enumerate()
+                .filter(|(_, &k)| self.nodes[k].count == 0)
+                .max_by(|a, b| area(a.1).total_cmp(&area(b.1)))
+                .map(|(i, _)| i);
+            let Some(i) = open else { break };
+            let first = self.nodes[kids[i]].first as usize;
+            kids[i] = first;
+            kids.insert(i + 1, first + 1);
+        }
+        let w = self.wide.len();
+        self.wide.push(Wide {
+            lo: [Vec4::ZERO; 3],
+            hi: [Vec4::ZERO; 3],
+            child: [NO_CHILD; 4],
+        });
+        let mut wide = self.wide[w];
+        for (lane, &k) in kids.iter().enumerate() {
+            let n = self.nodes[k];
+            for axis in 0..3 {
+                wide.lo[axis][lane] = n.lo[axis];
+                wide.hi[axis][lane] = n.hi[axis];
+            }
+            wide.child[lane] = if n.count > 0 {
+                self.pack(k)
+            } else {
+                self.widen(k)
+            };
+        }
+        self.wide[w] = wide;
+        w as u32
+    }
+
+    /// Packs the binary leaf `at`'s triangles; returns the wide child
+    /// naming them.
+    fn pack(&mut self, at: usize) -> u32 {
+        let node = self.nodes[at];
+        let mut p = Packed {
+            v0: [Vec4::ZERO; 3],
+            e1: [Vec4::ZERO; 3],
+            e2: [Vec4::ZERO; 3],
+            polygon: [u32::MAX; 4],
+            node: at as u32,
+            count: node.count,
+        };
+        let tris = &self.tris[node.first as usize..(node.first + node.count) as usize];
+        for (lane, t) in tris.iter().enumerate() {
+            for axis in 0..3 {
+                p.v0[axis][lane] = t.v0[axis];
+                p.e1[axis][lane] = t.e1[axis];
+                p.e2[axis][lane] = t.e2[axis];
+            }
+            p.polygon[lane] = t.polygon;
+        }
+        self.packed.push(p);
+        LEAF_BIT | (self.packed.len() - 1) as u32
     }
 
     fn bounds(tris: &[Tri]) -> (Vec3, Vec3) {
@@ -309,15 +422,46 @@ impl Bvh {
                 return true;
             }
         }
-        let mut hit = false;
-        self.walk_leaves(origin, dir, t_min, t_max, |leaf, tri, _| {
-            if blocks(tri) {
-                hit = true;
-                *hint = Some(leaf);
+        if self.wide.is_empty() {
+            let mut hit = false;
+            self.walk_leaves(origin, dir, t_min, t_max, |leaf, tri, _| {
+                if blocks(tri) {
+                    hit = true;
+                    *hint = Some(leaf);
+                }
+                (hit, t_max)
+            });
+            return hit;
+        }
+        if slab(&self.nodes[0], origin, inv, t_min, t_max).is_none() {
+            return false;
+        }
+        // The wide walk: each lane's test is `slab`'s, bit for bit, on the
+        // same boxes, so it reaches exactly the leaves the binary walk does.
+        let ray = WideRay::new(origin, dir, t_min, t_max);
+        let mut stack = [0u32; 256];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let at = stack[top];
+            if at & LEAF_BIT != 0 {
+                let leaf = &self.packed[(at & !LEAF_BIT) as usize];
+                if ray.blocked_by(leaf, skip) {
+                    *hint = Some(leaf.node);
+                    return true;
+                }
+                continue;
             }
-            (hit, t_max)
-        });
-        hit
+            let wide = &self.wide[at as usize];
+            let passed = ray.passes(wide).bitmask();
+            for (lane, &child) in wide.child.iter().enumerate() {
+                if passed & (1 << lane) != 0 && child != NO_CHILD && top < stack.len() {
+                    stack[top] = child;
+                    top += 1;
+                }
+            }
+        }
+        false
     }
 
     /// Visits the triangles of every leaf the ray's box test passes, nearest
@@ -395,18 +539,113 @@ impl Bvh {
     }
 }
 
+/// A shadow ray's origin, reciprocal direction and range, one copy a lane.
+struct WideRay {
+    origin: [Vec4; 3],
+    dir: [Vec4; 3],
+    inv: [Vec4; 3],
+    t_min: Vec4,
+    t_max: Vec4,
+    /// Whether every component of the direction is non-zero (no axis can
+    /// give 0 x inf, so the NaN masks can be left out).
+    finite: bool,
+}
+
+impl WideRay {
+    fn new(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Self {
+        let inv = dir.recip();
+        Self {
+            origin: [0, 1, 2].map(|a| Vec4::splat(origin[a])),
+            dir: [0, 1, 2].map(|a| Vec4::splat(dir[a])),
+            inv: [0, 1, 2].map(|a| Vec4::splat(inv[a])),
+            t_min: Vec4::splat(t_min),
+            t_max: Vec4::splat(t_max),
+            finite: inv.is_finite(),
+        }
+    }
+
+    /// Which of `wide`'s four boxes [`slab`] lets the ray through: the
+    /// same arithmetic a lane (an axis with a NaN bounds nothing; the rest
+    /// are exact minima and maxima, whatever their order).
+    fn passes(&self, wide: &Wide) -> BVec4A {
+        let (mut near, mut far) = (self.t_min, self.t_max);
+        for axis in 0..3 {
+            let a = (wide.lo[axis] - self.origin[axis]) * self.inv[axis];
+            let b = (wide.hi[axis] - self.origin[axis]) * self.inv[axis];
+            let (mut lo, mut hi) = (
+                Vec4::select(a.cmplt(b), a, b),
+                Vec4::select(a.cmpgt(b), a, b),
+            );
+            if !self.finite {
+                let free = a.is_nan_mask() | b.is_nan_mask();
+                lo = Vec4::select(free, Vec4::NEG_INFINITY, lo);
+                hi = Vec4::select(free, Vec4::INFINITY, hi);
+            }
+            near = Vec4::select(lo.cmpgt(near), lo, near);
+            far = Vec4::select(hi.cmplt(far), hi, far);
+        }
+        near.cmple(far)
+    }
+
+    /// Whether a triangle of `leaf` not in `skip` lies on the ray within
+    /// its range: [`intersect`] a lane, the same operations in the same
+    /// order (glam's `cross` and `dot`), so the same verdicts.
+    fn blocked_by(&self, leaf: &Packed, skip: [u32; 2]) -> bool {
+        const WIDE: f32 = 1e-6;
+        let cross = |a: [Vec4; 3], b: [Vec4; 3]| {
+            [
+                a[1] * b[2] - b[1] * a[2],
+                a[2] * b[0] - b[2] * a[0],
+                a[0] * b[1] - b[0] * a[1],
+            ]
+        };
+        let dot = |a: [Vec4; 3], b: [Vec4; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let p = cross(self.dir, leaf.e2);
+        let det = dot(leaf.e1, p);
+        let inv = Vec4::ONE / det;
+        let s = [0, 1, 2].map(|a| self.origin[a] - leaf.v0[a]);
+        let u = dot(s, p) * inv;
+        let q = cross(s, leaf.e1);
+        let v = dot(self.dir, q) * inv;
+        let t = dot(leaf.e2, q) * inv;
+        let (low, high) = (Vec4::splat(-WIDE), Vec4::splat(1.0 + WIDE));
+        // Each rejection of `intersect` as a mask (NaNs compare false alike).
+        let hit = !det.abs().cmplt(Vec4::splat(1e-20))
+            & u.cmpge(low)
+            & u.cmple(high)
+            & !v.cmplt(low)
+            & !(u + v).cmpgt(high)
+            & t.cmpgt(self.t_min)
+            & t.cmplt(self.t_max);
+        let mut mask = hit.bitmask();
+        for (lane, &polygon) in leaf.polygon.iter().enumerate() {
+            if lane as u32 >= leaf.count || skip.contains(&polygon) {
+                mask &= !(1 << lane);
+            }
+        }
+        mask != 0
+    }
+}
+
 /// The entry distance of a ray into a node's box, if it meets it in (t_min, t_max).
 fn slab(node: &Node, origin: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
     let a = (node.lo - origin) * inv;
     let b = (node.hi - origin) * inv;
-    // NaN (0 * inf for a ray in a box face's plane) must not reject the box.
-    let near = a.min(b).max_element().max(t_min);
-    let far = a.max(b).min_element().min(t_max);
-    if near <= far || near.is_nan() || far.is_nan() {
-        Some(near)
-    } else {
-        None
+    let (mut near, mut far) = (t_min, t_max);
+    for axis in 0..3 {
+        let (x, y) = (a[axis], b[axis]);
+        // 0 x inf: a ray parallel to this axis in a box face's plane, on
+        // the box's boundary. The axis bounds nothing, so the test stays
+        // conservative and a box passes whenever a box inside it does.
+        // (glam's min/max are compare-and-select: a NaN there fell either
+        // way by its place and could reject a box a child of which passes.)
+        if x.is_nan() || y.is_nan() {
+            continue;
+        }
+        near = near.max(x.min(y));
+        far = far.min(x.max(y));
     }
+    (near <= far).then_some(near)
 }
 
 /// Moller-Trumbore, with the edges widened by a hair so a ray through a
@@ -535,6 +774,80 @@ mod tests {
         assert!(
             hinted > hidden / 4,
             "the hint answered {hinted} of {hidden}"
+        );
+    }
+
+    /// The binary walk's verdict (what shadow rays took before the wide one).
+    fn occluded_binary(bvh: &Bvh, o: Vec3, d: Vec3, t_max: f32, skip: [u32; 2]) -> bool {
+        let mut hit = false;
+        bvh.walk_leaves(o, d, 0.0, t_max, |_, tri, _| {
+            hit |= !skip.contains(&tri.polygon) && intersect(tri, o, d, 0.0, t_max).is_some();
+            (hit, t_max)
+        });
+        hit
+    }
+
+    #[test]
+    fn the_wide_walk_answers_every_shadow_ray_as_the_binary_one() {
+        // Axis-aligned squares on a grid (origins in box faces' planes and
+        // directions with zero components: the NaN cases of the box test),
+        // then scattered ones with random rays: every verdict is the same.
+        let mut rng = crate::fuzz::Rng(5);
+        let mut polys = Vec::new();
+        for i in 0..12 {
+            for j in 0..12 {
+                // Horizontal and both vertical orientations, edges on
+                // the planes the rays below start in.
+                let c = Vec3::new(i as f32, j as f32, (i * j % 5) as f32);
+                let (a, b) =
+                    [(Vec3::X, Vec3::Y), (Vec3::Y, Vec3::Z), (Vec3::Z, Vec3::X)][(i + j) % 3];
+                polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
+            }
+        }
+        polys.extend(scattered(&mut rng, 300, [12.0, 0.0, 6.0], [0.1, 0.4], 0.5));
+        let bvh = Bvh::new(&polys);
+        assert!(!bvh.wide.is_empty());
+        let mut unit = || unit(&mut rng);
+        let (mut hidden, mut rays) = (0, 0);
+        for k in 0..20_000 {
+            let grid = |u: f32| (u * 12.0).floor() + [0.0, 0.5, -0.5, 0.25][k % 4];
+            let (o, d) = if k % 2 == 0 {
+                // From a grid point along an axis or a grid diagonal.
+                let o = Vec3::new(
+                    grid(unit()),
+                    grid(unit()),
+                    (unit() * 5.0).floor() + [0.0, 0.5, -0.5][k % 3],
+                );
+                let axes = [
+                    Vec3::X,
+                    Vec3::Y,
+                    Vec3::Z,
+                    Vec3::new(1.0, 1.0, 0.0),
+                    Vec3::new(0.0, -1.0, 1.0),
+                ];
+                let sign = if unit() < 0.5 { -1.0 } else { 1.0 };
+                (o, axes[k / 2 % axes.len()] * sign * (1.0 + unit() * 10.0))
+            } else {
+                let o = Vec3::new(unit() * 14.0 - 1.0, unit() * 14.0 - 1.0, unit() * 7.0 - 0.5);
+                (
+                    o,
+                    Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5) * 20.0,
+                )
+            };
+            let t_max = if k % 3 == 0 { f32::INFINITY } else { unit() };
+            let skip = [(k % polys.len()) as u32, u32::MAX];
+            let want = occluded_binary(&bvh, o, d, t_max, skip);
+            assert_eq!(
+                bvh.occluded(o, d, 0.0, t_max, skip),
+                want,
+                "ray {k}: {o} {d}"
+            );
+            hidden += want as u32;
+            rays += 1;
+        }
+        assert!(
+            hidden > rays / 10 && hidden < rays * 9 / 10,
+            "{hidden} of {rays} hidden"
         );
     }
 
