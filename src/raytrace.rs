@@ -356,27 +356,113 @@ impl Bvh {
         t_max: f32,
         behind: f32,
     ) -> Option<Hit> {
+        if !self.wide.is_empty() {
+            return self.nearest_wide(origin, dir, t_min, t_max, behind);
+        }
+        self.nearest_binary(origin, dir, t_min, t_max, behind)
+    }
+
+    /// [`Bvh::nearest_facing`] by the binary walk.
+    fn nearest_binary(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        behind: f32,
+    ) -> Option<Hit> {
         let mut best: Option<(f32, Hit)> = None;
         let mut far = t_max;
         self.walk(origin, dir, t_min, t_max, |tri, t_min| {
             // A face a hair beyond the best key can still win on facing.
-            let reach = (far * (1.0 + behind.abs())).min(t_max);
+            let reach = bound(best, far, behind, t_max);
             if let Some(t) = intersect(tri, origin, dir, t_min, reach) {
                 let back = dir.dot(tri.e1.cross(tri.e2)) > 0.0;
                 let key = if back { t * (1.0 + behind) } else { t };
-                if best.is_none_or(|(k, _)| key < k) {
-                    best = Some((
-                        key,
-                        Hit {
-                            t,
-                            polygon: tri.polygon,
-                        },
-                    ));
+                let hit = Hit {
+                    t,
+                    polygon: tri.polygon,
+                };
+                if beats((key, hit), best) {
+                    best = Some((key, hit));
                     far = key;
                 }
             }
-            (false, (far * (1.0 + behind.abs())).min(t_max))
+            (false, bound(best, far, behind, t_max))
         });
+        best.map(|(_, h)| h)
+    }
+
+    /// [`Bvh::nearest_facing`] by the wide walk: children nearest first,
+    /// four boxes and then a leaf's four triangles a test, each lane the
+    /// scalar test's arithmetic, the reach shrinking as the binary walk's
+    /// does (triangle by triangle within a leaf).
+    fn nearest_wide(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        behind: f32,
+    ) -> Option<Hit> {
+        slab(&self.nodes[0], origin, dir.recip(), t_min, t_max)?;
+        let mut ray = WideRay::new(origin, dir, t_min, t_max);
+        let mut best: Option<(f32, Hit)> = None;
+        let mut reach = t_max;
+        // Each entry keeps the distance at which the ray enters its box: a
+        // box entered beyond the reach now would fail its test again.
+        let mut stack = [(0u32, f32::NEG_INFINITY); 256];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let (at, entry) = stack[top];
+            if entry > reach {
+                continue;
+            }
+            ray.t_max = Vec4::splat(reach);
+            if at & LEAF_BIT != 0 {
+                let leaf = &self.packed[(at & !LEAF_BIT) as usize];
+                let (t, mask, back) = ray.hits(leaf);
+                for lane in 0..leaf.count as usize {
+                    if mask & (1 << lane) == 0 || t[lane] >= reach {
+                        continue;
+                    }
+                    let t = t[lane];
+                    let key = if back & (1 << lane) != 0 {
+                        t * (1.0 + behind)
+                    } else {
+                        t
+                    };
+                    let hit = Hit {
+                        t,
+                        polygon: leaf.polygon[lane],
+                    };
+                    if beats((key, hit), best) {
+                        best = Some((key, hit));
+                        reach = bound(best, key, behind, t_max);
+                    }
+                }
+                continue;
+            }
+            let wide = &self.wide[at as usize];
+            let (passed, near) = ray.entries(wide);
+            let mut kids: [(u32, f32); 4] = [(NO_CHILD, 0.0); 4];
+            let mut n = 0;
+            for (lane, &child) in wide.child.iter().enumerate() {
+                if passed & (1 << lane) != 0 && child != NO_CHILD {
+                    kids[n] = (child, near[lane]);
+                    n += 1;
+                }
+            }
+            // The farthest first on the stack, so the nearest comes off first.
+            kids[..n].sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+            for &kid in &kids[..n] {
+                if top < stack.len() {
+                    stack[top] = kid;
+                    top += 1;
+                }
+            }
+        }
         best.map(|(_, h)| h)
     }
 
@@ -568,6 +654,17 @@ impl WideRay {
     /// same arithmetic a lane (an axis with a NaN bounds nothing; the rest
     /// are exact minima and maxima, whatever their order).
     fn passes(&self, wide: &Wide) -> BVec4A {
+        self.boxes(wide).0
+    }
+
+    /// [`WideRay::passes`] as a bit mask, with the entry distance a lane.
+    fn entries(&self, wide: &Wide) -> (u32, Vec4) {
+        let (passed, near) = self.boxes(wide);
+        (passed.bitmask(), near)
+    }
+
+    /// Which boxes pass, and where the ray enters each.
+    fn boxes(&self, wide: &Wide) -> (BVec4A, Vec4) {
         let (mut near, mut far) = (self.t_min, self.t_max);
         for axis in 0..3 {
             let a = (wide.lo[axis] - self.origin[axis]) * self.inv[axis];
@@ -584,13 +681,26 @@ impl WideRay {
             near = Vec4::select(lo.cmpgt(near), lo, near);
             far = Vec4::select(hi.cmplt(far), hi, far);
         }
-        near.cmple(far)
+        (near.cmple(far), near)
     }
 
     /// Whether a triangle of `leaf` not in `skip` lies on the ray within
     /// its range: [`intersect`] a lane, the same operations in the same
     /// order (glam's `cross` and `dot`), so the same verdicts.
     fn blocked_by(&self, leaf: &Packed, skip: [u32; 2]) -> bool {
+        let mut mask = self.hits(leaf).1;
+        for (lane, &polygon) in leaf.polygon.iter().enumerate() {
+            if lane as u32 >= leaf.count || skip.contains(&polygon) {
+                mask &= !(1 << lane);
+            }
+        }
+        mask != 0
+    }
+
+    /// [`intersect`] a lane: the distances, which lanes hit (unused lanes
+    /// included: the caller counts them out) and which of those meet a
+    /// back face (`dir . (e1 x e2) > 0`, as [`Bvh::nearest_facing`] asks).
+    fn hits(&self, leaf: &Packed) -> (Vec4, u32, u32) {
         const WIDE: f32 = 1e-6;
         let cross = |a: [Vec4; 3], b: [Vec4; 3]| {
             [
@@ -617,14 +727,39 @@ impl WideRay {
             & !(u + v).cmpgt(high)
             & t.cmpgt(self.t_min)
             & t.cmplt(self.t_max);
-        let mut mask = hit.bitmask();
-        for (lane, &polygon) in leaf.polygon.iter().enumerate() {
-            if lane as u32 >= leaf.count || skip.contains(&polygon) {
-                mask &= !(1 << lane);
-            }
-        }
-        mask != 0
+        let back = dot(self.dir, cross(leaf.e1, leaf.e2)).cmpgt(Vec4::ZERO);
+        (t, hit.bitmask(), back.bitmask())
     }
+}
+
+/// How far a nearest-hit walk still looks once its best key is `far`: the
+/// distance at which a face's key could still tie it (a back face's key is
+/// `1 + behind` times its distance), taken inclusively (a hair beyond it,
+/// as `intersect` and the box tests take their limit exclusively), so a
+/// tie is found whichever face comes first; never beyond `t_max`.
+fn bound(best: Option<(f32, Hit)>, far: f32, behind: f32, t_max: f32) -> f32 {
+    if best.is_none() {
+        return t_max;
+    }
+    let reach = far * (1.0 + behind.abs());
+    // The next float up (f32::next_up needs Rust 1.86).
+    let above = if reach.is_finite() && reach > 0.0 {
+        f32::from_bits(reach.to_bits() + 1)
+    } else {
+        reach
+    };
+    above.min(t_max)
+}
+
+/// Whether `hit` (with its key) beats `best`: the nearer key, then, on an
+/// exact tie (faces given twice, a ray through a shared edge), the lower
+/// polygon and the nearer distance, so the answer does not depend on the
+/// order the walk meets them in.
+fn beats((key, hit): (f32, Hit), best: Option<(f32, Hit)>) -> bool {
+    best.is_none_or(|(k, b)| {
+        key < k
+            || (key == k && (hit.polygon < b.polygon || (hit.polygon == b.polygon && hit.t < b.t)))
+    })
 }
 
 /// The entry distance of a ray into a node's box, if it meets it in (t_min, t_max).
@@ -849,6 +984,55 @@ mod tests {
             hidden > rays / 10 && hidden < rays * 9 / 10,
             "{hidden} of {rays} hidden"
         );
+    }
+
+    #[test]
+    fn the_wide_walk_finds_the_binary_walks_nearest_hit() {
+        // Grid squares in three orientations, each given twice (exact ties)
+        // and some a third time facing the other way (facing keys), then
+        // scattered ones: the same hit for every ray and every `behind`.
+        let mut rng = crate::fuzz::Rng(9);
+        let mut polys = Vec::new();
+        for i in 0..10 {
+            for j in 0..10 {
+                let c = Vec3::new(i as f32, j as f32, (i * j % 4) as f32);
+                let (a, b) =
+                    [(Vec3::X, Vec3::Y), (Vec3::Y, Vec3::Z), (Vec3::Z, Vec3::X)][(i + j) % 3];
+                polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
+                polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
+                if (i * 7 + j) % 3 == 0 {
+                    polys.push(Polygon::square(c, 0.5, b, a, [0.5; 3], [0.0; 3]));
+                }
+            }
+        }
+        polys.extend(scattered(&mut rng, 200, [10.0, 0.0, 5.0], [0.1, 0.4], 0.5));
+        let bvh = Bvh::new(&polys);
+        assert!(!bvh.wide.is_empty());
+        let mut unit = || unit(&mut rng);
+        let mut hits = 0;
+        for k in 0..20_000 {
+            let o = if k % 2 == 0 {
+                let grid = |u: f32| (u * 10.0).floor() + [0.0, 0.5, 0.25][k % 3];
+                Vec3::new(grid(unit()), grid(unit()), (unit() * 4.0).floor() + 0.5)
+            } else {
+                Vec3::new(unit() * 12.0 - 1.0, unit() * 12.0 - 1.0, unit() * 6.0 - 0.5)
+            };
+            let d = if k % 4 == 0 {
+                [Vec3::X, -Vec3::Y, Vec3::Z, -Vec3::Z][k / 4 % 4]
+            } else {
+                Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5)
+            };
+            let behind = [0.0, 1e-5, -1e-5][k % 3];
+            let t_max = if k % 5 == 0 { 2.0 } else { f32::INFINITY };
+            let want = bvh.nearest_binary(o, d, 0.0, t_max, behind);
+            assert_eq!(
+                bvh.nearest_wide(o, d, 0.0, t_max, behind),
+                want,
+                "ray {k}: {o} {d}"
+            );
+            hits += want.is_some() as u32;
+        }
+        assert!(hits > 5000, "{hits} of 20000 rays hit");
     }
 
     #[test]
