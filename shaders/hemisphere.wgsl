@@ -101,6 +101,20 @@ fn vs(@builtin(vertex_index) vi: u32, r: Rect) -> VsOut {
     return out;
 }
 
+// a / d for the small counts here (cells, tiles, elements) without an
+// integer divide, which a CPU rasteriser runs lane by lane at tens of
+// cycles each: (a + 0.5) / d lies at least 0.5 / d from any integer, far
+// more than the few ulps f32 division may be off for a below 2^20, so the
+// floor is the integer quotient exactly.
+fn div_small(a: u32, d: u32) -> u32 {
+    return u32(floor((f32(a) + 0.5) / f32(d)));
+}
+
+// a mod d, as `div_small`.
+fn mod_small(a: u32, d: u32) -> u32 {
+    return a - div_small(a, d) * d;
+}
+
 fn cross2(a: vec2<f32>, b: vec2<f32>) -> f32 {
     return a.x * b.y - a.y * b.x;
 }
@@ -150,8 +164,8 @@ fn grid_element_of(
     let iu = min(u32(max(uv.x, 0.0) * f32(n.x)), n.x - 1u);
     let iv = min(u32(max(uv.y, 0.0) * f32(n.y)), n.y - 1u);
     let per = grid.zw;
-    let cell_patch = (iv / per.y) * (n.x / per.x) + iu / per.x;
-    return first + cell_patch * per.x * per.y + (iv % per.y) * per.x + iu % per.x;
+    let cell_patch = div_small(iv, per.y) * div_small(n.x, per.x) + div_small(iu, per.x);
+    return first + cell_patch * per.x * per.y + mod_small(iv, per.y) * per.x + mod_small(iu, per.x);
 }
 
 fn grid_element(in: VsOut, p: vec3<f32>) -> u32 {
@@ -172,7 +186,10 @@ fn cell_direction(cell: vec2<u32>) -> vec3<f32> {
 
 // Whether this rank's tiles hold the cell (full-size image, not the lattice).
 fn owns_cell(cell: vec2<u32>) -> bool {
-    let owner = vec2<u32>((cell.x / shot.tiles.x) % shot.tiles.z, (cell.y / shot.tiles.y) % shot.tiles.w);
+    let owner = vec2<u32>(
+        mod_small(div_small(cell.x, shot.tiles.x), shot.tiles.z),
+        mod_small(div_small(cell.y, shot.tiles.y), shot.tiles.w),
+    );
     return all(owner == shot.own.xy) && cell.x < shot.res.y && cell.y < shot.res.x;
 }
 
