@@ -41,47 +41,63 @@ pub fn split_at_contacts(polygons: Vec<Polygon>, extent: f32) -> (Vec<Polygon>, 
     let eps = 1e-5 * extent.max(1e-6);
     let hover = HOVER * extent.max(1e-6);
     let grid = EdgeGrid::new(&polygons, extent);
+    // Each polygon's pieces depend on the polygons alone: found on every
+    // core (a dense scene spends seconds looking for cut lines), then
+    // joined in order.
+    let mut pieces: Vec<Option<Vec<Vec<Vec3>>>> = vec![None; polygons.len()];
+    crate::sampling::in_parallel(&mut pieces, |i, out| {
+        *out = pieces_of(&grid, &polygons, i, eps, hover);
+    });
     let mut out = Vec::with_capacity(polygons.len());
     let mut split = 0;
-    for (i, p) in polygons.iter().enumerate() {
-        let cuts = grid.cuts(&polygons, i, eps, hover);
-        if cuts.is_empty() {
+    for ((i, p), pieces) in polygons.iter().enumerate().zip(pieces) {
+        let Some(pieces) = pieces else {
             out.push(p.clone());
             continue;
-        }
-        // Each line cuts only the pieces its contact segment crosses, so a
-        // box on a big floor cuts out its footprint's neighbourhood, not
-        // strips across the whole floor.
-        let mut pieces = vec![p.vertices.clone()];
-        for (m, c, a, b) in cuts {
-            pieces = pieces
-                .into_iter()
-                .flat_map(|piece| {
-                    if overlaps(&piece, a, b, eps) {
-                        cut(&piece, m, c, eps)
-                    } else {
-                        vec![piece]
-                    }
-                })
-                .collect();
-        }
-        // A floor under many objects would become hundreds of strips, each
-        // with its own patches (the many-objects scene: 5x the patches and
-        // 10x the time): such a polygon stays whole.
-        if pieces.len() > MAX_PIECES {
-            out.push(p.clone());
-            continue;
-        }
-        if pieces.len() > 1 {
-            split += 1;
-        }
+        };
         let whole = pieces.len() == 1;
+        split += usize::from(!whole);
         for piece in pieces {
-            let parent = (!whole).then_some(i as u32);
-            push_convex(&mut out, p, piece, parent);
+            push_convex(&mut out, p, piece, (!whole).then_some(i as u32));
         }
     }
     (out, split)
+}
+
+/// Polygon `i` cut along its contact lines (one piece where the lines it
+/// has miss it), or `None` where it stays as it is (it has no cut lines, or
+/// would fall into more than [`MAX_PIECES`]).
+fn pieces_of(
+    grid: &EdgeGrid,
+    polygons: &[Polygon],
+    i: usize,
+    eps: f32,
+    hover: f32,
+) -> Option<Vec<Vec<Vec3>>> {
+    let cuts = grid.cuts(polygons, i, eps, hover);
+    if cuts.is_empty() {
+        return None;
+    }
+    // Each line cuts only the pieces its contact segment crosses, so a box
+    // on a big floor cuts out its footprint's neighbourhood, not strips
+    // across the whole floor.
+    let mut pieces = vec![polygons[i].vertices.clone()];
+    for (m, c, a, b) in cuts {
+        pieces = pieces
+            .into_iter()
+            .flat_map(|piece| {
+                if overlaps(&piece, a, b, eps) {
+                    cut(&piece, m, c, eps)
+                } else {
+                    vec![piece]
+                }
+            })
+            .collect();
+    }
+    // A floor under many objects would become hundreds of strips, each with
+    // its own patches (the many-objects scene: 5x the patches and 10x the
+    // time): such a polygon stays whole.
+    (pieces.len() <= MAX_PIECES).then_some(pieces)
 }
 
 /// A convex piece of `p` as polygons of 3 or 4 vertices (a fan beyond).
