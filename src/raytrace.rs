@@ -732,16 +732,18 @@ impl WideRay {
     }
 }
 
-/// How far a nearest-hit walk still looks once its best key is `far`: the
-/// distance at which a face's key could still tie it (a back face's key is
-/// `1 + behind` times its distance), taken inclusively (a hair beyond it,
-/// as `intersect` and the box tests take their limit exclusively), so a
-/// tie is found whichever face comes first; never beyond `t_max`.
+/// How far a nearest-hit walk still looks once its best key is `far`: past
+/// every distance at which a face's key could still tie it (a back face's
+/// key is `1 + behind` times its distance, so with `behind` < 0 that is
+/// `far / (1 + behind)`, which `1 + 2 |behind|` covers with room for the
+/// keys' rounding), and a hair beyond (`intersect` and the box tests take
+/// their limit exclusively), so a tie is found whichever face comes first;
+/// never beyond `t_max`.
 fn bound(best: Option<(f32, Hit)>, far: f32, behind: f32, t_max: f32) -> f32 {
     if best.is_none() {
         return t_max;
     }
-    let reach = far * (1.0 + behind.abs());
+    let reach = far * (1.0 + 2.0 * behind.abs());
     // The next float up (f32::next_up needs Rust 1.86).
     let above = if reach.is_finite() && reach > 0.0 {
         f32::from_bits(reach.to_bits() + 1)
@@ -922,53 +924,84 @@ mod tests {
         hit
     }
 
-    #[test]
-    fn the_wide_walk_answers_every_shadow_ray_as_the_binary_one() {
-        // Axis-aligned squares on a grid (origins in box faces' planes and
-        // directions with zero components: the NaN cases of the box test),
-        // then scattered ones with random rays: every verdict is the same.
-        let mut rng = crate::fuzz::Rng(5);
+    /// Unit squares on an `n` x `n` grid at heights i j mod `heights`,
+    /// facing z, x and y in turn (edges on the planes [`grid_ray`]'s rays
+    /// start in), each given twice and every third once more facing the
+    /// other way (exact ties, facing keys), then scattered ones.
+    fn grid_scene(rng: &mut crate::fuzz::Rng, n: usize, heights: usize) -> Vec<Polygon> {
         let mut polys = Vec::new();
-        for i in 0..12 {
-            for j in 0..12 {
-                // Horizontal and both vertical orientations, edges on
-                // the planes the rays below start in.
-                let c = Vec3::new(i as f32, j as f32, (i * j % 5) as f32);
+        for i in 0..n {
+            for j in 0..n {
+                let c = Vec3::new(i as f32, j as f32, (i * j % heights) as f32);
                 let (a, b) =
                     [(Vec3::X, Vec3::Y), (Vec3::Y, Vec3::Z), (Vec3::Z, Vec3::X)][(i + j) % 3];
                 polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
+                polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
+                if (i * 7 + j) % 3 == 0 {
+                    polys.push(Polygon::square(c, 0.5, b, a, [0.5; 3], [0.0; 3]));
+                }
             }
         }
-        polys.extend(scattered(&mut rng, 300, [12.0, 0.0, 6.0], [0.1, 0.4], 0.5));
+        let w = n as f32;
+        polys.extend(scattered(
+            rng,
+            250,
+            [w, 0.0, heights as f32],
+            [0.1, 0.4],
+            0.5,
+        ));
+        polys
+    }
+
+    /// Ray `k` over a [`grid_scene`]: every other one from a grid point or
+    /// a half-way point (in box faces' planes) along an axis or a grid
+    /// diagonal (zero components: the box test's NaN cases), the rest from
+    /// anywhere in any direction.
+    fn grid_ray(
+        k: usize,
+        n: usize,
+        heights: usize,
+        unit: &mut impl FnMut() -> f32,
+    ) -> (Vec3, Vec3) {
+        let w = n as f32;
+        if k % 2 == 0 {
+            let offset = [0.0, 0.5, -0.5, 0.25][k % 4];
+            let mut grid = || (unit() * w).floor() + offset;
+            let (x, y) = (grid(), grid());
+            let z = (unit() * heights as f32).floor() + [0.0, 0.5, -0.5][k % 3];
+            let axes = [
+                Vec3::X,
+                Vec3::Y,
+                Vec3::Z,
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(0.0, -1.0, 1.0),
+            ];
+            let sign = if unit() < 0.5 { -1.0 } else { 1.0 };
+            let d = axes[k / 2 % axes.len()] * sign * (1.0 + unit() * 10.0);
+            (Vec3::new(x, y, z), d)
+        } else {
+            let o = Vec3::new(
+                unit() * (w + 2.0) - 1.0,
+                unit() * (w + 2.0) - 1.0,
+                unit() * (heights as f32 + 2.0) - 0.5,
+            );
+            (
+                o,
+                Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5) * 20.0,
+            )
+        }
+    }
+
+    #[test]
+    fn the_wide_walk_answers_every_shadow_ray_as_the_binary_one() {
+        let mut rng = crate::fuzz::Rng(5);
+        let polys = grid_scene(&mut rng, 12, 5);
         let bvh = Bvh::new(&polys);
         assert!(!bvh.wide.is_empty());
         let mut unit = || unit(&mut rng);
         let (mut hidden, mut rays) = (0, 0);
         for k in 0..20_000 {
-            let grid = |u: f32| (u * 12.0).floor() + [0.0, 0.5, -0.5, 0.25][k % 4];
-            let (o, d) = if k % 2 == 0 {
-                // From a grid point along an axis or a grid diagonal.
-                let o = Vec3::new(
-                    grid(unit()),
-                    grid(unit()),
-                    (unit() * 5.0).floor() + [0.0, 0.5, -0.5][k % 3],
-                );
-                let axes = [
-                    Vec3::X,
-                    Vec3::Y,
-                    Vec3::Z,
-                    Vec3::new(1.0, 1.0, 0.0),
-                    Vec3::new(0.0, -1.0, 1.0),
-                ];
-                let sign = if unit() < 0.5 { -1.0 } else { 1.0 };
-                (o, axes[k / 2 % axes.len()] * sign * (1.0 + unit() * 10.0))
-            } else {
-                let o = Vec3::new(unit() * 14.0 - 1.0, unit() * 14.0 - 1.0, unit() * 7.0 - 0.5);
-                (
-                    o,
-                    Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5) * 20.0,
-                )
-            };
+            let (o, d) = grid_ray(k, 12, 5, &mut unit);
             let t_max = if k % 3 == 0 { f32::INFINITY } else { unit() };
             let skip = [(k % polys.len()) as u32, u32::MAX];
             let want = occluded_binary(&bvh, o, d, t_max, skip);
@@ -988,40 +1021,14 @@ mod tests {
 
     #[test]
     fn the_wide_walk_finds_the_binary_walks_nearest_hit() {
-        // Grid squares in three orientations, each given twice (exact ties)
-        // and some a third time facing the other way (facing keys), then
-        // scattered ones: the same hit for every ray and every `behind`.
         let mut rng = crate::fuzz::Rng(9);
-        let mut polys = Vec::new();
-        for i in 0..10 {
-            for j in 0..10 {
-                let c = Vec3::new(i as f32, j as f32, (i * j % 4) as f32);
-                let (a, b) =
-                    [(Vec3::X, Vec3::Y), (Vec3::Y, Vec3::Z), (Vec3::Z, Vec3::X)][(i + j) % 3];
-                polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
-                polys.push(Polygon::square(c, 0.5, a, b, [0.5; 3], [0.0; 3]));
-                if (i * 7 + j) % 3 == 0 {
-                    polys.push(Polygon::square(c, 0.5, b, a, [0.5; 3], [0.0; 3]));
-                }
-            }
-        }
-        polys.extend(scattered(&mut rng, 200, [10.0, 0.0, 5.0], [0.1, 0.4], 0.5));
+        let polys = grid_scene(&mut rng, 10, 4);
         let bvh = Bvh::new(&polys);
         assert!(!bvh.wide.is_empty());
         let mut unit = || unit(&mut rng);
         let mut hits = 0;
         for k in 0..20_000 {
-            let o = if k % 2 == 0 {
-                let grid = |u: f32| (u * 10.0).floor() + [0.0, 0.5, 0.25][k % 3];
-                Vec3::new(grid(unit()), grid(unit()), (unit() * 4.0).floor() + 0.5)
-            } else {
-                Vec3::new(unit() * 12.0 - 1.0, unit() * 12.0 - 1.0, unit() * 6.0 - 0.5)
-            };
-            let d = if k % 4 == 0 {
-                [Vec3::X, -Vec3::Y, Vec3::Z, -Vec3::Z][k / 4 % 4]
-            } else {
-                Vec3::new(unit() - 0.5, unit() - 0.5, unit() - 0.5)
-            };
+            let (o, d) = grid_ray(k, 10, 4, &mut unit);
             let behind = [0.0, 1e-5, -1e-5][k % 3];
             let t_max = if k % 5 == 0 { 2.0 } else { f32::INFINITY };
             let want = bvh.nearest_binary(o, d, 0.0, t_max, behind);
