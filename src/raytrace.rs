@@ -53,7 +53,7 @@ struct Packed {
     e1: [Vec4; 3],
     e2: [Vec4; 3],
     polygon: [u32; 4],
-    /// The binary leaf (what a hint names).
+    /// The binary leaf (whose box a hinted ray tests first).
     node: u32,
     count: u32,
 }
@@ -68,6 +68,8 @@ const NO_CHILD: u32 = u32::MAX;
 #[derive(Clone, Debug, Default)]
 pub struct Bvh {
     nodes: Vec<Node>,
+    /// The triangles in leaf order while building (then packed; kept only
+    /// in unit tests, for the binary reference walk).
     tris: Vec<Tri>,
     /// The same hierarchy collapsed to four children a node, for shadow
     /// rays (empty when the root is a leaf). Its leaves are the binary
@@ -133,6 +135,11 @@ impl Bvh {
             } else {
                 bvh.pack(0)
             };
+            // Every walk reads the packed copies; only the tests' binary
+            // reference walk reads these (Sponza: 22 MB).
+            if !cfg!(test) {
+                bvh.tris = Vec::new();
+            }
         }
         bvh
     }
@@ -341,7 +348,7 @@ impl Bvh {
 
     /// Number of triangles held.
     pub fn triangles(&self) -> usize {
-        self.tris.len()
+        self.packed.iter().map(|p| p.count as usize).sum()
     }
 
     /// The nearest hit along `origin + t dir` with `t` in (`t_min`, `t_max`).
@@ -458,14 +465,11 @@ impl Bvh {
         hint: &mut Option<u32>,
     ) -> bool {
         let inv = dir.recip();
-        let blocks = |tri: &Tri| {
-            !skip.contains(&tri.polygon) && intersect(tri, origin, dir, t_min, t_max).is_some()
-        };
-        if let Some(node) = hint.and_then(|h| self.nodes.get(h as usize)) {
-            let (a, b) = (node.first as usize, (node.first + node.count) as usize);
-            if node.count > 0
-                && slab(node, origin, inv, t_min, t_max).is_some()
-                && self.tris[a..b].iter().any(blocks)
+        let ray = WideRay::new(origin, dir, t_min, t_max);
+        // The hint names a packed leaf; its box is its binary leaf's.
+        if let Some(leaf) = hint.and_then(|h| self.packed.get(h as usize)) {
+            if slab(&self.nodes[leaf.node as usize], origin, inv, t_min, t_max).is_some()
+                && ray.blocked_by(leaf, skip)
             {
                 return true;
             }
@@ -478,16 +482,15 @@ impl Bvh {
         }
         // The wide walk: each lane's test is `slab`'s, bit for bit, on the
         // same boxes, so it reaches exactly the leaves the binary walk does.
-        let ray = WideRay::new(origin, dir, t_min, t_max);
         let mut stack = [self.root; 256];
         let mut top = 1;
         while top > 0 {
             top -= 1;
             let at = stack[top];
             if at & LEAF_BIT != 0 {
-                let leaf = &self.packed[(at & !LEAF_BIT) as usize];
-                if ray.blocked_by(leaf, skip) {
-                    *hint = Some(leaf.node);
+                let k = at & !LEAF_BIT;
+                if ray.blocked_by(&self.packed[k as usize], skip) {
+                    *hint = Some(k);
                     return true;
                 }
                 continue;
@@ -642,7 +645,7 @@ impl WideRay {
     }
 
     /// Whether a triangle of `leaf` not in `skip` lies on the ray within
-    /// its range: [`intersect`] a lane, the same operations in the same
+    /// its range: `intersect` a lane, the same operations in the same
     /// order (glam's `cross` and `dot`), so the same verdicts.
     fn blocked_by(&self, leaf: &Packed, skip: [u32; 2]) -> bool {
         let mut mask = self.hits(leaf).1;
@@ -654,7 +657,7 @@ impl WideRay {
         mask != 0
     }
 
-    /// [`intersect`] a lane: the distances, which lanes hit (unused lanes
+    /// `intersect` a lane: the distances, which lanes hit (unused lanes
     /// included: the caller counts them out) and which of those meet a
     /// back face (`dir . (e1 x e2) > 0`, as [`Bvh::nearest_facing`] asks).
     fn hits(&self, leaf: &Packed) -> (Vec4, u32, u32) {
@@ -744,6 +747,9 @@ fn slab(node: &Node, origin: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<
 
 /// Moller-Trumbore, with the edges widened by a hair so a ray through a
 /// shared edge of two triangles of one polygon cannot slip between them.
+/// (The scalar test each lane of `WideRay::hits` repeats; the tests'
+/// reference walks call it.)
+#[cfg(test)]
 fn intersect(tri: &Tri, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
     const WIDE: f32 = 1e-6;
     let p = dir.cross(tri.e2);
