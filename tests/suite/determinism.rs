@@ -354,3 +354,40 @@ fn the_occlusion_cull_changes_no_number() {
         assert_eq!(culled.report.energy, drawn.report.energy, "{name}");
     }
 }
+
+#[test]
+fn the_contact_split_is_the_same_on_one_core_and_on_every_core() {
+    // Each polygon's pieces are found on every core and joined in order:
+    // the scene as loaded (the classroom's desks and chairs stand on its
+    // floor) is the same, bit for bit, pinned to one core.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bin = env!("CARGO_BIN_EXE_radiosity");
+    let export = |name: &str, one_core: bool| {
+        let out = dir.path().join(name);
+        let mut cmd = if one_core {
+            let mut c = std::process::Command::new("taskset");
+            c.args(["-c", "0", bin]);
+            c
+        } else {
+            std::process::Command::new(bin)
+        };
+        let status = cmd
+            .args(["scene", "classroom-c1", "--nodes"])
+            .arg(&out)
+            .stdout(std::process::Stdio::null())
+            .status()
+            .expect("runs (taskset is util-linux's)");
+        assert!(status.success());
+        std::fs::read(&out).expect("nodes written")
+    };
+    let (one, all) = (export("one.json", true), export("all.json", false));
+    let scene: serde_json::Value = serde_json::from_slice(&all).expect("json");
+    let triangles: usize = scene["nodes"]
+        .as_array()
+        .expect("nodes")
+        .iter()
+        .map(|n| n["triangles"].as_array().map_or(0, Vec::len))
+        .sum();
+    assert!(triangles > 5000, "{triangles} triangles");
+    assert!(one == all, "the scene differs with the core count");
+}
