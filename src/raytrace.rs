@@ -35,9 +35,9 @@ pub struct Hit {
 }
 
 /// Four nodes of the binary hierarchy side by side, one SIMD lane each (a
-/// node of the 4-wide hierarchy that shadow rays walk): their boxes by
-/// axis, and what each is: a binary leaf (`LEAF_BIT` | its index in
-/// `Bvh::nodes`), another wide node (its index), or nothing (`NO_CHILD`).
+/// node of the 4-wide hierarchy that rays walk): their boxes by axis, and
+/// what each is: a leaf (`LEAF_BIT` | its index in `Bvh::packed`),
+/// another wide node (its index), or nothing (`NO_CHILD`).
 #[derive(Clone, Copy, Debug)]
 struct Wide {
     lo: [Vec4; 3],
@@ -45,8 +45,8 @@ struct Wide {
     child: [u32; 4],
 }
 
-/// A leaf's (up to four) triangles side by side, one SIMD lane each, for
-/// shadow rays: the same numbers as their [`Tri`]s.
+/// A binary leaf's (up to four) triangles side by side, one SIMD lane
+/// each: the same numbers as their [`Tri`]s.
 #[derive(Clone, Copy, Debug)]
 struct Packed {
     v0: [Vec4; 3],
@@ -71,9 +71,9 @@ pub struct Bvh {
     /// The triangles in leaf order while building (then packed; kept only
     /// in unit tests, for the binary reference walk).
     tris: Vec<Tri>,
-    /// The same hierarchy collapsed to four children a node, for shadow
-    /// rays (empty when the root is a leaf). Its leaves are the binary
-    /// ones, so a shadow ray tests the same triangles either way.
+    /// The same hierarchy collapsed to four children a node, which every
+    /// ray walks (empty when the root is a leaf). Its leaves are the binary
+    /// ones, so a ray tests the same triangles either way.
     wide: Vec<Wide>,
     /// The binary leaves' triangles packed by four (the wide hierarchy's
     /// leaves: `LEAF_BIT` | an index here).
@@ -519,19 +519,6 @@ impl Bvh {
         t_max: f32,
         mut visit: impl FnMut(&Tri, f32) -> (bool, f32),
     ) {
-        self.walk_leaves(origin, dir, t_min, t_max, |_, tri, t| visit(tri, t));
-    }
-
-    /// [`Bvh::walk`], telling `visit` the leaf each triangle is in.
-    #[cfg(test)]
-    fn walk_leaves(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-        mut visit: impl FnMut(u32, &Tri, f32) -> (bool, f32),
-    ) {
         if self.nodes.is_empty() {
             return;
         }
@@ -556,7 +543,7 @@ impl Bvh {
             if node.count > 0 {
                 let (a, b) = (node.first as usize, (node.first + node.count) as usize);
                 for tri in &self.tris[a..b] {
-                    let (stop, f) = visit(at, tri, t_min);
+                    let (stop, f) = visit(tri, t_min);
                     far = f;
                     if stop {
                         return;
@@ -585,7 +572,7 @@ impl Bvh {
     }
 }
 
-/// A shadow ray's origin, reciprocal direction and range, one copy a lane.
+/// A ray's origin, direction, reciprocal direction and range, one copy a lane.
 struct WideRay {
     origin: [Vec4; 3],
     dir: [Vec4; 3],
@@ -904,7 +891,7 @@ mod tests {
     /// The binary walk's verdict (what shadow rays took before the wide one).
     fn occluded_binary(bvh: &Bvh, o: Vec3, d: Vec3, t_max: f32, skip: [u32; 2]) -> bool {
         let mut hit = false;
-        bvh.walk_leaves(o, d, 0.0, t_max, |_, tri, _| {
+        bvh.walk(o, d, 0.0, t_max, |tri, _| {
             hit |= !skip.contains(&tri.polygon) && intersect(tri, o, d, 0.0, t_max).is_some();
             (hit, t_max)
         });
