@@ -119,6 +119,9 @@ pub struct HemisphereRasterizer {
     /// Shots to draw without the cull before trying it again (it did not
     /// pay on the last shot that tried it).
     cull_wait: u32,
+    /// This rank's tiles as the bounds read them, kept while the layout
+    /// and the rank's place in it stay the same.
+    ownership: Option<Ownership>,
     /// The last shot's coverage per element (empty unless counting).
     coverage: Vec<u32>,
     elements: usize,
@@ -217,6 +220,7 @@ impl HemisphereRasterizer {
             cull_occluded: true,
             occlusion: crate::occlusion::OcclusionMap::new(res),
             cull_wait: 0,
+            ownership: None,
             coverage: Vec::new(),
             elements: mesh.elements.len(),
         })
@@ -604,13 +608,23 @@ impl HemisphereRasterizer {
         let lattice =
             layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1 && self.tess.is_none();
         // Over several ranks, skip rectangles that hold none of this rank's cells.
-        let ownership = (layout.ranks() > 1).then_some(Ownership {
-            tile: [layout.tile_w as f32, layout.tile_h as f32],
-            grid: [layout.px as f32, layout.py as f32],
-            own: [own.0 as f32, own.1 as f32],
-            cells: [self.res.cols as f32, self.res.rows as f32],
-            clip: !lattice,
-        });
+        if layout.ranks() > 1 {
+            let tile = [layout.tile_w, layout.tile_h];
+            let grid = [layout.px, layout.py];
+            let own = [own.0, own.1];
+            let cells = [self.res.cols, self.res.rows];
+            let same = self.ownership.as_ref().is_some_and(|o| {
+                o.tile == tile.map(|t| t as f32)
+                    && o.grid == grid.map(|g| g as f32)
+                    && o.own == own.map(|v| v as f32)
+                    && o.clip == !lattice
+            });
+            if !same {
+                self.ownership = Some(Ownership::new(tile, grid, own, cells, !lattice));
+            }
+        } else {
+            self.ownership = None;
+        }
         self.find_outside(shooter);
         // Every rank decides alike (the wait follows the share summed over
         // ranks), so all take part in the agreement or none.
@@ -625,7 +639,7 @@ impl HemisphereRasterizer {
                 &self.outside,
                 self.res,
                 self.far,
-                ownership,
+                self.ownership.as_ref(),
                 agree
                     .filter(|_| cull)
                     .map(|agree| (&mut self.occlusion, agree)),

@@ -220,7 +220,7 @@ impl Proxies {
         b: usize,
         shooter: &ShooterFrame,
         res: Resolution,
-        ownership: Option<Ownership>,
+        ownership: Option<&Ownership>,
     ) -> bool {
         let (centre, radius) = self.blocks[b];
         let d = centre - shooter.centre;
@@ -242,7 +242,7 @@ impl Proxies {
         outside: &[bool],
         res: Resolution,
         far: f32,
-        ownership: Option<Ownership>,
+        ownership: Option<&Ownership>,
         occlusion: Option<(&mut OcclusionMap, Agree<'_>)>,
         instances: &mut Vec<Instance>,
     ) -> Collected {
@@ -663,7 +663,7 @@ const PARALLEL_PROXIES: usize = 8192;
 
 /// The tiles one rank of a grid owns: tile (p, t) of `tile_w` x `tile_h`
 /// cells with t mod px = ox and p mod py = oy.
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub(super) struct Ownership {
     pub(super) tile: [f32; 2],
     pub(super) grid: [f32; 2],
@@ -674,31 +674,99 @@ pub(super) struct Ownership {
     /// rank's cells instead of discarding the others' (off in lattice mode,
     /// whose 1 x 1 tiles are packed instead).
     pub(super) clip: bool,
+    /// Per axis, where the rank's tiles lie (see [`OwnedCells`]).
+    axes: [OwnedCells; 2],
+}
+
+/// Along one axis, per cell, where this rank's next tile starts and ends:
+/// every rectangle on every rank asks which of its cells are the rank's,
+/// and tables answer without the integer divisions (four an axis) that
+/// made the question cost a third of a rank's bounds.
+#[derive(Clone)]
+struct OwnedCells {
+    /// `next[c]`: the first cell at or after c in one of the rank's tiles
+    /// (`cells` if none), for c in 0..=cells.
+    next: Vec<u32>,
+    /// `tile[c]` for a cell of the rank's: its tile's first cell and the
+    /// one after its last (the tile's own edges, not clamped to the grid).
+    tile: Vec<[u32; 2]>,
+}
+
+impl OwnedCells {
+    fn new(tile: u32, grid: u32, own: u32, cells: u32) -> Self {
+        let tile = tile.max(1);
+        let grid = grid.max(1);
+        let mut next = vec![cells; cells as usize + 1];
+        let mut edges = vec![[0, 0]; cells as usize];
+        for c in (0..cells).rev() {
+            let t = c / tile;
+            if t % grid == own {
+                next[c as usize] = c;
+                edges[c as usize] = [t * tile, (t + 1) * tile];
+            } else {
+                next[c as usize] = next[c as usize + 1];
+            }
+        }
+        Self { next, tile: edges }
+    }
+
+    /// The first cell of the rank's whose centre is at or after `c0` and
+    /// at most `c1`, if any (`c0`, `c1` already clamped to the grid).
+    fn first(&self, c0: i64, c1: i64) -> Option<usize> {
+        if c0 > c1 {
+            return None;
+        }
+        let c = self.next[c0 as usize] as i64;
+        (c <= c1).then_some(c as usize)
+    }
 }
 
 impl Ownership {
+    /// The tiles `own` of a grid of `grid` ranks, `tile` cells each, over a
+    /// hemisphere of `cells` (columns, rows).
+    pub(super) fn new(
+        tile: [u32; 2],
+        grid: [u32; 2],
+        own: [u32; 2],
+        cells: [u32; 2],
+        clip: bool,
+    ) -> Self {
+        Self {
+            tile: tile.map(|t| t as f32),
+            grid: grid.map(|g| g as f32),
+            own: own.map(|o| o as f32),
+            cells: cells.map(|c| c as f32),
+            clip,
+            axes: [0, 1].map(|a| OwnedCells::new(tile[a], grid[a], own[a], cells[a])),
+        }
+    }
+
+    /// The cells whose centres `[lo, hi]` holds along `axis`, clamped to
+    /// the grid (empty when `c0 > c1`). (Whole cells in integers: f32 floor
+    /// and ceil are library calls on the baseline x86-64 target, and this
+    /// runs for every rectangle on every rank.)
+    fn cell_range(&self, lo: f32, hi: f32, axis: usize) -> (i64, i64) {
+        let cells = self.axes[axis].tile.len() as i64;
+        (ceil_i(lo - 0.5).max(0), floor_i(hi - 0.5).min(cells - 1))
+    }
+
     /// The spans of `[lo, hi]` along `axis` that lie in this rank's tiles.
-    /// (Whole cells and tiles in integers: f32 floor, ceil and rem_euclid
-    /// are library calls on the baseline x86-64 target, and this runs for
-    /// every rectangle on every rank.)
-    fn spans(&self, lo: f32, hi: f32, axis: usize) -> impl Iterator<Item = [f32; 2]> {
-        let [tile, grid, own, cells] =
-            [self.tile, self.grid, self.own, self.cells].map(|v| v[axis] as i64);
-        let c0 = ceil_i(lo - 0.5).max(0);
-        let c1 = floor_i(hi - 0.5).min(cells - 1);
-        let (t0, t1) = (c0.div_euclid(tile), c1.div_euclid(tile));
-        // The first of this rank's tiles at or after t0.
-        let first = t0 + (own - t0).rem_euclid(grid);
-        let count = if c0 <= c1 && first <= t1 {
-            ((t1 - first) / grid) as usize + 1
-        } else {
-            0
-        };
-        let tile = tile as f32;
-        (0..count).map(move |k| {
-            let t = (first + k as i64 * grid) as f32;
-            [lo.max(t * tile), hi.min((t + 1.0) * tile)]
+    fn spans(&self, lo: f32, hi: f32, axis: usize) -> impl Iterator<Item = [f32; 2]> + '_ {
+        let (c0, c1) = self.cell_range(lo, hi, axis);
+        let owned = &self.axes[axis];
+        let mut at = owned.first(c0, c1);
+        std::iter::from_fn(move || {
+            let c = at?;
+            let [start, end] = owned.tile[c];
+            at = owned.first((end as i64).min(owned.next.len() as i64 - 1), c1);
+            Some([lo.max(start as f32), hi.min(end as f32)])
         })
+    }
+
+    /// Whether `[lo, hi]` holds the centre of a cell of this rank's along `axis`.
+    fn holds_along(&self, lo: f32, hi: f32, axis: usize) -> bool {
+        let (c0, c1) = self.cell_range(lo, hi, axis);
+        self.axes[axis].first(c0, c1).is_some()
     }
 
     /// `rect` ([x0, x1, y0, y1] in cells) cut to each of this rank's tiles
@@ -713,7 +781,7 @@ impl Ownership {
 
     /// Whether the cell rectangle holds the centre of a cell of one of this rank's tiles.
     fn holds_own(&self, x0: f32, x1: f32, y0: f32, y1: f32) -> bool {
-        self.spans(x0, x1, 0).next().is_some() && self.spans(y0, y1, 1).next().is_some()
+        self.holds_along(x0, x1, 0) && self.holds_along(y0, y1, 1)
     }
 
     /// Whether a sphere with centre `c` (in the shooter's frame) and radius
@@ -745,7 +813,7 @@ fn push_piece(
     lookup: &Lookup,
     res: Resolution,
     far: f32,
-    ownership: Option<Ownership>,
+    ownership: Option<&Ownership>,
 ) -> usize {
     let Some(r) = cell_bounds(d, res, far) else {
         return 0;
@@ -834,21 +902,17 @@ mod tests {
     fn layouts() -> Vec<Ownership> {
         let mut out = Vec::new();
         for (tile, grid) in [
-            ([64.0, 32.0], [2.0, 1.0]),
-            ([64.0, 32.0], [2.0, 2.0]),
-            ([32.0, 16.0], [4.0, 2.0]),
-            ([1.0, 1.0], [2.0, 1.0]),
-            ([512.0, 16.0], [1.0, 3.0]),
+            ([64, 32], [2, 1]),
+            ([64, 32], [2, 2]),
+            ([32, 16], [4, 2]),
+            ([1, 1], [2, 1]),
+            ([512, 16], [1, 3]),
+            ([48, 20], [3, 2]),
         ] {
-            for ox in 0..grid[0] as u32 {
-                for oy in 0..grid[1] as u32 {
-                    out.push(Ownership {
-                        tile,
-                        grid,
-                        own: [ox as f32, oy as f32],
-                        cells: [512.0, 128.0],
-                        clip: tile != [1.0, 1.0],
-                    });
+            for ox in 0..grid[0] {
+                for oy in 0..grid[1] {
+                    let clip = tile != [1, 1];
+                    out.push(Ownership::new(tile, grid, [ox, oy], [512, 128], clip));
                 }
             }
         }
@@ -870,7 +934,8 @@ mod tests {
             let n = (d[1] - d[0]).cross(d[3] - d[0]).normalize();
             for o in layouts() {
                 let mut out = Vec::new();
-                let drawn = push_piece(&mut out, &d, n, 0, &Lookup::default(), res, 100.0, Some(o));
+                let drawn =
+                    push_piece(&mut out, &d, n, 0, &Lookup::default(), res, 100.0, Some(&o));
                 let may = o.may_see(centre, radius, res);
                 assert!(
                     may || drawn == 0,
@@ -915,7 +980,7 @@ mod tests {
             let poly = &mesh.polygons[patch.polygon as usize];
             let frame = ShooterFrame::new(patch.centre, poly.normal, poly.tangent, patch.polygon);
             for shooter in [frame, frame.within(1.5)] {
-                for &o in owners.iter().skip(k % 3).step_by(3) {
+                for o in owners.iter().skip(k % 3).step_by(3).map(Option::as_ref) {
                     let (mut a, mut b) = (Vec::new(), Vec::new());
                     let got = proxies.collect_rects(&shooter, &outside, res, 1e3, o, None, &mut a);
                     let want = never.collect_rects(&shooter, &outside, res, 1e3, o, None, &mut b);
@@ -935,6 +1000,67 @@ mod tests {
         // The blocks have to pay: half the room is behind a box's face, and
         // a split group's reach holds a few boxes (31 % skipped when written).
         assert!(4 * skipped > all, "{skipped} of {all} blocks skipped");
+    }
+
+    /// The spans as they were computed before the tables: tile numbers by
+    /// integer division, the reference the tables must match bit for bit.
+    fn spans_by_division(o: &Ownership, lo: f32, hi: f32, axis: usize) -> Vec<[f32; 2]> {
+        let [tile, grid, own, cells] = [o.tile, o.grid, o.own, o.cells].map(|v| v[axis] as i64);
+        let c0 = ceil_i(lo - 0.5).max(0);
+        let c1 = floor_i(hi - 0.5).min(cells - 1);
+        let (t0, t1) = (c0.div_euclid(tile), c1.div_euclid(tile));
+        let first = t0 + (own - t0).rem_euclid(grid);
+        let count = if c0 <= c1 && first <= t1 {
+            ((t1 - first) / grid) as usize + 1
+        } else {
+            0
+        };
+        let tile = tile as f32;
+        (0..count)
+            .map(|k| {
+                let t = (first + k as i64 * grid) as f32;
+                [lo.max(t * tile), hi.min((t + 1.0) * tile)]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_tiles_tables_give_the_divisions_spans_bit_for_bit() {
+        let mut rnd = uniform(0x5851_f42d_4c95_7f2d);
+        let mut spans = 0;
+        for o in layouts() {
+            for _ in 0..4000 {
+                for axis in 0..2 {
+                    let n = o.cells[axis];
+                    // Wide and narrow, inside, across and beyond the grid,
+                    // some on whole and half cells exactly.
+                    let mut lo = rnd() * (n + 40.0) - 20.0;
+                    let mut hi = lo + rnd() * rnd() * n;
+                    if rnd() < 0.2 {
+                        (lo, hi) = ((lo * 2.0).round() / 2.0, (hi * 2.0).round() / 2.0);
+                    }
+                    let want = spans_by_division(&o, lo, hi, axis);
+                    let got: Vec<[f32; 2]> = o.spans(lo, hi, axis).collect();
+                    // Bit for bit, but for the sign of a zero: f32::max
+                    // of -0 and +0 may give either, as inlining falls.
+                    let bits = |v: &[[f32; 2]]| {
+                        v.iter()
+                            .map(|s| s.map(|x| (x + 0.0).to_bits()))
+                            .collect::<Vec<_>>()
+                    };
+                    assert_eq!(
+                        bits(&got),
+                        bits(&want),
+                        "[{lo}, {hi}] on axis {axis} of tiles {:?} {:?}",
+                        o.own,
+                        o.tile
+                    );
+                    assert_eq!(o.holds_along(lo, hi, axis), !want.is_empty());
+                    spans += want.len();
+                }
+            }
+        }
+        assert!(spans > 10_000, "only {spans} spans met");
     }
 
     #[test]
