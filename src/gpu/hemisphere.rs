@@ -617,7 +617,7 @@ impl HemisphereRasterizer {
                 o.tile == tile.map(|t| t as f32)
                     && o.grid == grid.map(|g| g as f32)
                     && o.own == own.map(|v| v as f32)
-                    && o.clip == !lattice
+                    && o.clip != lattice
             });
             if !same {
                 self.ownership = Some(Ownership::new(tile, grid, own, cells, !lattice));
