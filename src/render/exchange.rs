@@ -110,17 +110,20 @@ impl<'c> Exchanger<'c> {
     ) -> Duration {
         let comm = self.comm;
         self.packed.clear();
-        self.packed.extend(
-            cells.cells_of[comm.rank()]
-                .iter()
-                .map(|&i| items[i as usize]),
-        );
+        for run in &cells.runs_of[comm.rank()] {
+            self.packed
+                .extend_from_slice(&items[run.start as usize..run.end as usize]);
+        }
         let t = Instant::now();
         let all = comm.all_gather_u32(&self.packed, Some(&cells.cell_counts));
         let mut spent = t.elapsed();
-        for (own, values) in cells.cells_of.iter().zip(&all) {
-            for (&c, &v) in own.iter().zip(values) {
-                cells.full[c as usize] = v;
+        for (runs, values) in cells.runs_of.iter().zip(&all) {
+            let mut at = 0;
+            for run in runs {
+                let n = run.len();
+                cells.full[run.start as usize..run.end as usize]
+                    .copy_from_slice(&values[at..at + n]);
+                at += n;
             }
         }
         let cols = cells.resolution.cols as usize;

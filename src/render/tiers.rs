@@ -126,9 +126,10 @@ pub struct TierCells {
     /// hemisphere that sees something (exact to sum over any split of the
     /// cells between ranks).
     pub shares: Vec<u64>,
-    /// Cells (row-major indices) of each rank's tiles (hemisphere exchange;
-    /// empty in one process).
-    pub cells_of: Vec<Vec<u32>>,
+    /// Each rank's tiles as runs of consecutive cells, one per tile row
+    /// (row-major cell indices, end excluded), in row-major order
+    /// (hemisphere exchange; empty in one process).
+    pub runs_of: Vec<Vec<std::ops::Range<u32>>>,
     /// How many cells each rank owns (known to all, so never exchanged).
     pub cell_counts: Vec<usize>,
     /// The whole hemisphere's cells, assembled from every rank's.
@@ -151,12 +152,17 @@ impl TierCells {
             FormFactorMethod::Hybrid => vec![crate::formfactor::VISIBLE_ONE; res.rows as usize],
             FormFactorMethod::Hemisphere => res.delta_form_factors_fixed(),
         };
-        let mut cells_of = vec![Vec::new(); ranks];
+        let mut runs_of: Vec<Vec<std::ops::Range<u32>>> = vec![Vec::new(); ranks];
         if ranks > 1 && layout.ranks() as usize == ranks {
             for p in 0..res.rows {
                 for t in 0..res.cols {
                     let (x, y) = layout.owner(p, t);
-                    cells_of[(y * layout.px + x) as usize].push(p * res.cols + t);
+                    let c = p * res.cols + t;
+                    let runs = &mut runs_of[(y * layout.px + x) as usize];
+                    match runs.last_mut() {
+                        Some(run) if run.end == c && t % layout.tile_w != 0 => run.end += 1,
+                        _ => runs.push(c..c + 1),
+                    }
                 }
             }
         }
@@ -177,8 +183,11 @@ impl TierCells {
             layout,
             weights,
             shares,
-            cell_counts: cells_of.iter().map(Vec::len).collect(),
-            cells_of,
+            cell_counts: runs_of
+                .iter()
+                .map(|runs| runs.iter().map(|r| r.len()).sum())
+                .collect(),
+            runs_of,
             full: vec![EMPTY; res.cells()],
             position_cells,
         }
@@ -199,6 +208,22 @@ impl TierCells {
         let cols = self.resolution.cols as usize;
         let whole = self.layout.ranks() == 1;
         let mut out = [0u64; 3];
+        let k = (own.1 * self.layout.px + own.0) as usize;
+        if let Some(runs) = self.runs_of.get(k).filter(|r| !r.is_empty()) {
+            // A rank of a run reads its own cells only: the others' are
+            // EMPTY here, and asking each one's owner cost more than the rest.
+            for run in runs {
+                let w = self.shares[run.start as usize / cols];
+                for &id in &items[run.start as usize..run.end as usize] {
+                    match id {
+                        crate::hemisphere::EMPTY => out[2] += 1,
+                        crate::hemisphere::BLOCKED => out[1] += w,
+                        _ => out[0] += w,
+                    }
+                }
+            }
+            return out;
+        }
         for (row, cells) in items.chunks_exact(cols).enumerate() {
             let w = self.shares[row];
             for (t, &id) in cells.iter().enumerate() {
@@ -238,10 +263,17 @@ mod tests {
             let layout = layout_for(&opts, res, ranks).expect("layout");
             let cells = TierCells::new(res, layout, ranks, FormFactorMethod::Hybrid);
             let mut seen = vec![0u8; res.cells()];
-            for (r, own) in cells.cells_of.iter().enumerate() {
+            for (r, runs) in cells.runs_of.iter().enumerate() {
+                let own: Vec<u32> = runs.iter().flat_map(|r| r.clone()).collect();
                 assert_eq!(cells.cell_counts[r], own.len());
                 assert!(!own.is_empty(), "{ranks} ranks: rank {r} owns no cell");
-                for &c in own {
+                assert!(own.windows(2).all(|w| w[0] < w[1]), "runs in order");
+                assert!(
+                    runs.iter()
+                        .all(|r| r.start / res.cols == (r.end - 1) / res.cols),
+                    "a run within one row"
+                );
+                for &c in &own {
                     seen[c as usize] += 1;
                     let (p, t) = (c / res.cols, c % res.cols);
                     let (x, y) = layout.owner(p, t);
@@ -267,7 +299,7 @@ mod tests {
             .weights
             .iter()
             .all(|&w| w == crate::formfactor::VISIBLE_ONE));
-        assert!(h.cells_of[0].is_empty(), "one process needs no cell lists");
+        assert!(h.runs_of[0].is_empty(), "one process needs no cell lists");
     }
 
     #[test]
