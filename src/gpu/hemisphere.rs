@@ -122,8 +122,9 @@ pub struct HemisphereRasterizer {
     /// This rank's tiles as the bounds read them, kept while the layout
     /// and the rank's place in it stay the same.
     ownership: Option<Ownership>,
-    /// The last shot's coverage per element (empty unless counting).
-    coverage: Vec<u32>,
+    /// The last shot's elements with a covered cell and their counts, in
+    /// element order (empty unless counting).
+    coverage: Vec<(u32, u64)>,
     elements: usize,
 }
 
@@ -370,11 +371,7 @@ impl HemisphereRasterizer {
     /// (element, count) for every element with some; none unless
     /// [`HemisphereRasterizer::set_count_coverage`] is on.
     pub fn coverage_pairs(&self) -> impl Iterator<Item = (u32, u64)> + '_ {
-        self.coverage
-            .iter()
-            .enumerate()
-            .filter(|(_, &c)| c > 0)
-            .map(|(id, &c)| (id as u32, c as u64))
+        self.coverage.iter().copied()
     }
 
     /// The hemisphere resolution.
@@ -567,12 +564,36 @@ impl HemisphereRasterizer {
                     .slice(..)
                     .get_mapped_range()
                     .map_err(|e| GpuError::Failed(e.to_string()))?;
+                // Straight from the mapped counts to the pairs: most
+                // elements are not in view, and a block of zeros is skipped
+                // with one test (every rank reads every element's count).
                 self.coverage.clear();
-                self.coverage.extend(
-                    view.chunks_exact(4)
-                        .take(self.elements)
-                        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-                );
+                let bytes = &view[..4 * self.elements.min(view.len() / 4)];
+                // Mapped ranges are aligned (wgpu::MAP_ALIGNMENT); copy if not.
+                let copied: Vec<u32>;
+                let counts: &[u32] = match bytemuck::try_cast_slice(bytes) {
+                    Ok(counts) => counts,
+                    Err(_) => {
+                        copied = bytes
+                            .chunks_exact(4)
+                            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                            .collect();
+                        &copied
+                    }
+                };
+                for (b, block) in counts.chunks(COVERAGE_BLOCK).enumerate() {
+                    if block.iter().fold(0, |a, &c| a | c) == 0 {
+                        continue;
+                    }
+                    let first = b * COVERAGE_BLOCK;
+                    self.coverage.extend(
+                        block
+                            .iter()
+                            .enumerate()
+                            .filter(|(_, &c)| c > 0)
+                            .map(|(k, &c)| ((first + k) as u32, u64::from(c))),
+                    );
+                }
             }
             self.coverage_read.unmap();
         }
@@ -672,6 +693,9 @@ impl HemisphereRasterizer {
         })
     }
 }
+
+/// Coverage counts tested for zero at once (see `read_coverage`).
+const COVERAGE_BLOCK: usize = 64;
 
 /// The occlusion cull pays where it leaves out at least this share of the
 /// cells the shot's rectangles hold (on lavapipe a fragment costs several
