@@ -18,6 +18,7 @@ use crate::mesh::Mesh;
 use crate::parallel::{owned_patches, patch_owner};
 
 mod state;
+mod vote;
 use crate::settings::AmbientTerm;
 pub use state::{SolverState, StateMismatch};
 
@@ -226,6 +227,9 @@ pub struct Solver<'m> {
     /// Per patch, its area: the scans of every shot read this, not the
     /// patch records (Sponza: 13 MB a scan instead of 32).
     patch_area: Vec<f64>,
+    /// The vote for the next shooter, kept up to date (see [`vote`]); a
+    /// lock only because [`Solver::local_vote`] reads through `&self`.
+    vote: std::sync::Mutex<vote::Vote>,
 }
 
 /// The area-weighted mean reflectance of a mesh, per channel.
@@ -324,6 +328,7 @@ impl<'m> Solver<'m> {
                 .collect(),
             direct_known: true,
             patch_area: mesh.patches.iter().map(|p| p.area).collect(),
+            vote: Default::default(),
         };
         solver.receive_lights();
         solver
@@ -355,6 +360,7 @@ impl<'m> Solver<'m> {
         // Shot as one: what missed the elements left the scene (or met
         // the backs of one-sided surfaces, which rays do not tell apart).
         self.note_energy(field.emitted, field.delivered, 0.0);
+        self.vote_mut().invalidate();
     }
 
     /// Turns overshooting by the ambient term on or off (off by default, here
@@ -409,18 +415,40 @@ impl<'m> Solver<'m> {
     /// [`Solver::local_unshot_fixed`] and [`Solver::local_candidate`] in one
     /// scan of the patches (what every shot's vote needs).
     pub fn local_vote(&self) -> (u64, Option<Candidate>) {
-        let mut fixed = 0u64;
-        let mut best: Option<(usize, f64)> = None;
-        // Patches in increasing order, so the first of equal powers wins
-        // (the lowest index, as `Candidate::best` breaks ties).
-        for i in self.own_patches() {
-            let w = self.patch_power(i);
-            fixed += self.to_fixed(w);
-            if w > 0.0 && best.is_none_or(|(_, b)| w > b) {
-                best = Some((i, w));
-            }
+        let patches = self.mesh.patches.len();
+        let leaves = if self.rank < patches {
+            (patches - self.rank).div_ceil(self.ranks)
+        } else {
+            0
+        };
+        let key = (self.rank, self.ranks, self.overshoot, patches);
+        // Leaf k is own patch rank + k ranks, in increasing order, so the
+        // first of equal powers wins (the lowest index, as
+        // `Candidate::best` breaks ties).
+        let (fixed, best) =
+            self.vote
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .refresh(key, leaves, |k| {
+                    let w = self.patch_power(self.rank + k * self.ranks);
+                    (w, self.to_fixed(w))
+                });
+        (
+            fixed,
+            best.map(|(k, w)| self.patch_candidate(self.rank + k * self.ranks, w)),
+        )
+    }
+
+    /// Notes that own patch `patch`'s residual changed (for the vote).
+    fn touch(vote: &mut vote::Vote, rank: usize, ranks: usize, patch: usize) {
+        if patch_owner(patch as u32, ranks) == rank {
+            vote.touch((patch - rank) / ranks);
         }
-        (fixed, best.map(|(i, w)| self.patch_candidate(i, w)))
+    }
+
+    /// The vote, for writing (no lock: `&mut self`).
+    fn vote_mut(&mut self) -> &mut vote::Vote {
+        self.vote.get_mut().unwrap_or_else(|e| e.into_inner())
     }
 
     /// How much patch `i`'s residual still matters (sum over RGB, W). Without
@@ -487,6 +515,8 @@ impl<'m> Solver<'m> {
             if !self.owns(i) {
                 continue;
             }
+            let (rank, ranks) = (self.rank, self.ranks);
+            Self::touch(self.vote_mut(), rank, ranks, i as usize);
             self.unshot[i as usize] = [0.0; 3];
             for k in mesh.patches[i as usize].elements.clone() {
                 self.element_unshot[k as usize] = [0.0; 3];
@@ -641,6 +671,8 @@ impl<'m> Solver<'m> {
         let mesh = self.mesh;
         let i = shooter.patch as usize;
         let p = &mesh.patches[i];
+        let (rank, ranks) = (self.rank, self.ranks);
+        Self::touch(self.vote_mut(), rank, ranks, i);
         if self.owns(shooter.patch) && !self.overshoot {
             self.unshot[i] = [0.0; 3];
             for k in p.elements.clone() {
@@ -675,13 +707,15 @@ impl<'m> Solver<'m> {
             [0.0; 3]
         };
         let mut form_factor_sum = 0.0;
+        let vote = self.vote.get_mut().unwrap_or_else(|e| e.into_inner());
         for t in ff {
             form_factor_sum += t.form_factor;
             let j = t.element as usize;
             let el = &mesh.elements[j];
-            if !self.owns(el.patch) {
+            if patch_owner(el.patch, ranks) != rank {
                 continue;
             }
+            Self::touch(vote, rank, ranks, el.patch as usize);
             let rho = el.reflectance;
             let scale = area / el.area;
             let patch_share = patch_share(mesh, el);

@@ -54,6 +54,7 @@ impl Solver<'_> {
     /// Installs every rank's [`Solver::local_state`] (rank order), so this
     /// solver holds the whole solution.
     pub fn assemble(&mut self, radiosity: &[Vec<f64>], unshot: &[Vec<f64>]) {
+        self.vote_mut().invalidate();
         let ranks = radiosity.len();
         for (r, (b, u)) in radiosity.iter().zip(unshot).enumerate() {
             let (mut bi, mut ui) = (b.chunks_exact(3), u.chunks_exact(3));
@@ -80,6 +81,7 @@ impl Solver<'_> {
 
     /// Installs every rank's [`Solver::local_element_unshot`] (rank order).
     pub fn assemble_element_unshot(&mut self, parts: &[Vec<f64>]) {
+        self.vote_mut().invalidate();
         let mut v = std::mem::take(&mut self.element_unshot);
         self.install_elements(&mut v, parts);
         self.element_unshot = v;
@@ -149,6 +151,7 @@ impl Solver<'_> {
     /// Continues from `state` (every rank takes the whole state and keeps
     /// updating its own share). Fails when it is for another mesh.
     pub fn restore(&mut self, state: &SolverState) -> Result<(), StateMismatch> {
+        self.vote_mut().invalidate();
         let (e, p) = (self.mesh.elements.len(), self.mesh.patches.len());
         if state.radiosity.len() != e || state.element_unshot.len() != e || state.unshot.len() != p
         {
