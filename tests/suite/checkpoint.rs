@@ -251,3 +251,86 @@ fn an_interrupt_during_the_refinement_pass_keeps_the_pass_solution() {
         assert!((x / y - 1.0).abs() < 0.01, "{x} against {y}");
     }
 }
+
+/// A signal right after the refinement pass's last shot, before the final
+/// mesh's first: what the render keeps must not be worse than what the pass
+/// had (the final mesh's start is only the emitters' light).
+#[test]
+fn an_interrupt_at_the_end_of_the_refinement_pass_loses_no_light() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("cornell.ckpt");
+    let measured = cornell(&interruptible(&path, false), None);
+    let pass = measured.report.refinement.shots;
+    assert!(pass > 0, "the pass shot");
+    let opts = interruptible(&path, true);
+    let stopped = cornell(&opts, Some(pass));
+    assert!(stopped.interrupted);
+    let r = &stopped.report;
+    let trace = &r.convergence;
+    let last_pass = trace
+        .iter()
+        .filter(|p| p.pass.is_some())
+        .last()
+        .expect("the pass's points");
+    assert!(
+        r.unshot_fraction <= last_pass.unshot_fraction * (1.0 + 1e-9),
+        "the report's unshot {} against the pass's {}",
+        r.unshot_fraction,
+        last_pass.unshot_fraction
+    );
+    // It is the pass's solution after its last shot, as an interrupt
+    // during the pass keeps (not the final mesh's start).
+    assert!(r.refinement.interrupted);
+    assert_eq!((r.shots, r.refinement.shots), (pass, pass));
+    assert_eq!(
+        [r.counts.patches, r.counts.elements],
+        r.refinement.start,
+        "the pass's mesh"
+    );
+    let saved = Checkpoint::read(&path).expect("checkpoint written");
+    assert_eq!(saved.state.shots, r.shots);
+}
+
+/// The same signal during the refinement pass on two ranks (threads that
+/// share the flag, as a signal reaches every rank): the ranks stop at the
+/// same shot and keep the same pass solution as one rank does, bit for bit.
+#[test]
+fn an_interrupt_during_the_refinement_pass_on_two_ranks_keeps_the_same_solution() {
+    use radiosity::parallel::{Collectives, ThreadComm};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let one_path = dir.path().join("one.ckpt");
+    let one = cornell(&interruptible(&one_path, true), Some(5));
+    let path = dir.path().join("two.ckpt");
+    let opts = interruptible(&path, true);
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let flag = opts.interrupt.clone().expect("a flag");
+    let two = ThreadComm::run(2, |comm| {
+        let rank = comm.rank();
+        radiosity::render::render_on(gpu(), &scene, &opts, comm, Duration::ZERO, &mut |p| {
+            // The signal after rank 0's fifth shot.
+            if rank == 0 && p.shots == 5 {
+                flag.store(true, Ordering::Relaxed);
+            }
+        })
+        .expect("render")
+    })
+    .into_iter()
+    .flatten()
+    .next()
+    .expect("rank 0's result");
+    assert!(one.interrupted && two.interrupted);
+    let (a, b) = (&one.report, &two.report);
+    assert_eq!(b.counts.ranks, 2);
+    assert!(b.refinement.interrupted);
+    assert_eq!((b.shots, b.refinement.shots), (a.shots, a.refinement.shots));
+    assert_eq!(
+        [b.counts.patches, b.counts.elements],
+        [a.counts.patches, a.counts.elements]
+    );
+    assert_eq!(
+        a.surfaces, b.surfaces,
+        "1 and 2 ranks keep the same solution"
+    );
+    let saved = Checkpoint::read(&path).expect("checkpoint written");
+    assert_eq!(saved.state.shots, b.shots);
+}
