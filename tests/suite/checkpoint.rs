@@ -269,8 +269,7 @@ fn an_interrupt_at_the_end_of_the_refinement_pass_loses_no_light() {
     let trace = &r.convergence;
     let last_pass = trace
         .iter()
-        .filter(|p| p.pass.is_some())
-        .last()
+        .rfind(|p| p.pass.is_some())
         .expect("the pass's points");
     assert!(
         r.unshot_fraction <= last_pass.unshot_fraction * (1.0 + 1e-9),
