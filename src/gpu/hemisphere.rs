@@ -8,7 +8,7 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
-use super::proxies::{in_view, Agree, Instance, Lookup, Ownership, Proxies};
+use super::proxies::{in_view, Agree, Instance, Lookup, Ownership, Proxies, TilePlace};
 use super::target::RenderTarget;
 use super::GpuError;
 use crate::hemisphere::{Resolution, TileLayout, EMPTY};
@@ -630,18 +630,15 @@ impl HemisphereRasterizer {
             layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1 && self.tess.is_none();
         // Over several ranks, skip rectangles that hold none of this rank's cells.
         if layout.ranks() > 1 {
-            let tile = [layout.tile_w, layout.tile_h];
-            let grid = [layout.px, layout.py];
-            let own = [own.0, own.1];
-            let cells = [self.res.cols, self.res.rows];
-            let same = self.ownership.as_ref().is_some_and(|o| {
-                o.tile == tile.map(|t| t as f32)
-                    && o.grid == grid.map(|g| g as f32)
-                    && o.own == own.map(|v| v as f32)
-                    && o.clip != lattice
-            });
-            if !same {
-                self.ownership = Some(Ownership::new(tile, grid, own, cells, !lattice));
+            let place = TilePlace {
+                tile: [layout.tile_w, layout.tile_h],
+                grid: [layout.px, layout.py],
+                own: [own.0, own.1],
+                cells: [self.res.cols, self.res.rows],
+                clip: !lattice,
+            };
+            if self.ownership.as_ref().is_none_or(|o| o.place != place) {
+                self.ownership = Some(Ownership::new(place));
             }
         } else {
             self.ownership = None;

@@ -251,7 +251,7 @@ impl Proxies {
         // range and nearest possible distance. Over several ranks each
         // draws its tiles' pieces only (not the packed lattice of 1 x 1
         // tiles, whose rectangles are not cut to the rank's cells).
-        let culling = occlusion.is_some() && ownership.is_none_or(|o| o.clip);
+        let culling = occlusion.is_some() && ownership.is_none_or(|o| o.place.clip);
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
         } else {
@@ -661,19 +661,28 @@ fn ceil_i(x: f32) -> i64 {
 /// Scenes with at least this many proxies find their rectangles on several threads.
 const PARALLEL_PROXIES: usize = 8192;
 
-/// The tiles one rank of a grid owns: tile (p, t) of `tile_w` x `tile_h`
-/// cells with t mod px = ox and p mod py = oy.
-#[derive(Clone)]
-pub(super) struct Ownership {
-    pub(super) tile: [f32; 2],
-    pub(super) grid: [f32; 2],
-    pub(super) own: [f32; 2],
-    pub(super) cells: [f32; 2],
+/// One rank's place in a grid of tiles, per axis (columns, rows): tile
+/// (p, t) of `tile` cells is the rank's when t mod grid[0] = own[0] and p
+/// mod grid[1] = own[1], over a hemisphere of `cells`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct TilePlace {
+    pub(super) tile: [u32; 2],
+    pub(super) grid: [u32; 2],
+    pub(super) own: [u32; 2],
+    pub(super) cells: [u32; 2],
     /// Whether to clip each rectangle to the rank's tiles (one instance per
     /// tile it meets), so the rasteriser makes fragments only for this
     /// rank's cells instead of discarding the others' (off in lattice mode,
     /// whose 1 x 1 tiles are packed instead).
     pub(super) clip: bool,
+}
+
+/// The tiles one rank of a grid owns ([`TilePlace`]), with the tables the
+/// bounds read them through.
+#[derive(Clone)]
+pub(super) struct Ownership {
+    /// What the tables were made for.
+    pub(super) place: TilePlace,
     /// Per axis, where the rank's tiles lie (see [`OwnedCells`]).
     axes: [OwnedCells; 2],
 }
@@ -722,21 +731,17 @@ impl OwnedCells {
 }
 
 impl Ownership {
-    /// The tiles `own` of a grid of `grid` ranks, `tile` cells each, over a
-    /// hemisphere of `cells` (columns, rows).
-    pub(super) fn new(
-        tile: [u32; 2],
-        grid: [u32; 2],
-        own: [u32; 2],
-        cells: [u32; 2],
-        clip: bool,
-    ) -> Self {
+    /// The tables of `place`.
+    pub(super) fn new(place: TilePlace) -> Self {
+        let TilePlace {
+            tile,
+            grid,
+            own,
+            cells,
+            ..
+        } = place;
         Self {
-            tile: tile.map(|t| t as f32),
-            grid: grid.map(|g| g as f32),
-            own: own.map(|o| o as f32),
-            cells: cells.map(|c| c as f32),
-            clip,
+            place,
             axes: [0, 1].map(|a| OwnedCells::new(tile[a], grid[a], own[a], cells[a])),
         }
     }
@@ -789,11 +794,11 @@ impl Ownership {
     /// the axes the rank grid divides), its columns wrapped around the
     /// azimuth.
     pub(super) fn may_see(&self, c: Vec3, r: f32, res: Resolution) -> bool {
-        let split = [self.grid[0] > 1.0, self.grid[1] > 1.0];
+        let split = self.place.grid.map(|g| g > 1);
         let Some([x0, x1, y0, y1]) = sphere_cells(c, r, res, split) else {
             return true;
         };
-        let cols = self.cells[0];
+        let cols = self.place.cells[0] as f32;
         self.holds_own(x0, x1, y0, y1)
             || (x1 > cols && self.holds_own(x0 - cols, x1 - cols, y0, y1))
             || (x0 < 0.0 && self.holds_own(x0 + cols, x1 + cols, y0, y1))
@@ -848,7 +853,7 @@ fn push_piece(
     // Pieces of one rectangle go out together, in order, so every cell
     // sees the same fragments in the same order as if it were drawn whole.
     let mut push = |rect: [f32; 4]| match ownership {
-        Some(o) if o.clip => out.extend(o.pieces(rect).map(|rect| Instance { rect, ..inst })),
+        Some(o) if o.place.clip => out.extend(o.pieces(rect).map(|rect| Instance { rect, ..inst })),
         _ => out.push(Instance { rect, ..inst }),
     };
     if primary {
@@ -911,8 +916,13 @@ mod tests {
         ] {
             for ox in 0..grid[0] {
                 for oy in 0..grid[1] {
-                    let clip = tile != [1, 1];
-                    out.push(Ownership::new(tile, grid, [ox, oy], [512, 128], clip));
+                    out.push(Ownership::new(TilePlace {
+                        tile,
+                        grid,
+                        own: [ox, oy],
+                        cells: [512, 128],
+                        clip: tile != [1, 1],
+                    }));
                 }
             }
         }
@@ -940,7 +950,7 @@ mod tests {
                 assert!(
                     may || drawn == 0,
                     "a quad at {centre} (radius {radius}) draws {drawn} rectangles in tiles {:?} its sphere misses",
-                    o.own
+                    o.place.own
                 );
                 if may {
                     kept += 1;
@@ -1005,7 +1015,8 @@ mod tests {
     /// The spans as they were computed before the tables: tile numbers by
     /// integer division, the reference the tables must match bit for bit.
     fn spans_by_division(o: &Ownership, lo: f32, hi: f32, axis: usize) -> Vec<[f32; 2]> {
-        let [tile, grid, own, cells] = [o.tile, o.grid, o.own, o.cells].map(|v| v[axis] as i64);
+        let p = o.place;
+        let [tile, grid, own, cells] = [p.tile, p.grid, p.own, p.cells].map(|v| v[axis] as i64);
         let c0 = ceil_i(lo - 0.5).max(0);
         let c1 = floor_i(hi - 0.5).min(cells - 1);
         let (t0, t1) = (c0.div_euclid(tile), c1.div_euclid(tile));
@@ -1031,7 +1042,7 @@ mod tests {
         for o in layouts() {
             for _ in 0..4000 {
                 for axis in 0..2 {
-                    let n = o.cells[axis];
+                    let n = o.place.cells[axis] as f32;
                     // Wide and narrow, inside, across and beyond the grid,
                     // some on whole and half cells exactly.
                     let mut lo = rnd() * (n + 40.0) - 20.0;
@@ -1052,8 +1063,8 @@ mod tests {
                         bits(&got),
                         bits(&want),
                         "[{lo}, {hi}] on axis {axis} of tiles {:?} {:?}",
-                        o.own,
-                        o.tile
+                        o.place.own,
+                        o.place.tile
                     );
                     assert_eq!(o.holds_along(lo, hi, axis), !want.is_empty());
                     spans += want.len();
@@ -1072,8 +1083,9 @@ mod tests {
         };
         for o in layouts() {
             let own = |x: u32, y: u32| {
-                let (tx, ty) = (x / o.tile[0] as u32, y / o.tile[1] as u32);
-                tx % o.grid[0] as u32 == o.own[0] as u32 && ty % o.grid[1] as u32 == o.own[1] as u32
+                let p = o.place;
+                let (tx, ty) = (x / p.tile[0], y / p.tile[1]);
+                tx % p.grid[0] == p.own[0] && ty % p.grid[1] == p.own[1]
             };
             for _ in 0..40 {
                 let (x0, y0) = (rnd() * 560.0 - 20.0, rnd() * 140.0 - 6.0);
@@ -1087,7 +1099,7 @@ mod tests {
                         assert_eq!(
                             got, want as usize,
                             "cell ({x}, {y}) of {rect:?} in tiles {:?}",
-                            o.own
+                            o.place.own
                         );
                         holds |= want;
                     }

@@ -208,6 +208,13 @@ impl TierCells {
         let cols = self.resolution.cols as usize;
         let whole = self.layout.ranks() == 1;
         let mut out = [0u64; 3];
+        // A cell showing `id` with weight `w`; `counted` when an empty one
+        // is this position's.
+        let mut tally = |id: u32, w: u64, counted: bool| match id {
+            crate::hemisphere::EMPTY => out[2] += u64::from(counted),
+            crate::hemisphere::BLOCKED => out[1] += w,
+            _ => out[0] += w,
+        };
         let k = (own.1 * self.layout.px + own.0) as usize;
         if let Some(runs) = self.runs_of.get(k).filter(|r| !r.is_empty()) {
             // A rank of a run reads its own cells only: the others' are
@@ -215,26 +222,17 @@ impl TierCells {
             for run in runs {
                 let w = self.shares[run.start as usize / cols];
                 for &id in &items[run.start as usize..run.end as usize] {
-                    match id {
-                        crate::hemisphere::EMPTY => out[2] += 1,
-                        crate::hemisphere::BLOCKED => out[1] += w,
-                        _ => out[0] += w,
-                    }
+                    tally(id, w, true);
                 }
             }
-            return out;
-        }
-        for (row, cells) in items.chunks_exact(cols).enumerate() {
-            let w = self.shares[row];
-            for (t, &id) in cells.iter().enumerate() {
-                match id {
-                    crate::hemisphere::EMPTY => {
-                        if whole || self.layout.owner(row as u32, t as u32) == own {
-                            out[2] += 1;
-                        }
-                    }
-                    crate::hemisphere::BLOCKED => out[1] += w,
-                    _ => out[0] += w,
+        } else {
+            for (row, cells) in items.chunks_exact(cols).enumerate() {
+                let w = self.shares[row];
+                for (t, &id) in cells.iter().enumerate() {
+                    let counted = id != crate::hemisphere::EMPTY
+                        || whole
+                        || self.layout.owner(row as u32, t as u32) == own;
+                    tally(id, w, counted);
                 }
             }
         }

@@ -439,11 +439,19 @@ impl<'m> Solver<'m> {
         )
     }
 
-    /// Notes that own patch `patch`'s residual changed (for the vote).
+    /// Notes that patch `patch`'s residual changed, if it is this rank's
+    /// (for the vote; a free function so a loop can hold the vote while it
+    /// writes the other fields).
     fn touch(vote: &mut vote::Vote, rank: usize, ranks: usize, patch: usize) {
         if patch_owner(patch as u32, ranks) == rank {
             vote.touch((patch - rank) / ranks);
         }
+    }
+
+    /// [`Solver::touch`] on this solver's vote.
+    fn touch_patch(&mut self, patch: usize) {
+        let (rank, ranks) = (self.rank, self.ranks);
+        Self::touch(self.vote_mut(), rank, ranks, patch);
     }
 
     /// The vote, for writing (no lock: `&mut self`).
@@ -515,8 +523,7 @@ impl<'m> Solver<'m> {
             if !self.owns(i) {
                 continue;
             }
-            let (rank, ranks) = (self.rank, self.ranks);
-            Self::touch(self.vote_mut(), rank, ranks, i as usize);
+            self.touch_patch(i as usize);
             self.unshot[i as usize] = [0.0; 3];
             for k in mesh.patches[i as usize].elements.clone() {
                 self.element_unshot[k as usize] = [0.0; 3];
@@ -671,8 +678,7 @@ impl<'m> Solver<'m> {
         let mesh = self.mesh;
         let i = shooter.patch as usize;
         let p = &mesh.patches[i];
-        let (rank, ranks) = (self.rank, self.ranks);
-        Self::touch(self.vote_mut(), rank, ranks, i);
+        self.touch_patch(i);
         if self.owns(shooter.patch) && !self.overshoot {
             self.unshot[i] = [0.0; 3];
             for k in p.elements.clone() {
@@ -707,6 +713,7 @@ impl<'m> Solver<'m> {
             [0.0; 3]
         };
         let mut form_factor_sum = 0.0;
+        let (rank, ranks) = (self.rank, self.ranks);
         let vote = self.vote.get_mut().unwrap_or_else(|e| e.into_inner());
         for t in ff {
             form_factor_sum += t.form_factor;

@@ -54,14 +54,15 @@ impl Vote {
     /// The fixed-point sum and the best leaf (`None` when no power is
     /// positive), after bringing the tree up to date: `key` is what the
     /// solver is now (rank, ranks, overshoot, patches), `leaves` the own
-    /// patches' count, `of(leaf)` a leaf's (power, fixed-point power).
+    /// patches' count (which the key decides), `of(leaf)` a leaf's (power,
+    /// fixed-point power).
     pub(super) fn refresh(
         &mut self,
         key: (usize, usize, bool, usize),
         leaves: usize,
         of: impl Fn(usize) -> (f64, u64),
     ) -> (u64, Option<(usize, f64)>) {
-        if self.built != Some(key) || self.power.len() != leaves {
+        if self.built != Some(key) {
             self.rebuild(key, leaves, &of);
         } else if !self.dirty.is_empty() {
             self.update(&of);
