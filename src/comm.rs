@@ -136,6 +136,37 @@ impl Collectives for MpiComm {
         self.count(8 * data.len(), 8 * data.len());
     }
 
+    fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>> {
+        let _call = self.call();
+        let n = self.size();
+        let send_counts: Vec<Count> = outgoing.iter().map(|v| v.len() as Count).collect();
+        let mut recv_counts = vec![0 as Count; n];
+        self.world
+            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
+        let (sd, rd) = (
+            Self::displacements(&send_counts),
+            Self::displacements(&recv_counts),
+        );
+        let total_in: usize = recv_counts.iter().map(|&c| c as usize).sum();
+        let words: Vec<u32> = outgoing.concat();
+        let mut incoming = vec![0u32; total_in];
+        {
+            let send = Partition::new(&words[..], &send_counts[..], &sd[..]);
+            let mut recv = PartitionMut::new(&mut incoming[..], &recv_counts[..], &rd[..]);
+            self.world.all_to_all_varcount_into(&send, &mut recv);
+        }
+        let me = self.rank();
+        self.count(
+            4 * (words.len() - send_counts[me] as usize) + 4 * n,
+            4 * (total_in - recv_counts[me] as usize) + 4 * n,
+        );
+        recv_counts
+            .iter()
+            .zip(&rd)
+            .map(|(&c, &d)| incoming[d as usize..(d + c) as usize].to_vec())
+            .collect()
+    }
+
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
         let _call = self.call();
         let n = self.size();

@@ -198,6 +198,14 @@ pub struct SolveArgs {
     /// results are identical, only the time changes.
     #[arg(long)]
     no_occlusion_cull: bool,
+    /// Whether the ranks of an MPI run deal the polygons' bounds between
+    /// them: each bounds every N-th block of polygons for the whole
+    /// hemisphere and sends each piece to its tile's owner, instead of every
+    /// rank testing every polygon for its own tiles. auto: from 4 ranks up
+    /// (measured: README "Ranks"). The results are identical, only the time
+    /// changes.
+    #[arg(long, value_enum, default_value = "auto")]
+    deal_bounds: radiosity::render::DealBounds,
     /// The memory each rank aims to stay within, GB: the form-factor row
     /// cache takes only what the scene, the mesh and the drawing leave of it
     /// (at most 1 GiB a rank). It changes no number, only the time.
@@ -259,6 +267,7 @@ impl SolveArgs {
             },
             raster_pieces: self.raster_pieces,
             occlusion_cull: !self.no_occlusion_cull,
+            deal_bounds: self.deal_bounds,
             projection: self.projection,
             tessellation_tolerance: self.tessellation_tolerance,
             cache_rows: !self.no_cache,

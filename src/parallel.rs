@@ -90,6 +90,9 @@ pub trait Collectives {
     fn reduce_broadcast_sum(&self, data: &mut [u64]);
     /// Sends `outgoing[r]` to rank r; returns everything sent to this rank, in rank order.
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)>;
+    /// Sends `outgoing[r]` to rank r; returns what each rank sent to this
+    /// one, in rank order (this rank's own included).
+    fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>>;
     /// Rank 0 gets every rank's `local`, in rank order; the others get `None`.
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>>;
     /// Whether every rank passed `ok`; when not, rank 0 gets the failing
@@ -121,6 +124,9 @@ impl Collectives for Single {
     fn reduce_broadcast_sum(&self, _data: &mut [u64]) {}
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
         outgoing.first().cloned().unwrap_or_default()
+    }
+    fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>> {
+        vec![outgoing.first().cloned().unwrap_or_default()]
     }
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
         Some(vec![local.to_vec()])
@@ -277,6 +283,16 @@ impl Collectives for ThreadComm {
         self.count(
             12 * (out - own_out) + 4 * n,
             12 * (incoming.len() - all[self.rank][self.rank].len()) + 4 * n,
+        );
+        incoming
+    }
+    fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>> {
+        let all = self.meet(outgoing.to_vec());
+        let incoming: Vec<Vec<u32>> = all.iter().map(|from| from[self.rank].clone()).collect();
+        let words = |v: &[Vec<u32>]| v.iter().map(Vec::len).sum::<usize>();
+        self.count(
+            4 * (words(outgoing) - outgoing[self.rank].len()),
+            4 * (words(&incoming) - incoming[self.rank].len()),
         );
         incoming
     }

@@ -140,6 +140,9 @@ pub struct Settings {
     /// Whether one rank left undrawn the polygons nearer ones hide (the
     /// same bits either way).
     pub occlusion_cull: bool,
+    /// Whether the ranks dealt the polygons' bounds (`auto`, `on`, `off`;
+    /// the same bits either way).
+    pub deal_bounds: crate::settings::DealBounds,
     /// How cells were found: `exact` or `tessellated`.
     pub projection: crate::settings::Projection,
     /// The tessellated projection's tolerance in cells (null with `exact`).
@@ -387,18 +390,22 @@ pub struct RankStats {
     pub bytes_received: u64,
     /// Work counted (not timed), summed over the shots this rank drew:
     /// rectangles drawn (each rank bounds and draws every rectangle that
-    /// holds one of its cells)...
+    /// holds one of its cells), or, where the ranks deal the bounds, the
+    /// rectangles of the polygons it bounded (they sum to one rank's)...
     pub rects: u64,
     /// ... hemisphere cells in its tiles (divided between the ranks) ...
     pub cells: u64,
     /// ... and receiving elements whose form factors it summed.
     pub receivers: u64,
     /// Proxies whose cell rectangle it computed (the bounds pass's work;
-    /// over several ranks, only polygons that may show in its tiles).
+    /// over several ranks, the polygons of its deal).
     pub bounded: u64,
     /// Bytes it received agreeing with the other ranks on which hidden
     /// polygons to leave undrawn (the occlusion cull; not in `bytes_received`).
     pub occlusion_bytes_received: u64,
+    /// Bytes of rectangles it received from the ranks that bounded them
+    /// (the bounds' deal; not in `bytes_received`).
+    pub rect_bytes_received: u64,
     /// This process's peak resident memory, bytes (Linux `VmHWM`; 0 where
     /// unknown), when the solve was gathered.
     pub peak_resident_bytes: u64,

@@ -8,7 +8,7 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
-use super::proxies::{in_view, Agree, Instance, Lookup, Ownership, Proxies, TilePlace};
+use super::proxies::{in_view, Agree, Instance, Lookup, Ownership, Proxies, Scatter, TilePlace};
 use super::target::RenderTarget;
 use super::GpuError;
 use crate::hemisphere::{Resolution, TileLayout, EMPTY};
@@ -602,11 +602,13 @@ impl HemisphereRasterizer {
 
     /// Renders the cells of the tiles that rank `own` of `layout` owns, as seen
     /// from `shooter`, into `items` (row-major, R_phi x R_theta). Cells other
-    /// ranks own are [`EMPTY`]. With `agree` (every rank's messages, in
-    /// rank order: one rank drawing the whole hemisphere, or every rank of
-    /// a run, each its tiles) polygons hidden in every rank's cells are
-    /// left undrawn ([`HemisphereRasterizer::set_cull_occluded`]); every
-    /// rank must then pass one, and each calls it once a shot or never.
+    /// ranks own are [`EMPTY`]. With `peers` (one rank drawing the whole
+    /// hemisphere, or every rank of a run, each its tiles): its `agree`
+    /// leaves polygons hidden in every rank's cells undrawn
+    /// ([`HemisphereRasterizer::set_cull_occluded`]); every rank must then
+    /// pass one, and each calls it once a shot or never. Its `scatter`
+    /// (ranks of a run, tiles cut out) deals the polygons' bounds between
+    /// the ranks, called once a shot by every rank.
     // The device and queue apart (wgpu's examples' style, so tests inject
     // them), the tiles, the output and the ranks' agreement: all needed.
     #[allow(clippy::too_many_arguments)]
@@ -618,7 +620,7 @@ impl HemisphereRasterizer {
         layout: &TileLayout,
         own: (u32, u32),
         items: &mut Vec<u32>,
-        agree: Option<Agree<'_>>,
+        peers: Option<Peers<'_>>,
     ) -> Result<RasterStats, GpuError> {
         let start = Instant::now();
         // With 1 x 1 tiles over several ranks, draw only this rank's cells,
@@ -646,6 +648,10 @@ impl HemisphereRasterizer {
         self.find_outside(shooter);
         // Every rank decides alike (the wait follows the share summed over
         // ranks), so all take part in the agreement or none.
+        let (agree, scatter) = match peers {
+            Some(p) => (Some(p.agree), p.scatter),
+            None => (None, None),
+        };
         let cull = self.cull_occluded && self.cull_wait == 0 && agree.is_some();
         self.cull_wait = self.cull_wait.saturating_sub(1);
         let mut collected = super::proxies::Collected::default();
@@ -661,6 +667,7 @@ impl HemisphereRasterizer {
                 agree
                     .filter(|_| cull)
                     .map(|agree| (&mut self.occlusion, agree)),
+                scatter,
                 &mut self.instances,
             );
             // Where the cull left little out, the next shots (most likely
@@ -689,6 +696,16 @@ impl HemisphereRasterizer {
             readback: read_start.elapsed(),
         })
     }
+}
+
+/// What a rank asks of the others while it finds a shot's rectangles
+/// (see [`HemisphereRasterizer::render`]).
+pub struct Peers<'a> {
+    /// The occlusion cull's agreement.
+    pub agree: Agree<'a>,
+    /// The rectangles' deal between the ranks of a run (`None` for one
+    /// process).
+    pub scatter: Option<Scatter<'a>>,
 }
 
 /// Coverage counts tested for zero at once (see `read_coverage`).

@@ -6,11 +6,11 @@
 
 mod hemisphere;
 mod proxies;
-pub use proxies::Agree;
+pub use proxies::{Agree, Scatter};
 mod target;
 mod view;
 
-pub use hemisphere::{HemisphereRasterizer, RasterStats};
+pub use hemisphere::{HemisphereRasterizer, Peers, RasterStats};
 pub use view::{render_view, view_depth_range, Shading, ViewRenderer, ViewSettings};
 
 use std::time::Duration;

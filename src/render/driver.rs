@@ -254,13 +254,15 @@ pub fn render_on(
     // The transport is estimated before the first pass, or here.
     timings.ambient = refinement.transport_seconds + solved.ambient;
     source.release_cache();
-    // The occlusion cull's agreements are counted apart (per rank).
+    // The occlusion cull's agreements and the rectangles' deal are counted
+    // apart (per rank).
     let excluded = solved
         .trace
         .traffic
         .plus(before)
         .plus(solved.ambient_traffic)
-        .plus(source.timings.cull_traffic);
+        .plus(source.timings.cull_traffic)
+        .plus(source.timings.rect_traffic);
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
@@ -397,6 +399,7 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, traffic: Traffic, cpu: f64
         traffic.calls as f64,
         t.bounded as f64,
         t.cull_traffic.received as f64,
+        t.rect_traffic.received as f64,
     ]
 }
 
@@ -422,6 +425,7 @@ fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
         mpi_calls: v[15] as u64,
         bounded: v[16] as u64,
         occlusion_bytes_received: v[17] as u64,
+        rect_bytes_received: v[18] as u64,
     }
 }
 
@@ -520,6 +524,7 @@ pub fn build_report(
             mesh: opts.mesh_settings(),
             raster_pieces: opts.raster_pieces,
             occlusion_cull: opts.occlusion_cull,
+            deal_bounds: opts.deal_bounds,
             projection: opts.projection,
             tessellation_tolerance: (opts.projection == Projection::Tessellated)
                 .then_some(opts.tessellation_tolerance),

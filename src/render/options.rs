@@ -8,7 +8,7 @@ use crate::mesh::MeshSettings;
 use crate::parallel::Exchange;
 use crate::scene::{Scene, Subdivision};
 pub use crate::settings::{
-    FormFactorMethod, Projection, AUTO_TRANSPORT_BELOW, DEFAULT_COARSE_BELOW,
+    DealBounds, FormFactorMethod, Projection, AUTO_TRANSPORT_BELOW, DEFAULT_COARSE_BELOW,
     DEFAULT_MEMORY_BUDGET, DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
 };
 use crate::solver::StopRule;
@@ -39,6 +39,9 @@ pub struct RenderOptions {
     /// hide in every rank's tiles (`crate::occlusion`; the same bits
     /// either way).
     pub occlusion_cull: bool,
+    /// Whether the ranks of a run deal the polygons' bounds between them
+    /// (`gpu::Scatter`; the same bits either way).
+    pub deal_bounds: DealBounds,
     /// How the hemisphere is tiled and over which rank grid. Under MPI the
     /// grid comes from the rank count and only the tile size is used; in one
     /// process every rank's tiles are drawn in turn (one tile by default).
@@ -116,6 +119,7 @@ impl Default for RenderOptions {
             mesh: MeshSettings::default(),
             raster_pieces: DEFAULT_RASTER_PIECES,
             occlusion_cull: true,
+            deal_bounds: DealBounds::Auto,
             projection: Projection::Exact,
             tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
             layout: None,

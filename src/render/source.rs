@@ -43,6 +43,8 @@ pub struct PhaseTimes {
     pub occluded: u64,
     /// What the ranks' agreements on the cull moved (not the exchange's).
     pub cull_traffic: parallel::Traffic,
+    /// What the ranks' deal of the rectangles moved (not the exchange's).
+    pub rect_traffic: parallel::Traffic,
     /// Proxies whose cell rectangle this rank computed (the bounds pass's
     /// work: over several ranks, only polygons that may show in its tiles).
     pub bounded: u64,
@@ -162,6 +164,8 @@ pub struct GpuFormFactors<'a> {
     max_patch_radius: f32,
     /// Where the last unsplit hemisphere stood.
     last_centre: glam::Vec3,
+    /// Whether this run's ranks deal the polygons' bounds (the same on every rank).
+    deal: bool,
 }
 
 impl<'a> GpuFormFactors<'a> {
@@ -224,6 +228,7 @@ impl<'a> GpuFormFactors<'a> {
             whole_items: Vec::new(),
             composite: Vec::new(),
             last_centre: glam::Vec3::ZERO,
+            deal: opts.deal_bounds.deals(n),
         })
     }
 
@@ -362,6 +367,19 @@ impl<'a> GpuFormFactors<'a> {
             cull_traffic = cull_traffic.plus(comm.traffic().since(before));
             all
         };
+        // Ranks of a run deal the polygons' bounds and send each other the
+        // pieces in their tiles (that traffic, too, kept apart).
+        let mut rect_traffic = parallel::Traffic::default();
+        let mut scatter = |outgoing: &[Vec<u32>]| -> Vec<Vec<u32>> {
+            let before = comm.traffic();
+            let all = comm.all_to_all_u32(outgoing);
+            rect_traffic = rect_traffic.plus(comm.traffic().since(before));
+            all
+        };
+        let peers = (whole || comm.size() > 1).then(|| gpu::Peers {
+            agree: &mut agree,
+            scatter: self.deal.then_some(&mut scatter as gpu::Scatter<'_>),
+        });
         let stats = tier.raster.render(
             &self.gpu.device,
             &self.gpu.queue,
@@ -369,9 +387,10 @@ impl<'a> GpuFormFactors<'a> {
             &tier.cells.layout,
             own,
             &mut self.items,
-            (whole || comm.size() > 1).then_some(&mut agree as gpu::Agree<'_>),
+            peers,
         )?;
         self.timings.cull_traffic = self.timings.cull_traffic.plus(cull_traffic);
+        self.timings.rect_traffic = self.timings.rect_traffic.plus(rect_traffic);
         self.timings.bounds += stats.bounds;
         self.timings.rects += stats.rects as u64;
         self.timings.occluded += stats.occluded as u64;

@@ -85,6 +85,15 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
         let r = mpirun(4, dir.path(), &tag, &["--tile", tile]);
         same_result(&base, &r, &tag);
     }
+    // The bounds dealt between the ranks or not (by default from 4 ranks).
+    for (ranks, deal) in [(2, "on"), (3, "on"), (4, "off")] {
+        let tag = format!("n{ranks}-deal-{deal}");
+        let r = mpirun(ranks, dir.path(), &tag, &["--deal-bounds", deal]);
+        same_result(&base, &r, &tag);
+        assert_eq!(r["settings"]["deal_bounds"], deal);
+        let image = std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+        assert!(image == base_image, "{tag}: image differs");
+    }
 }
 
 #[test]
@@ -483,11 +492,13 @@ fn a_sun_and_a_sky_give_the_same_bits_on_every_rank_count() {
 
 #[test]
 fn ranks_divide_the_bounds_of_scenes_of_many_small_polygons() {
-    // Bounds (issue 19, item 1): a rank computes the cell rectangles only
-    // of polygons whose bounding spheres may show in its tiles. In a room
-    // of 512 cubes most faces are small and fall in one rank's tiles; the
-    // walls and the floor span every rank's. Counts, not times; the
-    // results stay the same bits (the other tests here).
+    // Bounds (issue 19, item 1), counts, not times; the results stay the
+    // same bits (the other tests here). Not dealt, a rank computes the
+    // cell rectangles only of polygons whose bounding spheres may show in
+    // its tiles: in a room of 512 cubes most faces are small and fall in
+    // one rank's tiles, but the walls and the floor span every rank's.
+    // Dealt (`--deal-bounds`, by default from 4 ranks), each polygon is
+    // bounded by one rank: the counts sum to one rank's exactly.
     let dir = tempfile::tempdir().expect("temp dir");
     let args = ["--max-shots", "6", "--refine", "0"];
     let bounded = |r: &serde_json::Value| -> Vec<u64> {
@@ -498,18 +509,42 @@ fn ranks_divide_the_bounds_of_scenes_of_many_small_polygons() {
             .map(|s| s["bounded"].as_u64().expect("bounded"))
             .collect()
     };
-    let one = bounded(&mpirun_scene(1, dir.path(), "one", "cubes-8", &args))[0];
+    let one_report = mpirun_scene(1, dir.path(), "one", "cubes-8", &args);
+    let one = bounded(&one_report)[0];
     assert!(one > 0, "one rank bounded nothing");
-    for (ranks, most) in [(2, 0.75), (4, 0.62)] {
-        let r = mpirun_scene(ranks, dir.path(), &format!("n{ranks}"), "cubes-8", &args);
+    for (ranks, deal, most) in [(2, "auto", 0.75), (4, "off", 0.62)] {
+        let tag = format!("n{ranks}-{deal}");
+        let extra = [&args[..], &["--deal-bounds", deal]].concat();
+        let r = mpirun_scene(ranks, dir.path(), &tag, "cubes-8", &extra);
         let per = bounded(&r);
         // Each polygon that shows in some rank's tiles is bounded by at
         // least that rank; none by a rank whose tiles it misses.
         assert!(
             per.iter().sum::<u64>() >= one && per.iter().all(|&k| k as f64 <= most * one as f64),
-            "{ranks} ranks: proxies bounded {per:?} of {one} (at most {most} each)"
+            "{tag}: proxies bounded {per:?} of {one} (at most {most} each)"
         );
-        eprintln!("{ranks} ranks: proxies bounded {per:?} of {one}");
+        eprintln!("{tag}: proxies bounded {per:?} of {one}");
+    }
+    // Polygons dealt in turn: within a third of an even share.
+    for (ranks, deal) in [(2, "on"), (3, "on"), (4, "auto")] {
+        let tag = format!("n{ranks}-{deal}");
+        let extra = [&args[..], &["--deal-bounds", deal]].concat();
+        let r = mpirun_scene(ranks, dir.path(), &tag, "cubes-8", &extra);
+        same_result(&one_report, &r, &tag);
+        let per = bounded(&r);
+        let most = 1.33 / ranks as f64;
+        assert!(
+            per.iter().sum::<u64>() == one && per.iter().all(|&k| k as f64 <= most * one as f64),
+            "{tag}: proxies bounded {per:?} of {one} (exactly, at most {most} each)"
+        );
+        let received: u64 = r["parallel"]["per_rank"]
+            .as_array()
+            .expect("per rank")
+            .iter()
+            .map(|s| s["rect_bytes_received"].as_u64().expect("rect bytes"))
+            .sum();
+        assert!(received > 0, "{tag}: no rectangles travelled");
+        eprintln!("{tag}: proxies bounded {per:?} of {one}, {received} bytes of rectangles");
     }
 }
 
@@ -561,9 +596,9 @@ fn ranks_divide_the_hemisphere_cells_and_say_what_they_repeat() {
             "{ranks} ranks: receivers {receivers:?} (even: {fair})"
         );
         // Rectangles: each rank draws those that hold some of its cells
-        // (with 1 x 1 tiles, nearly all of them; see README "Ranks"). The
-        // automatic tiles keep each rank to at most 3/4 of them from 2
-        // ranks on.
+        // (with 1 x 1 tiles, nearly all of them; see README "Ranks"), or,
+        // dealing the bounds (from 4 ranks), finds those of its polygons.
+        // Either way at most 3/4 of them from 2 ranks on.
         let rects = count(&r, "rects");
         let one_rects = count(&one, "rects")[0];
         assert!(
