@@ -89,8 +89,10 @@ pub enum DealBounds {
 }
 
 /// The fewest ranks that deal the bounds under `--deal-bounds auto`:
-/// measured on one core a rank (README "Ranks"), dealing cost 5 % a shot at
-/// 2 ranks, broke even at 3 and saved 3-4 % at 4 and 5-10 % at 8.
+/// measured on cubes-b1 and classroom-c3 (README "Ranks"), dealing changed
+/// a shot by +1 to -3 % at 2 ranks, +1 to -4 % at 4 and -4 to -6 % at 8,
+/// and the work it saves grows with the ranks (each undealt rank bounds
+/// every polygon whose sphere touches its tiles).
 pub const DEAL_BOUNDS_RANKS: usize = 4;
 
 impl DealBounds {
