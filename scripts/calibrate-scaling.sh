@@ -33,6 +33,9 @@ BIG=${BIG:-"cubes-b2 cubes-b3"}
 OVER=${OVER:-"4 8 16"}
 OVER_BIG=${OVER_BIG:-"4 8"}
 REPEAT=${REPEAT:-2}
+# The model has no term for the ranks' deal of the bounds (README "Ranks"),
+# so its runs bound undealt unless DEAL says otherwise (auto, on).
+DEAL=${DEAL:-off}
 runs=${RUNS:-docs/scaling/runs}
 mkdir -p "$runs"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 LP_NUM_THREADS=1
@@ -48,7 +51,7 @@ run() { # ranks scene resolution exchange [repeat]
   # after the big scenes' short coarse pass, refines thousands of their
   # small faces (cubes-b1: 200 244 -> 296 580 elements).
   local args=(render "$scene" --resolution "$res" --exchange "$ex" --max-shots "$SHOTS"
-    --threshold 0 --width 0 --refine-shading 0 --report "$out")
+    --threshold 0 --width 0 --refine-shading 0 --deal-bounds "$DEAL" --report "$out")
   if [ "$n" = 1 ]; then
     taskset -c 0 "$bin" "${args[@]}" >/dev/null 2>&1
   elif [ "$n" = 2 ]; then
