@@ -397,7 +397,7 @@ impl<'m> ShotLoop<'m> {
         let area = self.mesh.patches[best.patch as usize].area;
         let (mut landed, mut delivered) = (0u64, 0i64);
         for t in &self.ff {
-            if !solver.owns(self.mesh.elements[t.element as usize].patch) {
+            if !solver.owns_element(t.element) {
                 continue;
             }
             landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
