@@ -105,6 +105,11 @@ impl ReceiverTable {
     pub fn patch(&self, j: u32) -> u32 {
         self.elements[j as usize].patch
     }
+
+    /// The area of element `j` (the element record's).
+    pub fn area(&self, j: u32) -> f64 {
+        self.elements[j as usize].area
+    }
 }
 
 /// Receivers farther than this many shooter radii from the shooter's centre

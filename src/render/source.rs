@@ -160,6 +160,10 @@ pub struct GpuFormFactors<'a> {
     whole_items: Vec<Vec<u32>>,
     /// A split group's items with the whole hemisphere's beyond its reach.
     composite: Vec<u32>,
+    /// A transport row's sort keys and its transfers in element order
+    /// (kept between shots).
+    sort_keys: Vec<u64>,
+    sorted: Vec<Transfer>,
     /// The largest distance from a patch's centre to its corners.
     max_patch_radius: f32,
     /// Where the last unsplit hemisphere stood.
@@ -227,6 +231,8 @@ impl<'a> GpuFormFactors<'a> {
                 .fold(0.0, f32::max),
             whole_items: Vec::new(),
             composite: Vec::new(),
+            sort_keys: Vec::new(),
+            sorted: Vec::new(),
             last_centre: glam::Vec3::ZERO,
             deal: opts.deal_bounds.deals(n),
         })
@@ -673,8 +679,9 @@ impl GpuFormFactors<'_> {
             }
             for &j in transport.elements_of(h) {
                 // A degenerate element takes nothing (the solver divides
-                // by its area).
-                let a = mesh.elements[j as usize].area;
+                // by its area). (The packed table: a transport row reaches
+                // thousands of elements, a record apiece was a cache miss.)
+                let a = self.receivers.area(j);
                 if a <= 0.0 {
                     continue;
                 }
@@ -686,8 +693,21 @@ impl GpuFormFactors<'_> {
                 });
             }
         }
-        // Clusters' elements interleave with other clusters'.
-        out.sort_unstable_by_key(|t| t.element);
+        // Clusters' elements interleave with other clusters'. Each element
+        // comes once, so its number orders the row wholly; sorting 8-byte
+        // keys (element, position) and gathering once moves less than
+        // sorting the 40-byte transfers.
+        self.sort_keys.clear();
+        self.sort_keys.extend(
+            out.iter()
+                .enumerate()
+                .map(|(k, t)| u64::from(t.element) << 32 | k as u64),
+        );
+        self.sort_keys.sort_unstable();
+        self.sorted.clear();
+        self.sorted
+            .extend(self.sort_keys.iter().map(|&k| out[(k & 0xffff_ffff) as usize]));
+        std::mem::swap(out, &mut self.sorted);
         self.last_blocked = transport.back_share(g);
         self.timings.transported += 1;
     }
