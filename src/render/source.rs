@@ -705,8 +705,11 @@ impl GpuFormFactors<'_> {
         );
         self.sort_keys.sort_unstable();
         self.sorted.clear();
-        self.sorted
-            .extend(self.sort_keys.iter().map(|&k| out[(k & 0xffff_ffff) as usize]));
+        self.sorted.extend(
+            self.sort_keys
+                .iter()
+                .map(|&k| out[(k & 0xffff_ffff) as usize]),
+        );
         std::mem::swap(out, &mut self.sorted);
         self.last_blocked = transport.back_share(g);
         self.timings.transported += 1;
