@@ -44,6 +44,21 @@ impl MpiComm {
         self.traffic.set(t);
     }
 
+    /// The layout of an all-to-all whose message to rank r has `lengths`'
+    /// r-th length: the counts are exchanged first (one collective).
+    fn plan(&self, lengths: impl Iterator<Item = usize>) -> AllToAll {
+        let send_counts: Vec<Count> = lengths.map(|n| n as Count).collect();
+        let mut recv_counts = vec![0 as Count; self.size()];
+        self.world
+            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
+        AllToAll {
+            send_displs: Self::displacements(&send_counts),
+            recv_displs: Self::displacements(&recv_counts),
+            send_counts,
+            recv_counts,
+        }
+    }
+
     fn displacements(counts: &[Count]) -> Vec<Count> {
         counts
             .iter()
@@ -74,6 +89,51 @@ impl Drop for CallTimer<'_> {
         t.calls += 1;
         t.cpu_seconds += (process_cpu_seconds() - self.start).max(0.0);
         self.traffic.set(t);
+    }
+}
+
+/// The counts and displacements of one all-to-all (see [`MpiComm::plan`]).
+struct AllToAll {
+    send_counts: Vec<Count>,
+    send_displs: Vec<Count>,
+    recv_counts: Vec<Count>,
+    recv_displs: Vec<Count>,
+}
+
+impl AllToAll {
+    /// Moves `data` (laid out by the send counts) to its ranks; returns
+    /// what came, laid out by the receive counts.
+    fn move_all<T: Equivalence + Copy + Default>(
+        &self,
+        world: &SimpleCommunicator,
+        data: &[T],
+    ) -> Vec<T> {
+        let total: usize = self.recv_counts.iter().map(|&c| c as usize).sum();
+        let mut incoming = vec![T::default(); total];
+        let send = Partition::new(data, &self.send_counts[..], &self.send_displs[..]);
+        let mut recv = PartitionMut::new(
+            &mut incoming[..],
+            &self.recv_counts[..],
+            &self.recv_displs[..],
+        );
+        world.all_to_all_varcount_into(&send, &mut recv);
+        incoming
+    }
+
+    fn ranks(&self) -> usize {
+        self.send_counts.len()
+    }
+
+    /// Items this rank sent to the other ranks.
+    fn sent_to_others(&self, me: usize) -> usize {
+        let all: usize = self.send_counts.iter().map(|&c| c as usize).sum();
+        all - self.send_counts[me] as usize
+    }
+
+    /// Items this rank received from the other ranks.
+    fn received_from_others(&self, me: usize) -> usize {
+        let all: usize = self.recv_counts.iter().map(|&c| c as usize).sum();
+        all - self.recv_counts[me] as usize
     }
 }
 
@@ -138,48 +198,23 @@ impl Collectives for MpiComm {
 
     fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>> {
         let _call = self.call();
-        let n = self.size();
-        let send_counts: Vec<Count> = outgoing.iter().map(|v| v.len() as Count).collect();
-        let mut recv_counts = vec![0 as Count; n];
-        self.world
-            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
-        let (sd, rd) = (
-            Self::displacements(&send_counts),
-            Self::displacements(&recv_counts),
-        );
-        let total_in: usize = recv_counts.iter().map(|&c| c as usize).sum();
-        let words: Vec<u32> = outgoing.concat();
-        let mut incoming = vec![0u32; total_in];
-        {
-            let send = Partition::new(&words[..], &send_counts[..], &sd[..]);
-            let mut recv = PartitionMut::new(&mut incoming[..], &recv_counts[..], &rd[..]);
-            self.world.all_to_all_varcount_into(&send, &mut recv);
-        }
-        let me = self.rank();
+        let plan = self.plan(outgoing.iter().map(Vec::len));
+        let incoming = plan.move_all(&self.world, &outgoing.concat());
         self.count(
-            4 * (words.len() - send_counts[me] as usize) + 4 * n,
-            4 * (total_in - recv_counts[me] as usize) + 4 * n,
+            4 * plan.sent_to_others(self.rank()) + 4 * plan.ranks(),
+            4 * plan.received_from_others(self.rank()) + 4 * plan.ranks(),
         );
-        recv_counts
+        plan.recv_counts
             .iter()
-            .zip(&rd)
+            .zip(&plan.recv_displs)
             .map(|(&c, &d)| incoming[d as usize..(d + c) as usize].to_vec())
             .collect()
     }
 
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
         let _call = self.call();
-        let n = self.size();
+        let plan = self.plan(outgoing.iter().map(Vec::len));
         // Pairs travel as two flat arrays (element ids, fixed-point values).
-        let send_counts: Vec<Count> = outgoing.iter().map(|v| v.len() as Count).collect();
-        let mut recv_counts = vec![0 as Count; n];
-        self.world
-            .all_to_all_into(&send_counts[..], &mut recv_counts[..]);
-        let (sd, rd) = (
-            Self::displacements(&send_counts),
-            Self::displacements(&recv_counts),
-        );
-        let total_in: usize = recv_counts.iter().map(|&c| c as usize).sum();
         let ids: Vec<u32> = outgoing
             .iter()
             .flat_map(|v| v.iter().map(|p| p.0))
@@ -188,24 +223,11 @@ impl Collectives for MpiComm {
             .iter()
             .flat_map(|v| v.iter().map(|p| p.1))
             .collect();
-        let mut in_ids = vec![0u32; total_in];
-        let mut in_vals = vec![0u64; total_in];
-        {
-            let send = Partition::new(&ids[..], &send_counts[..], &sd[..]);
-            let mut recv = PartitionMut::new(&mut in_ids[..], &recv_counts[..], &rd[..]);
-            self.world.all_to_all_varcount_into(&send, &mut recv);
-        }
-        {
-            let send = Partition::new(&vals[..], &send_counts[..], &sd[..]);
-            let mut recv = PartitionMut::new(&mut in_vals[..], &recv_counts[..], &rd[..]);
-            self.world.all_to_all_varcount_into(&send, &mut recv);
-        }
-        let me = self.rank();
-        let own_out = send_counts[me] as usize;
-        let own_in = recv_counts[me] as usize;
+        let in_ids = plan.move_all(&self.world, &ids);
+        let in_vals = plan.move_all(&self.world, &vals);
         self.count(
-            12 * (ids.len() - own_out) + 4 * n,
-            12 * (total_in - own_in) + 4 * n,
+            12 * plan.sent_to_others(self.rank()) + 4 * plan.ranks(),
+            12 * plan.received_from_others(self.rank()) + 4 * plan.ranks(),
         );
         in_ids.into_iter().zip(in_vals).collect()
     }

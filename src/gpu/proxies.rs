@@ -1419,27 +1419,13 @@ mod tests {
                     use crate::parallel::Collectives;
                     let o = Ownership::new(place(comm.rank()));
                     let mut scatter = |out: &[Vec<u32>]| comm.all_to_all_u32(out);
+                    let collect = |scatter: Option<Scatter<'_>>, out: &mut Vec<Instance>| {
+                        let o = Some(&o);
+                        proxies.collect_rects(&shooter, outside, res, 1e3, o, None, scatter, out)
+                    };
                     let (mut mine, mut theirs) = (Vec::new(), Vec::new());
-                    let done = proxies.collect_rects(
-                        &shooter,
-                        outside,
-                        res,
-                        1e3,
-                        Some(&o),
-                        None,
-                        Some(&mut scatter),
-                        &mut mine,
-                    );
-                    proxies.collect_rects(
-                        &shooter,
-                        outside,
-                        res,
-                        1e3,
-                        Some(&o),
-                        None,
-                        None,
-                        &mut theirs,
-                    );
+                    let done = collect(Some(&mut scatter), &mut mine);
+                    collect(None, &mut theirs);
                     let same = bytemuck::cast_slice::<Instance, u8>(&mine)
                         == bytemuck::cast_slice::<Instance, u8>(&theirs);
                     (same, done.bounded)
