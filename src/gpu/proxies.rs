@@ -258,7 +258,6 @@ impl Proxies {
         } else {
             crate::parallel::cores().min(8)
         };
-        let (corners, element, quads) = (&self.corners, &self.element, &self.quads);
         // Returns the rectangles drawn (each cut to a rank's tiles counts
         // once) and the proxies bounded.
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Drawn| {
@@ -288,24 +287,9 @@ impl Proxies {
                     }
                 }
                 done.bounded += poly.proxies.len();
-                let n = shooter.to_local(poly.normal);
-                let lookup = poly.quad.map_or_else(Lookup::default, |q| {
-                    Lookup::new(&quads[q as usize], shooter, n)
-                });
                 let start = out.instances.len();
-                for i in poly.proxies.clone() {
-                    let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                    done.rects += push_piece(
-                        &mut out.instances,
-                        &d,
-                        n,
-                        element[i as usize],
-                        &lookup,
-                        res,
-                        far,
-                        ownership,
-                    );
-                }
+                done.rects +=
+                    self.push_polygon(poly, shooter, res, far, ownership, &mut out.instances);
                 if culling {
                     let end = out.instances.len();
                     out.polygons
@@ -350,25 +334,10 @@ impl Proxies {
     where
         F: Fn(&[PolygonProxies], usize, &mut Drawn) -> Collected + Sync,
     {
-        let bounds = self.thread_runs(threads);
-        let polygons = &self.polygons;
-        let parts: Vec<(Drawn, Collected)> = std::thread::scope(|scope| {
-            let handles: Vec<_> = bounds
-                .windows(2)
-                .map(|w| {
-                    let (lo, hi) = (w[0], w[1]);
-                    scope.spawn(move || {
-                        let mut out = Drawn::default();
-                        let done = visit(&polygons[lo..hi], lo, &mut out);
-                        (out, done)
-                    })
-                })
-                .collect();
-            // A panic in a worker is a bug; surface it on this thread.
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .collect()
+        let parts = self.on_runs(threads, |lo, hi| {
+            let mut out = Drawn::default();
+            let done = visit(&self.polygons[lo..hi], lo, &mut out);
+            (out, done)
         });
         let mut done = Collected::default();
         for (part, n) in parts {
@@ -387,9 +356,13 @@ impl Proxies {
 }
 
 impl Proxies {
-    /// Where `threads` contiguous runs of polygons with about equal proxy
-    /// counts start, and the end (increasing; no empty run).
-    fn thread_runs(&self, threads: usize) -> Vec<usize> {
+    /// `run(lo, hi)` over contiguous runs of polygons with about equal
+    /// proxy counts, one a thread (all of them at once on one), the results
+    /// in polygon order.
+    fn on_runs<T: Send>(&self, threads: usize, run: impl Fn(usize, usize) -> T + Sync) -> Vec<T> {
+        if threads <= 1 {
+            return vec![run(0, self.polygons.len())];
+        }
         let per = self.corners.len().div_ceil(threads) as u32;
         let mut bounds = vec![0usize];
         for (k, poly) in self.polygons.iter().enumerate() {
@@ -399,7 +372,46 @@ impl Proxies {
         }
         bounds.push(self.polygons.len());
         bounds.dedup();
-        bounds
+        let run = &run;
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = bounds
+                .windows(2)
+                .map(|w| {
+                    let (lo, hi) = (w[0], w[1]);
+                    scope.spawn(move || run(lo, hi))
+                })
+                .collect();
+            // A panic in a worker is a bug; surface it on this thread.
+            handles
+                .into_iter()
+                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        })
+    }
+
+    /// Pushes the rectangles of `poly`'s proxies (see [`push_piece`]);
+    /// returns how many it drew uncut.
+    fn push_polygon(
+        &self,
+        poly: &PolygonProxies,
+        shooter: &ShooterFrame,
+        res: Resolution,
+        far: f32,
+        ownership: Option<&Ownership>,
+        out: &mut Vec<Instance>,
+    ) -> usize {
+        let n = shooter.to_local(poly.normal);
+        let lookup = poly.quad.map_or_else(Lookup::default, |q| {
+            Lookup::new(&self.quads[q as usize], shooter, n)
+        });
+        poly.proxies
+            .clone()
+            .map(|i| {
+                let d = self.corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
+                let element = self.element[i as usize];
+                push_piece(out, &d, n, element, &lookup, res, far, ownership)
+            })
+            .sum()
     }
 
     /// The rectangles of a run of ranks, each drawing its tiles: this rank
@@ -430,7 +442,7 @@ impl Proxies {
         let run = |lo: usize, hi: usize| -> (Vec<Vec<u32>>, Collected) {
             let mut out = vec![Vec::new(); ranks];
             let mut done = Collected::default();
-            let mut whole = Vec::new();
+            let (mut whole, mut heads) = (Vec::new(), Vec::new());
             let mut k = lo;
             while k < hi {
                 let b = k / BLOCK;
@@ -447,49 +459,21 @@ impl Proxies {
                     continue;
                 }
                 done.bounded += poly.proxies.len();
-                let n = deal.shooter.to_local(poly.normal);
-                let lookup = poly.quad.map_or_else(Lookup::default, |q| {
-                    Lookup::new(&self.quads[q as usize], deal.shooter, n)
-                });
                 whole.clear();
-                for i in poly.proxies.clone() {
-                    let d = self.corners[i as usize]
-                        .map(|c| deal.shooter.to_local(c - deal.shooter.centre));
-                    let element = self.element[i as usize];
-                    done.rects += push_piece(
-                        &mut whole, &d, n, element, &lookup, deal.res, deal.far, None,
-                    );
-                }
-                deal_pieces(&place, at as u32, &whole, &mut out);
+                done.rects +=
+                    self.push_polygon(poly, deal.shooter, deal.res, deal.far, None, &mut whole);
+                deal_pieces(&place, at as u32, &whole, &mut heads, &mut out);
             }
             (out, done)
         };
+        // Runs in polygon order, so each rank's stream stays in order.
         let (mut out, mut done) = (vec![Vec::new(); ranks], Collected::default());
-        if threads <= 1 {
-            (out, done) = run(0, self.polygons.len());
-        } else {
-            let bounds = self.thread_runs(threads);
-            let parts: Vec<(Vec<Vec<u32>>, Collected)> = std::thread::scope(|scope| {
-                let handles: Vec<_> = bounds
-                    .windows(2)
-                    .map(|w| {
-                        let (lo, hi) = (w[0], w[1]);
-                        scope.spawn(move || run(lo, hi))
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                    .collect()
-            });
-            // Runs in polygon order, so each rank's stream stays in order.
-            for (part, n) in parts {
-                for (o, p) in out.iter_mut().zip(part) {
-                    o.extend(p);
-                }
-                done.rects += n.rects;
-                done.bounded += n.bounded;
+        for (part, n) in self.on_runs(threads, run) {
+            for (o, p) in out.iter_mut().zip(part) {
+                o.extend(p);
             }
+            done.rects += n.rects;
+            done.bounded += n.bounded;
         }
         let incoming = scatter(&out);
         // Each polygon came from one rank: its runs, sorted, are the order
@@ -545,8 +529,16 @@ pub type Scatter<'a> = &'a mut dyn FnMut(&[Vec<u32>]) -> Vec<Vec<u32>>;
 /// `out[r]`, cut at every tile edge, each piece to the rank `r` whose
 /// tile holds it, after a (polygon, count) head where the polygon has any.
 /// A rank's pieces come in the order [`Ownership::pieces`] gives them.
-fn deal_pieces(place: &TilePlace, polygon: u32, whole: &[Instance], out: &mut [Vec<u32>]) {
-    let mut head = vec![usize::MAX; out.len()];
+/// `head` is scratch (where each rank's count is), kept between polygons.
+fn deal_pieces(
+    place: &TilePlace,
+    polygon: u32,
+    whole: &[Instance],
+    head: &mut Vec<usize>,
+    out: &mut [Vec<u32>],
+) {
+    head.clear();
+    head.resize(out.len(), usize::MAX);
     for inst in whole {
         let r = inst.rect;
         for (x, ox) in tile_spans(place, r[0], r[1], 0) {
@@ -1366,7 +1358,7 @@ mod tests {
                     })
                     .collect();
                 let mut out = vec![Vec::new(); ranks];
-                deal_pieces(&p, k, &whole, &mut out);
+                deal_pieces(&p, k, &whole, &mut Vec::new(), &mut out);
                 let want: Vec<[f32; 4]> = whole.iter().flat_map(|i| o.pieces(i.rect)).collect();
                 let got: Vec<[f32; 4]> = match out[rank].split_first_chunk::<2>() {
                     None => Vec::new(),

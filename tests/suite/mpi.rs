@@ -70,14 +70,19 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
     let dir = tempfile::tempdir().expect("temp dir");
     let base = mpirun(1, dir.path(), "base", &[]);
     let base_image = std::fs::read(dir.path().join("base.exr")).expect("image");
+    // The same report and the same EXR image as one rank.
+    let same_as_one = |ranks: usize, tag: &str, args: &[&str]| -> serde_json::Value {
+        let r = mpirun(ranks, dir.path(), tag, args);
+        same_result(&base, &r, tag);
+        let image = std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+        assert!(image == base_image, "{tag}: image differs");
+        r
+    };
     for ranks in [2, 3, 4] {
         for exchange in ["hemispheres", "form-factors", "sparse"] {
             let tag = format!("n{ranks}-{exchange}");
-            let r = mpirun(ranks, dir.path(), &tag, &["--exchange", exchange]);
-            same_result(&base, &r, &tag);
+            let r = same_as_one(ranks, &tag, &["--exchange", exchange]);
             assert_eq!(r["parallel"]["ranks"], ranks);
-            let image = std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
-            assert!(image == base_image, "{tag}: image differs");
         }
     }
     for tile in ["8x4", "3x5", "512x128"] {
@@ -88,11 +93,8 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
     // The bounds dealt between the ranks or not (by default from 4 ranks).
     for (ranks, deal) in [(2, "on"), (3, "on"), (4, "off")] {
         let tag = format!("n{ranks}-deal-{deal}");
-        let r = mpirun(ranks, dir.path(), &tag, &["--deal-bounds", deal]);
-        same_result(&base, &r, &tag);
+        let r = same_as_one(ranks, &tag, &["--deal-bounds", deal]);
         assert_eq!(r["settings"]["deal_bounds"], deal);
-        let image = std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
-        assert!(image == base_image, "{tag}: image differs");
     }
 }
 
