@@ -414,9 +414,12 @@ pub struct RankStats {
     /// waits for a core and this does not.
     pub cpu_seconds: f64,
     /// ... of which inside collective calls (MPI polls while it waits), so
-    /// `cpu_seconds - mpi_cpu_seconds` is the rank's own work.
+    /// `cpu_seconds - mpi_cpu_seconds` is the rank's own work. Every
+    /// collective of the final solve counts: the exchange's, the occlusion
+    /// cull's and the bounds' deal.
     pub mpi_cpu_seconds: f64,
-    /// Collective calls in the final solve.
+    /// Collective calls in the final solve (the exchange's, the cull's and
+    /// the deal's).
     pub mpi_calls: u64,
 }
 

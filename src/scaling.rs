@@ -23,6 +23,10 @@
 //!   stages; sparse pairs to their owners, a rank's distinct receivers
 //!   V (1 - exp(-cells / (N V))) of V visible ones. With the paper's own
 //!   schedule (its AP1000+), a partial-hemisphere exchange takes N stages.
+//!   Beside the exchange, the occlusion cull's all-gather of the polygons
+//!   each rank saw (bytes fitted as a power of N) and, where the ranks deal
+//!   the bounds, the all-to-all of rectangles to their tiles' owners (a
+//!   rank's share falling as a fitted power of N, N - 1 messages a call).
 //!
 //! The module reads reports as JSON and knows nothing of GPUs or MPI.
 
@@ -79,8 +83,13 @@ pub struct Run {
     pub solve: f64,
     /// Per rank, per phase ([`PHASES`]), seconds per shot.
     pub phases: Vec<[f64; 6]>,
-    /// Per rank, bytes received per shot.
+    /// Per rank, bytes received per shot (the exchange's).
     pub bytes: Vec<f64>,
+    /// Per rank, bytes of the occlusion cull's agreement received per shot.
+    pub occlusion_bytes: Vec<f64>,
+    /// Per rank, bytes of dealt rectangles received per shot (0 where the
+    /// ranks did not deal the bounds).
+    pub rect_bytes: Vec<f64>,
     /// Per rank, collective calls per shot.
     pub calls: Vec<f64>,
     /// Per rank, process CPU seconds per shot outside collective calls.
@@ -132,6 +141,8 @@ impl Run {
                 - num(&v["refinement"]["seconds"], "refinement.seconds")?,
             phases: Vec::new(),
             bytes: Vec::new(),
+            occlusion_bytes: Vec::new(),
+            rect_bytes: Vec::new(),
             calls: Vec::new(),
             cpu_own: Vec::new(),
             cells: Vec::new(),
@@ -146,6 +157,10 @@ impl Run {
             run.phases.push(ph);
             run.bytes
                 .push(num(&r["bytes_received"], "bytes_received")? / shots);
+            run.occlusion_bytes
+                .push(num(&r["occlusion_bytes_received"], "occlusion_bytes_received")? / shots);
+            run.rect_bytes
+                .push(num(&r["rect_bytes_received"], "rect_bytes_received")? / shots);
             run.calls.push(num(&r["mpi_calls"], "mpi_calls")? / shots);
             run.cpu_own.push(
                 (num(&r["cpu_seconds"], "cpu_seconds")?
@@ -263,11 +278,38 @@ pub struct Bytes {
     pub dense: f64,
     /// Sparse pairs, if any.
     pub pairs: Option<Pairs>,
+    /// The bounds' deal: rectangles sent to their tiles' owners, if the
+    /// ranks deal.
+    pub rects: Option<Pairs>,
+    /// The occlusion cull's all-gather of the polygons each rank saw.
+    pub occlusion: Growth,
 }
 
-/// (element, value) pairs sent to the ranks that own the elements: a rank
-/// sends `at2 (N / 2)^-delta` pairs a shot, (N - 1) / N of them to others,
-/// of 12 bytes each, and a 4-byte count to every rank per call.
+/// Bytes that grow (or fall) as a power of the rank count:
+/// `at2 (N / 2)^power` a rank receives a shot.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct Growth {
+    /// Bytes a rank receives a shot on 2 ranks.
+    pub at2: f64,
+    /// The power of N / 2.
+    pub power: f64,
+}
+
+impl Growth {
+    /// Bytes a rank receives a shot on `n` ranks.
+    pub fn received(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            0.0
+        } else {
+            self.at2 * (n / 2.0).powf(self.power)
+        }
+    }
+}
+
+/// Items sent to the ranks that own them ((element, value) pairs to the
+/// elements' owners, rectangles to their tiles'): a rank sends
+/// `at2 (N / 2)^-delta` items a shot, (N - 1) / N of them to others, of
+/// `size` bytes each, and a 4-byte count to every rank per call.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pairs {
     /// Pairs a rank sends a shot on 2 ranks.
@@ -276,10 +318,15 @@ pub struct Pairs {
     pub delta: f64,
     /// All-to-all calls a shot.
     pub calls: f64,
+    /// Bytes an item takes.
+    pub size: f64,
 }
 
 /// Bytes a pair takes (u32 element, u64 fixed-point value).
 pub const PAIR_BYTES: f64 = 12.0;
+/// Bytes a dealt rectangle takes (38 u32: its cells, edge planes, plane,
+/// item and grid).
+pub const RECT_BYTES: f64 = 152.0;
 /// Bytes of the count an all-to-all sends each rank.
 pub const COUNT_BYTES: f64 = 4.0;
 
@@ -291,12 +338,13 @@ impl Pairs {
 
     /// Bytes a rank receives a shot on `n` ranks.
     pub fn received(&self, n: f64) -> f64 {
-        PAIR_BYTES * self.sent(n) * (n - 1.0) / n + COUNT_BYTES * n * self.calls
+        self.size * self.sent(n) * (n - 1.0) / n + COUNT_BYTES * n * self.calls
     }
 
-    /// Pairs a rank sent a shot, from the bytes it received on `n` ranks.
-    fn from_received(bytes: f64, n: f64, calls: f64) -> f64 {
-        ((bytes - COUNT_BYTES * n * calls) * n / ((n - 1.0) * PAIR_BYTES)).max(0.0)
+    /// Items a rank sent a shot, from the bytes it received on `n` ranks
+    /// in `calls` all-to-alls of items of `size` bytes.
+    fn from_received(bytes: f64, n: f64, calls: f64, size: f64) -> f64 {
+        ((bytes - COUNT_BYTES * n * calls) * n / ((n - 1.0) * size)).max(0.0)
     }
 }
 
@@ -306,7 +354,23 @@ impl Bytes {
         if n <= 1.0 {
             return 0.0;
         }
+        self.exchanged(n) + self.beside(n)
+    }
+
+    /// Of those, the exchange's bytes.
+    pub fn exchanged(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            return 0.0;
+        }
         self.items * (n - 1.0) / n + self.dense + self.pairs.map_or(0.0, |p| p.received(n))
+    }
+
+    /// Of those, the occlusion cull's and the bounds' deal's.
+    pub fn beside(&self, n: f64) -> f64 {
+        if n <= 1.0 {
+            return 0.0;
+        }
+        self.occlusion.received(n) + self.rects.map_or(0.0, |p| p.received(n))
     }
 
     /// Bytes that cross a rank's links a shot: the dense array once per stage.
@@ -399,8 +463,8 @@ impl Model {
             // The paper's N broadcasts instead of a tree.
             stages += self.hemispheres * (n - log2_stages(n));
         }
-        if let Some(p) = self.bytes.pairs {
-            // Pairs go to every other rank: N - 1 messages.
+        for p in self.bytes.pairs.iter().chain(&self.bytes.rects) {
+            // Pairs and dealt rectangles go to every other rank: N - 1 messages.
             stages += p.calls * (n - 1.0 - log2_stages(n));
         }
         stages * net.latency + self.bytes.on_the_wire(n) / net.bandwidth
@@ -430,6 +494,23 @@ pub fn imbalance_from_epsilon(epsilon: f64, replicated: f64, divided_share: f64)
     }
     ((replicated + divided_share) * (1.0 - epsilon) / (divided_share * (1.0 + epsilon)))
         .clamp(0.0, 1.0)
+}
+
+/// The power p of `at2 (N / 2)^p` through `(ranks, value)` points beyond 2
+/// ranks, by least squares in logs (NaN with none to fit, or nothing at 2).
+fn power_through(at2: f64, points: impl Iterator<Item = (usize, f64)>) -> f64 {
+    let (num, den) =
+        points
+            .filter(|&(_, y)| y > 0.0 && at2 > 0.0)
+            .fold((0.0, 0.0), |(a, b), (n, y)| {
+                let x = (n as f64 / 2.0).ln();
+                (a + x * (y / at2).ln(), b + x * x)
+            });
+    if den > 0.0 {
+        num / den
+    } else {
+        f64::NAN
+    }
 }
 
 /// Least squares of y = a x0 + b x1 with a, b >= 0.
@@ -554,6 +635,12 @@ impl Calibration {
             // Every rank's cells of a shot's hemispheres, 4 bytes each.
             let items = 4.0 * single.cells.iter().sum::<f64>();
             let pair_calls = hemispheres;
+            // This exchange's runs beyond 2 ranks, which give the bytes' fall.
+            let more = || {
+                runs.iter()
+                    .filter(used)
+                    .filter(|r| r.ranks > 2 && key(r) == key(two))
+            };
             let mut bytes = match two.exchange.as_str() {
                 "hemispheres" => Bytes {
                     items,
@@ -571,22 +658,37 @@ impl Calibration {
                 let pairs_at = |r: &Run| {
                     let n = r.ranks as f64;
                     let rest = Run::mean(&r.bytes) - bytes.items * (n - 1.0) / n;
-                    Pairs::from_received(rest, n, pair_calls)
+                    Pairs::from_received(rest, n, pair_calls, PAIR_BYTES)
                 };
                 let at2 = pairs_at(two);
-                let (num, den) = runs
-                    .iter()
-                    .filter(used)
-                    .filter(|r| r.ranks > 2 && key(r) == key(two))
-                    .map(|r| ((r.ranks as f64 / 2.0).ln(), pairs_at(r)))
-                    .filter(|&(_, p)| p > 0.0 && at2 > 0.0)
-                    .fold((0.0, 0.0), |(a, b), (x, p)| {
-                        (a - x * (p / at2).ln(), b + x * x)
-                    });
                 bytes.pairs = Some(Pairs {
                     at2,
-                    delta: if den > 0.0 { num / den } else { f64::NAN },
+                    delta: -power_through(at2, more().map(|r| (r.ranks, pairs_at(r)))),
                     calls: pair_calls,
+                    size: PAIR_BYTES,
+                });
+            }
+            // Beside the exchange: the cull's lists, and the dealt rectangles
+            // (one all-to-all a hemisphere) where the 2-rank run dealt.
+            let occlusion_at2 = Run::mean(&two.occlusion_bytes);
+            bytes.occlusion = Growth {
+                at2: occlusion_at2,
+                power: power_through(
+                    occlusion_at2,
+                    more().map(|r| (r.ranks, Run::mean(&r.occlusion_bytes))),
+                ),
+            };
+            let rects_at = |r: &Run| {
+                let rest = Run::mean(&r.rect_bytes);
+                Pairs::from_received(rest, r.ranks as f64, hemispheres, RECT_BYTES)
+            };
+            if Run::mean(&two.rect_bytes) > 0.0 {
+                let at2 = rects_at(two);
+                bytes.rects = Some(Pairs {
+                    at2,
+                    delta: -power_through(at2, more().map(|r| (r.ranks, rects_at(r)))),
+                    calls: hemispheres,
+                    size: RECT_BYTES,
                 });
             }
             let mut model = Model {
@@ -645,7 +747,7 @@ impl Calibration {
             models.push(model);
         }
         // Pairs without runs beyond 2 ranks fall as the mean of those with,
-        // per exchange.
+        // per exchange; so do the cull's lists and the dealt rectangles.
         for ex in ["hemispheres", "sparse"] {
             let known: Vec<f64> = models
                 .iter()
@@ -661,6 +763,31 @@ impl Calibration {
                     }
                 }
             }
+        }
+        let known: Vec<f64> = models
+            .iter()
+            .filter_map(|m| m.bytes.rects.map(|p| p.delta))
+            .filter(|d| !d.is_nan())
+            .collect();
+        let mean = mean_or(&known, 1.0);
+        for m in &mut models {
+            if let Some(p) = m.bytes.rects.as_mut() {
+                if p.delta.is_nan() {
+                    p.delta = mean;
+                }
+            }
+        }
+        let known: Vec<f64> = models
+            .iter()
+            .map(|m| m.bytes.occlusion.power)
+            .filter(|d| !d.is_nan())
+            .collect();
+        let mean = mean_or(&known, 0.0);
+        for m in models
+            .iter_mut()
+            .filter(|m| m.bytes.occlusion.power.is_nan())
+        {
+            m.bytes.occlusion.power = mean;
         }
         // Scenes without runs beyond 2 ranks take the mean growth of those with.
         let known: Vec<f64> = models
@@ -740,8 +867,12 @@ impl Calibration {
                 out.push(what(
                     "bytes a shot",
                     Run::mean(&r.bytes),
-                    m.bytes.received(n),
+                    m.bytes.exchanged(n),
                 ));
+                let beside = Run::mean(&r.occlusion_bytes) + Run::mean(&r.rect_bytes);
+                if beside > 0.0 {
+                    out.push(what(BESIDE, beside, m.bytes.beside(n)));
+                }
             }
         }
         out
@@ -831,6 +962,9 @@ impl Check {
 
 /// The quantity of a load-balance check.
 pub const LOAD_BALANCE: &str = "load balance (CPU)";
+/// The quantity of a check of the bytes beside the exchange (the occlusion
+/// cull's lists and the dealt rectangles).
+pub const BESIDE: &str = "cull and deal bytes a shot";
 
 /// Reads every `*.json` report in `dir`, sorted by name.
 pub fn read_runs(dir: &Path) -> Result<Vec<Run>, ScalingError> {
@@ -894,14 +1028,79 @@ mod tests {
     }
 
     #[test]
+    fn the_deal_and_the_cull_cost_their_bytes_and_messages() {
+        let zero = PhaseFit {
+            replicated: 0.0,
+            divided: 0.0,
+        };
+        let plain = Model {
+            scene: "s".into(),
+            resolution: [128, 512],
+            exchange: "hemispheres".into(),
+            phases: [zero; 6],
+            serial: 0.1,
+            replicated: 0.01,
+            divided: 0.09,
+            calls: 4.0,
+            hemispheres: 1.0,
+            bytes: Bytes {
+                items: 262144.0,
+                ..Bytes::default()
+            },
+            imbalance2: 0.0,
+            gamma: 0.0,
+        };
+        let rects = Pairs {
+            at2: 1000.0,
+            delta: 1.0,
+            calls: 1.0,
+            size: RECT_BYTES,
+        };
+        let occlusion = Growth {
+            at2: 2000.0,
+            power: 0.5,
+        };
+        let mut dealt = plain.clone();
+        dealt.bytes.rects = Some(rects);
+        dealt.bytes.occlusion = occlusion;
+        for n in [2.0, 64.0, 1024.0] {
+            // The exchange's bytes are untouched; the deal's and the cull's
+            // come beside them.
+            assert_eq!(dealt.bytes.exchanged(n), plain.bytes.exchanged(n));
+            let beside = rects.received(n) + occlusion.received(n);
+            assert!((dealt.bytes.beside(n) - beside).abs() < 1e-9);
+            // A rank sends 1000 (2 / N) rectangles, (N - 1) / N to others.
+            let sent = 1000.0 * 2.0 / n;
+            let expect = RECT_BYTES * sent * (n - 1.0) / n + COUNT_BYTES * n;
+            assert!((rects.received(n) - expect).abs() < 1e-6, "{n}");
+            // The all-to-all takes N - 1 messages where the other calls
+            // take a tree's ceil(log2 N) stages.
+            let extra = dealt.exchange(n, &CLUSTER) - plain.exchange(n, &CLUSTER);
+            let stages = n - 1.0 - log2_stages(n);
+            let want = stages * CLUSTER.latency + beside / CLUSTER.bandwidth;
+            assert!((extra - want).abs() < 1e-12, "{n}: {extra} {want}");
+        }
+        assert_eq!(dealt.bytes.beside(1.0), 0.0);
+    }
+
+    #[test]
+    fn a_power_is_fitted_through_the_points_in_logs() {
+        let p = power_through(100.0, [(4, 200.0), (8, 400.0), (16, 800.0)].into_iter());
+        assert!((p - 1.0).abs() < 1e-12);
+        assert!(power_through(100.0, std::iter::empty()).is_nan());
+        assert!(power_through(0.0, [(4, 1.0)].into_iter()).is_nan());
+    }
+
+    #[test]
     fn pairs_round_trip_through_their_bytes() {
         let p = Pairs {
             at2: 5000.0,
             delta: 0.8,
             calls: 1.2,
+            size: RECT_BYTES,
         };
         for n in [2.0, 8.0] {
-            let back = Pairs::from_received(p.received(n), n, p.calls);
+            let back = Pairs::from_received(p.received(n), n, p.calls, p.size);
             assert!((back - p.sent(n)).abs() < 1e-6, "{n}");
         }
     }

@@ -395,8 +395,10 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, traffic: Traffic, cpu: f64
         t.receivers as f64,
         crate::report::peak_resident_bytes() as f64,
         cpu,
-        traffic.cpu_seconds,
-        traffic.calls as f64,
+        // Every collective of the final solve: the model counts the rank's
+        // own work as its CPU outside all of them, and their calls' latency.
+        traffic.cpu_seconds + t.cull_traffic.cpu_seconds + t.rect_traffic.cpu_seconds,
+        (traffic.calls + t.cull_traffic.calls + t.rect_traffic.calls) as f64,
         t.bounded as f64,
         t.cull_traffic.received as f64,
         t.rect_traffic.received as f64,
