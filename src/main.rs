@@ -201,9 +201,9 @@ pub struct SolveArgs {
     /// Whether the ranks of an MPI run deal the polygons' bounds between
     /// them: each bounds every N-th block of polygons for the whole
     /// hemisphere and sends each piece to its tile's owner, instead of every
-    /// rank testing every polygon for its own tiles. auto: from 4 ranks up
-    /// (measured: README "Ranks"). The results are identical, only the time
-    /// changes.
+    /// rank testing every polygon for its own tiles. auto: on every run of
+    /// ranks (measured: README "Ranks"). The results are identical, only the
+    /// time changes.
     #[arg(long, value_enum, default_value = "auto")]
     deal_bounds: radiosity::render::DealBounds,
     /// The memory each rank aims to stay within, GB: the form-factor row

@@ -324,9 +324,9 @@ pub struct Pairs {
 
 /// Bytes a pair takes (u32 element, u64 fixed-point value).
 pub const PAIR_BYTES: f64 = 12.0;
-/// Bytes a dealt rectangle takes (38 u32: its cells, edge planes, plane,
-/// item and grid).
-pub const RECT_BYTES: f64 = 152.0;
+/// Bytes a dealt rectangle takes (its proxy and its cell rectangle: the
+/// receiver rebuilds the rest).
+pub const RECT_BYTES: f64 = 20.0;
 /// Bytes of the count an all-to-all sends each rank.
 pub const COUNT_BYTES: f64 = 4.0;
 

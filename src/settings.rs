@@ -89,11 +89,13 @@ pub enum DealBounds {
 }
 
 /// The fewest ranks that deal the bounds under `--deal-bounds auto`:
-/// measured on cubes-b1 and classroom-c3 (README "Ranks"), dealing changed
-/// a shot by +1 to -3 % at 2 ranks, +1 to -4 % at 4 and -4 to -6 % at 8,
-/// and the work it saves grows with the ranks (each undealt rank bounds
-/// every polygon whose sphere touches its tiles).
-pub const DEAL_BOUNDS_RANKS: usize = 4;
+/// every run of ranks. Measured on cubes-b1 and classroom-c3 (README
+/// "Ranks") since the pieces travel as (proxy, cell rectangle), 20 bytes
+/// instead of the whole 152-byte rectangle: a shot 1.5-5 % faster dealt at
+/// 2 ranks, and a rank's CPU 7-9 % less at 4; the work it saves grows with
+/// the ranks (each undealt rank bounds every polygon whose sphere touches
+/// its tiles). With the 152-byte pieces, 2 ranks had not gained.
+pub const DEAL_BOUNDS_RANKS: usize = 2;
 
 impl DealBounds {
     /// Whether `ranks` ranks of a run deal the bounds.

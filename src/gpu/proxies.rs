@@ -24,6 +24,16 @@ pub(super) struct Instance {
     grid: [u32; 4],
 }
 
+/// A dealt rectangle on the wire: the proxy and its cell rectangle (or a
+/// piece of it); the receiver rebuilds the rest of its [`Instance`] from
+/// the proxy, as the sender would have (20 bytes instead of 152).
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Bound {
+    proxy: u32,
+    rect: [f32; 4],
+}
+
 /// A polygon's pieces and what culling needs.
 pub(super) struct PolygonProxies {
     pub(super) proxies: Range<u32>,
@@ -400,18 +410,62 @@ impl Proxies {
         ownership: Option<&Ownership>,
         out: &mut Vec<Instance>,
     ) -> usize {
-        let n = shooter.to_local(poly.normal);
-        let lookup = poly.quad.map_or_else(Lookup::default, |q| {
-            Lookup::new(&self.quads[q as usize], shooter, n)
-        });
+        let (n, lookup) = self.polygon_frame(poly, shooter);
         poly.proxies
             .clone()
             .map(|i| {
-                let d = self.corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
+                let d = self.local_corners(i, shooter);
                 let element = self.element[i as usize];
                 push_piece(out, &d, n, element, &lookup, res, far, ownership)
             })
             .sum()
+    }
+
+    /// `poly`'s normal in the shooter's frame and its element lookup.
+    fn polygon_frame(&self, poly: &PolygonProxies, shooter: &ShooterFrame) -> (Vec3, Lookup) {
+        let n = shooter.to_local(poly.normal);
+        let lookup = poly.quad.map_or_else(Lookup::default, |q| {
+            Lookup::new(&self.quads[q as usize], shooter, n)
+        });
+        (n, lookup)
+    }
+
+    /// Proxy `i`'s corners in the shooter's frame.
+    fn local_corners(&self, i: u32, shooter: &ShooterFrame) -> [Vec3; 4] {
+        self.corners[i as usize].map(|c| shooter.to_local(c - shooter.centre))
+    }
+
+    /// The cell rectangles of `poly`'s proxies, uncut, in the order
+    /// [`Proxies::push_polygon`] draws them (each proxy's own, then its seam
+    /// copy): what a dealing rank sends, the rest of each [`Instance`] left
+    /// to the rank that draws it. Returns how many.
+    fn bound_polygon(
+        &self,
+        poly: &PolygonProxies,
+        shooter: &ShooterFrame,
+        res: Resolution,
+        far: f32,
+        out: &mut Vec<Bound>,
+    ) -> usize {
+        let cols = res.cols as f32;
+        let before = out.len();
+        for i in poly.proxies.clone() {
+            let d = self.local_corners(i, shooter);
+            let Some(r) = cell_bounds(&d, res, far) else {
+                continue;
+            };
+            out.push(Bound {
+                proxy: i,
+                rect: [r.x0, r.x1, r.y0, r.y1],
+            });
+            if r.x1 > cols {
+                out.push(Bound {
+                    proxy: i,
+                    rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
+                });
+            }
+        }
+        out.len() - before
     }
 
     /// The rectangles of a run of ranks, each drawing its tiles: this rank
@@ -461,7 +515,7 @@ impl Proxies {
                 done.bounded += poly.proxies.len();
                 whole.clear();
                 done.rects +=
-                    self.push_polygon(poly, deal.shooter, deal.res, deal.far, None, &mut whole);
+                    self.bound_polygon(poly, deal.shooter, deal.res, deal.far, &mut whole);
                 deal_pieces(&place, at as u32, &whole, &mut heads, &mut out);
             }
             (out, done)
@@ -482,7 +536,7 @@ impl Proxies {
         for (from, words) in incoming.iter().enumerate() {
             let mut at = 0;
             while let Some(&[polygon, count]) = words.get(at..at + 2) {
-                let len = count as usize * INSTANCE_WORDS;
+                let len = count as usize * BOUND_WORDS;
                 if words.len() < at + 2 + len {
                     break;
                 }
@@ -492,12 +546,23 @@ impl Proxies {
         }
         runs.sort_unstable_by_key(|r| r.0);
         for (polygon, from, start, len) in runs {
+            // Every rank numbers polygons and proxies alike.
+            let Some(poly) = self.polygons.get(polygon as usize) else {
+                continue;
+            };
             let first = drawn.instances.len();
+            let (n, lookup) = self.polygon_frame(poly, deal.shooter);
             let words = &incoming[from][start..start + len];
-            drawn
-                .instances
-                .extend_from_slice(bytemuck::cast_slice::<u32, Instance>(words));
-            if let (true, Some(poly)) = (culling, self.polygons.get(polygon as usize)) {
+            for b in bytemuck::cast_slice::<u32, Bound>(words) {
+                if poly.proxies.contains(&b.proxy) {
+                    let d = self.local_corners(b.proxy, deal.shooter);
+                    let element = self.element[b.proxy as usize];
+                    drawn
+                        .instances
+                        .push(instance(&d, n, element, &lookup, b.rect));
+                }
+            }
+            if culling {
                 let nearest = nearest(poly, deal.shooter);
                 drawn
                     .polygons
@@ -518,8 +583,8 @@ struct Deal<'a> {
     place: TilePlace,
 }
 
-/// Words of one [`Instance`] on the wire.
-const INSTANCE_WORDS: usize = std::mem::size_of::<Instance>() / 4;
+/// Words of one [`Bound`] on the wire.
+const BOUND_WORDS: usize = std::mem::size_of::<Bound>() / 4;
 
 /// How the rectangles travel between ranks (see [`Proxies::deal`]): each
 /// rank's words for each rank, and back what each rank sent this one.
@@ -533,14 +598,14 @@ pub type Scatter<'a> = &'a mut dyn FnMut(&[Vec<u32>]) -> Vec<Vec<u32>>;
 fn deal_pieces(
     place: &TilePlace,
     polygon: u32,
-    whole: &[Instance],
+    whole: &[Bound],
     head: &mut Vec<usize>,
     out: &mut [Vec<u32>],
 ) {
     head.clear();
     head.resize(out.len(), usize::MAX);
-    for inst in whole {
-        let r = inst.rect;
+    for bound in whole {
+        let r = bound.rect;
         for (x, ox) in tile_spans(place, r[0], r[1], 0) {
             for (y, oy) in tile_spans(place, r[2], r[3], 1) {
                 let to = (oy * place.grid[0] + ox) as usize;
@@ -552,9 +617,9 @@ fn deal_pieces(
                     words.extend([polygon, 0]);
                 }
                 words[head[to]] += 1;
-                let piece = Instance {
+                let piece = Bound {
                     rect: [x[0], x[1], y[0], y[1]],
-                    ..*inst
+                    ..*bound
                 };
                 words.extend_from_slice(bytemuck::cast_slice(std::slice::from_ref(&piece)));
             }
@@ -1038,24 +1103,7 @@ fn push_piece(
     if !primary && !wrapped {
         return 0;
     }
-    // The shooter is in front when it is on the side n points to.
-    let offset = n.dot(d[0]);
-    let back = offset >= 0.0;
-    // Inside <=> the direction is on the inner side of every edge plane; which
-    // side is inner depends on the side the shooter sees.
-    let sign = if back { 1.0 } else { -1.0 };
-    let edges =
-        std::array::from_fn(|k| (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array());
-    let inst = Instance {
-        rect: [r.x0, r.x1, r.y0, r.y1],
-        edges,
-        plane: [n.x, n.y, n.z, offset],
-        item: [element, back as u32],
-        origin: lookup.origin,
-        axis: lookup.axis,
-        bilinear: lookup.bilinear,
-        grid: lookup.grid,
-    };
+    let inst = instance(d, n, element, lookup, [r.x0, r.x1, r.y0, r.y1]);
     // Pieces of one rectangle go out together, in order, so every cell
     // sees the same fragments in the same order as if it were drawn whole.
     let mut push = |rect: [f32; 4]| match ownership {
@@ -1069,6 +1117,30 @@ fn push_piece(
         push([r.x0 - cols, r.x1 - cols, r.y0, r.y1]);
     }
     primary as usize + wrapped as usize
+}
+
+/// What the fragment test needs of one planar quad `d` (corners in the
+/// shooter's frame) of element `element` on a plane with normal `n`, drawn
+/// over the cell rectangle `rect`.
+fn instance(d: &[Vec3; 4], n: Vec3, element: u32, lookup: &Lookup, rect: [f32; 4]) -> Instance {
+    // The shooter is in front when it is on the side n points to.
+    let offset = n.dot(d[0]);
+    let back = offset >= 0.0;
+    // Inside <=> the direction is on the inner side of every edge plane; which
+    // side is inner depends on the side the shooter sees.
+    let sign = if back { 1.0 } else { -1.0 };
+    let edges =
+        std::array::from_fn(|k| (d[k].cross(d[(k + 1) % 4]).normalize_or_zero() * sign).to_array());
+    Instance {
+        rect,
+        edges,
+        plane: [n.x, n.y, n.z, offset],
+        item: [element, back as u32],
+        origin: lookup.origin,
+        axis: lookup.axis,
+        bilinear: lookup.bilinear,
+        grid: lookup.grid,
+    }
 }
 
 #[cfg(test)]
@@ -1331,7 +1403,7 @@ mod tests {
             for k in 0..200u32 {
                 // Three rectangles of one polygon, some across the seam or
                 // off the grid, some on whole and half cells.
-                let whole: Vec<Instance> = (0..3)
+                let whole: Vec<Bound> = (0..3)
                     .map(|_| {
                         let v: [f32; 8] = std::array::from_fn(|_| rnd());
                         let snap = |x: f32, u: f32| {
@@ -1345,15 +1417,14 @@ mod tests {
                             snap(v[0] * 600.0 - 40.0, v[4]),
                             snap(v[1] * 150.0 - 10.0, v[5]),
                         );
-                        Instance {
+                        Bound {
+                            proxy: k,
                             rect: [
                                 x0,
                                 snap(x0 + v[2] * 150.0, v[6]),
                                 y0,
                                 snap(y0 + v[3] * 50.0, v[7]),
                             ],
-                            item: [k, 0],
-                            ..Instance::zeroed()
                         }
                     })
                     .collect();
@@ -1364,10 +1435,13 @@ mod tests {
                     None => Vec::new(),
                     Some(([polygon, count], words)) => {
                         assert_eq!(*polygon, k);
-                        assert_eq!(words.len(), *count as usize * INSTANCE_WORDS);
-                        bytemuck::cast_slice::<u32, Instance>(words)
+                        assert_eq!(words.len(), *count as usize * BOUND_WORDS);
+                        bytemuck::cast_slice::<u32, Bound>(words)
                             .iter()
-                            .map(|i| i.rect)
+                            .map(|b| {
+                                assert_eq!(b.proxy, k);
+                                b.rect
+                            })
                             .collect()
                     }
                 };
