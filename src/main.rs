@@ -202,8 +202,8 @@ pub struct SolveArgs {
     /// them: each bounds every N-th block of polygons for the whole
     /// hemisphere and sends each piece to its tile's owner, instead of every
     /// rank testing every polygon for its own tiles. auto: on every run of
-    /// ranks (measured: README "Ranks"). The results are identical, only the
-    /// time changes.
+    /// ranks whose scene has 1024 polygons or more (measured: README
+    /// "Ranks"). The results are identical, only the time changes.
     #[arg(long, value_enum, default_value = "auto")]
     deal_bounds: radiosity::render::DealBounds,
     /// The memory each rank aims to stay within, GB: the form-factor row

@@ -234,7 +234,7 @@ impl<'a> GpuFormFactors<'a> {
             sort_keys: Vec::new(),
             sorted: Vec::new(),
             last_centre: glam::Vec3::ZERO,
-            deal: opts.deal_bounds.deals(n),
+            deal: opts.deal_bounds.deals(n, mesh.polygons.len()),
         })
     }
 

@@ -90,7 +90,8 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
         let r = mpirun(4, dir.path(), &tag, &["--tile", tile]);
         same_result(&base, &r, &tag);
     }
-    // The bounds dealt between the ranks or not (by default from 4 ranks).
+    // The bounds dealt between the ranks or not (by default where the scene
+    // has 1024 polygons: not this box).
     for (ranks, deal) in [(2, "on"), (3, "on"), (4, "off")] {
         let tag = format!("n{ranks}-deal-{deal}");
         let r = same_as_one(ranks, &tag, &["--deal-bounds", deal]);
@@ -499,8 +500,9 @@ fn ranks_divide_the_bounds_of_scenes_of_many_small_polygons() {
     // cell rectangles only of polygons whose bounding spheres may show in
     // its tiles: in a room of 512 cubes most faces are small and fall in
     // one rank's tiles, but the walls and the floor span every rank's.
-    // Dealt (`--deal-bounds`, by default from 4 ranks), each polygon is
-    // bounded by one rank: the counts sum to one rank's exactly.
+    // Dealt (`--deal-bounds`, by default on scenes of 1024 polygons and
+    // more), each polygon is bounded by one rank: the counts sum to one
+    // rank's exactly.
     let dir = tempfile::tempdir().expect("temp dir");
     let args = ["--max-shots", "6", "--refine", "0"];
     let bounded = |r: &serde_json::Value| -> Vec<u64> {
@@ -514,7 +516,7 @@ fn ranks_divide_the_bounds_of_scenes_of_many_small_polygons() {
     let one_report = mpirun_scene(1, dir.path(), "one", "cubes-8", &args);
     let one = bounded(&one_report)[0];
     assert!(one > 0, "one rank bounded nothing");
-    for (ranks, deal, most) in [(2, "auto", 0.75), (4, "off", 0.62)] {
+    for (ranks, deal, most) in [(2, "off", 0.75), (4, "off", 0.62)] {
         let tag = format!("n{ranks}-{deal}");
         let extra = [&args[..], &["--deal-bounds", deal]].concat();
         let r = mpirun_scene(ranks, dir.path(), &tag, "cubes-8", &extra);
@@ -599,7 +601,8 @@ fn ranks_divide_the_hemisphere_cells_and_say_what_they_repeat() {
         );
         // Rectangles: each rank draws those that hold some of its cells
         // (with 1 x 1 tiles, nearly all of them; see README "Ranks"), or,
-        // dealing the bounds (from 4 ranks), finds those of its polygons.
+        // dealing the bounds (`auto`: scenes of 1024 polygons and more,
+        // not this box), finds those of its polygons.
         // Either way at most 3/4 of them from 2 ranks on.
         let rects = count(&r, "rects");
         let one_rects = count(&one, "rects")[0];
