@@ -233,6 +233,12 @@ pub const CLUSTER: Network = Network {
     paper_schedule: false,
 };
 
+/// `at2 (n / 2)^power`: the model's laws of what grows or falls with the
+/// rank count from its value on 2 ranks.
+fn from_two(at2: f64, power: f64, n: f64) -> f64 {
+    at2 * (n / 2.0).powf(power)
+}
+
 /// ceil(log2 n), 0 for one rank.
 fn log2_stages(n: f64) -> f64 {
     if n <= 1.0 {
@@ -301,7 +307,7 @@ impl Growth {
         if n <= 1.0 {
             0.0
         } else {
-            self.at2 * (n / 2.0).powf(self.power)
+            from_two(self.at2, self.power, n)
         }
     }
 }
@@ -333,7 +339,7 @@ pub const COUNT_BYTES: f64 = 4.0;
 impl Pairs {
     /// Pairs a rank sends a shot on `n` ranks.
     pub fn sent(&self, n: f64) -> f64 {
-        self.at2 * (n / 2.0).powf(-self.delta)
+        from_two(self.at2, -self.delta, n)
     }
 
     /// Bytes a rank receives a shot on `n` ranks.
@@ -421,7 +427,7 @@ impl Model {
         if n <= 1.0 {
             0.0
         } else {
-            (self.imbalance2 * (n / 2.0).powf(self.gamma)).min(1.0)
+            from_two(self.imbalance2, self.gamma, n).min(1.0)
         }
     }
 
@@ -993,29 +999,35 @@ mod tests {
         assert_eq!(PhaseFit::from_times(1.0, 0.4).replicated, 0.0);
     }
 
-    #[test]
-    fn imbalance_inverts_epsilon() {
+    /// A partial-hemisphere model of 128 x 512 cells: one rank 0.1 s a shot,
+    /// 0.01 s of it replicated, four calls a shot.
+    fn model(divided: f64, imbalance2: f64, gamma: f64) -> Model {
         let zero = PhaseFit {
             replicated: 0.0,
             divided: 0.0,
         };
-        let m = Model {
+        Model {
             scene: "s".into(),
             resolution: [128, 512],
             exchange: "hemispheres".into(),
             phases: [zero; 6],
             serial: 0.1,
             replicated: 0.01,
-            divided: 0.095,
+            divided,
             calls: 4.0,
             hemispheres: 1.0,
             bytes: Bytes {
                 items: 262144.0,
                 ..Bytes::default()
             },
-            imbalance2: 0.05,
-            gamma: 0.5,
-        };
+            imbalance2,
+            gamma,
+        }
+    }
+
+    #[test]
+    fn imbalance_inverts_epsilon() {
+        let m = model(0.095, 0.05, 0.5);
         for n in [2.0, 8.0, 64.0] {
             let u = imbalance_from_epsilon(m.epsilon(n), m.replicated, m.divided / n);
             assert!((u - m.imbalance(n)).abs() < 1e-9, "{n}: {u}");
@@ -1029,27 +1041,7 @@ mod tests {
 
     #[test]
     fn the_deal_and_the_cull_cost_their_bytes_and_messages() {
-        let zero = PhaseFit {
-            replicated: 0.0,
-            divided: 0.0,
-        };
-        let plain = Model {
-            scene: "s".into(),
-            resolution: [128, 512],
-            exchange: "hemispheres".into(),
-            phases: [zero; 6],
-            serial: 0.1,
-            replicated: 0.01,
-            divided: 0.09,
-            calls: 4.0,
-            hemispheres: 1.0,
-            bytes: Bytes {
-                items: 262144.0,
-                ..Bytes::default()
-            },
-            imbalance2: 0.0,
-            gamma: 0.0,
-        };
+        let plain = model(0.09, 0.0, 0.0);
         let rects = Pairs {
             at2: 1000.0,
             delta: 1.0,
