@@ -665,11 +665,16 @@ impl GpuFormFactors<'_> {
     /// A weak shooter's row along the ambient term's transport: its group's
     /// ray-sampled shares, each spread over the receiving group's elements
     /// by area (F = share * A_j / A_group), the patch shooting its mean
-    /// radiosity. The same on every rank (the transport is seeded).
+    /// radiosity. The same on every rank (the transport is seeded), and
+    /// each rank makes only its own elements' transfers: the update and the
+    /// landing skip every other rank's, and a weak shooter's row reaches
+    /// thousands of elements, so a whole row on every rank was work every
+    /// rank repeated.
     fn transport_row(&mut self, shooter: u32, region: &ShotRegion, out: &mut Vec<Transfer>) {
         let mesh = self.mesh;
         let transport = mesh.ambient_transport();
         let g = transport.group_of(shooter);
+        let (rank, ranks) = (self.comm.rank(), self.comm.size());
         out.clear();
         for &(h, share) in transport.row(g) {
             let h = h as usize;
@@ -678,6 +683,9 @@ impl GpuFormFactors<'_> {
                 continue;
             }
             for &j in transport.elements_of(h) {
+                if ranks > 1 && parallel::patch_owner(self.receivers.patch(j), ranks) != rank {
+                    continue;
+                }
                 // A degenerate element takes nothing (the solver divides
                 // by its area). (The packed table: a transport row reaches
                 // thousands of elements, a record apiece was a cache miss.)

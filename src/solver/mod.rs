@@ -118,7 +118,9 @@ pub struct Shot {
     /// The power it shot (sum over RGB; with overshooting, more than `power`,
     /// or negative where it takes back light shot ahead), W.
     pub shot_power: f64,
-    /// Sum of F_ij over all elements (1 in a closed scene).
+    /// Sum of F_ij over the transfers the shot was given: over all
+    /// elements on one rank (1 in a closed scene), over the rank's own
+    /// where a source gives only those (as the transport rows do).
     pub form_factor_sum: f64,
 }
 

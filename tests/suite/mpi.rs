@@ -456,6 +456,31 @@ fn the_tessellated_projection_is_the_same_on_every_rank_count() {
 }
 
 #[test]
+fn weak_shooters_along_the_transport_agree_across_ranks() {
+    // A weak shooter's row along the ambient term's transport is made by
+    // each rank for its own elements only: the same bits as one rank, which
+    // makes the whole row.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let args = ["--max-shots", "200", "--transport-below", "0.05"];
+    let one = mpirun(1, dir.path(), "one", &args);
+    let transported = one["timings"]["transport_shots"]
+        .as_u64()
+        .expect("transport count");
+    assert!(
+        transported > 100,
+        "{transported} of 200 shots along the transport"
+    );
+    for ranks in [2, 3] {
+        let r = mpirun(ranks, dir.path(), &format!("n{ranks}"), &args);
+        same_result(&one, &r, &format!("{ranks} ranks"));
+        assert_eq!(
+            r["timings"]["transport_shots"],
+            one["timings"]["transport_shots"]
+        );
+    }
+}
+
+#[test]
 fn overshooting_and_coarse_shots_agree_across_ranks() {
     // The ambient term every rank overshoots by is summed in fixed point,
     // and a weak shooter's coarse hemisphere is chosen from the gathered
