@@ -150,15 +150,42 @@ pub fn cores() -> usize {
     *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
 }
 
-/// The rank that owns patch `patch` among `ranks` ranks: k mod ranks (an
-/// element belongs to its patch's owner). The one place this rule lives.
+/// Patches a rank owns in a row (see [`patch_owner`]).
+pub const OWNED_RUN: usize = 8;
+
+/// The rank that owns patch `patch` among `ranks` ranks: runs of
+/// [`OWNED_RUN`] patches dealt in turn (an element belongs to its patch's
+/// owner). The one place this rule lives, with [`owned_patches`],
+/// [`owned_count`], [`owned_at`] and [`owned_index`].
 pub fn patch_owner(patch: u32, ranks: usize) -> usize {
-    patch as usize % ranks.max(1)
+    (patch as usize / OWNED_RUN) % ranks.max(1)
 }
 
 /// The patches rank `rank` of `ranks` owns, in increasing order, out of `patches`.
 pub fn owned_patches(rank: usize, ranks: usize, patches: usize) -> impl Iterator<Item = usize> {
-    (rank..patches).step_by(ranks.max(1))
+    (rank * OWNED_RUN..patches)
+        .step_by(ranks.max(1) * OWNED_RUN)
+        .flat_map(move |s| s..(s + OWNED_RUN).min(patches))
+}
+
+/// How many of `patches` patches rank `rank` of `ranks` owns.
+pub fn owned_count(rank: usize, ranks: usize, patches: usize) -> usize {
+    let period = ranks.max(1) * OWNED_RUN;
+    let full = patches / period * OWNED_RUN;
+    let rest = (patches % period)
+        .saturating_sub(rank * OWNED_RUN)
+        .min(OWNED_RUN);
+    full + rest
+}
+
+/// The `k`-th patch (from 0) rank `rank` of `ranks` owns.
+pub fn owned_at(rank: usize, ranks: usize, k: usize) -> usize {
+    (k / OWNED_RUN * ranks.max(1) + rank) * OWNED_RUN + k % OWNED_RUN
+}
+
+/// Where patch `patch` comes among its owner's patches ([`owned_at`]'s inverse).
+pub fn owned_index(patch: usize, ranks: usize) -> usize {
+    patch / (ranks.max(1) * OWNED_RUN) * OWNED_RUN + patch % OWNED_RUN
 }
 
 /// Ranks as threads of one process, for tests of what ranks exchange
@@ -397,13 +424,32 @@ mod tests {
     }
 
     #[test]
-    fn patch_ownership_is_k_mod_ranks() {
-        assert_eq!(patch_owner(7, 3), 1);
+    fn patch_ownership_is_runs_dealt_in_turn() {
+        let run = OWNED_RUN as u32;
+        assert_eq!(patch_owner(0, 3), 0);
+        assert_eq!(patch_owner(run, 3), 1);
+        assert_eq!(patch_owner(3 * run + 1, 3), 0);
         assert_eq!(patch_owner(7, 1), 0);
-        assert_eq!(owned_patches(1, 3, 8).collect::<Vec<_>>(), vec![1, 4, 7]);
-        for ranks in 1..5 {
-            for r in 0..ranks {
-                assert!(owned_patches(r, ranks, 20).all(|k| patch_owner(k as u32, ranks) == r));
+        for ranks in 1..6 {
+            for patches in [0, 1, 7, 20, 100, 257] {
+                let mut all = Vec::new();
+                for r in 0..ranks {
+                    let own: Vec<usize> = owned_patches(r, ranks, patches).collect();
+                    assert_eq!(
+                        own.len(),
+                        owned_count(r, ranks, patches),
+                        "{r}/{ranks} of {patches}"
+                    );
+                    for (k, &p) in own.iter().enumerate() {
+                        assert_eq!(patch_owner(p as u32, ranks), r);
+                        assert_eq!(owned_at(r, ranks, k), p);
+                        assert_eq!(owned_index(p, ranks), k);
+                    }
+                    assert!(own.windows(2).all(|w| w[0] < w[1]), "in increasing order");
+                    all.extend(own);
+                }
+                all.sort_unstable();
+                assert_eq!(all, (0..patches).collect::<Vec<_>>(), "every patch once");
             }
         }
     }

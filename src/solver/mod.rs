@@ -450,11 +450,7 @@ impl<'m> Solver<'m> {
     /// scan of the patches (what every shot's vote needs).
     pub fn local_vote(&self) -> (u64, Option<Candidate>) {
         let patches = self.mesh.patches.len();
-        let leaves = if self.rank < patches {
-            (patches - self.rank).div_ceil(self.ranks)
-        } else {
-            0
-        };
+        let leaves = crate::parallel::owned_count(self.rank, self.ranks, patches);
         let key = (self.rank, self.ranks, self.overshoot, patches);
         // Leaf k is own patch rank + k ranks, in increasing order, so the
         // first of equal powers wins (the lowest index, as
@@ -464,12 +460,14 @@ impl<'m> Solver<'m> {
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())
                 .refresh(key, leaves, |k| {
-                    let w = self.patch_power(self.rank + k * self.ranks);
+                    let w = self.patch_power(crate::parallel::owned_at(self.rank, self.ranks, k));
                     (w, self.to_fixed(w))
                 });
         (
             fixed,
-            best.map(|(k, w)| self.patch_candidate(self.rank + k * self.ranks, w)),
+            best.map(|(k, w)| {
+                self.patch_candidate(crate::parallel::owned_at(self.rank, self.ranks, k), w)
+            }),
         )
     }
 
@@ -478,7 +476,7 @@ impl<'m> Solver<'m> {
     /// writes the other fields).
     fn touch(vote: &mut vote::Vote, rank: usize, ranks: usize, patch: usize) {
         if patch_owner(patch as u32, ranks) == rank {
-            vote.touch((patch - rank) / ranks);
+            vote.touch(crate::parallel::owned_index(patch, ranks));
         }
     }
 
