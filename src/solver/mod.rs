@@ -191,8 +191,9 @@ pub type NetUnshot = [i64; 3];
 /// the stop rule sums exactly and ranks agree bit for bit.
 pub const UNSHOT_ONE: f64 = (1u64 << 40) as f64;
 
-/// Radiosity state over a mesh, or over one rank's share of it: patch k
-/// belongs to rank k mod ranks, and an element to its patch's rank.
+/// Radiosity state over a mesh, or over one rank's share of it: patches
+/// belong to ranks as [`patch_owner`] deals them, and an element to its
+/// patch's rank.
 pub struct Solver<'m> {
     mesh: &'m Mesh,
     rank: usize,
@@ -452,7 +453,7 @@ impl<'m> Solver<'m> {
         let patches = self.mesh.patches.len();
         let leaves = crate::parallel::owned_count(self.rank, self.ranks, patches);
         let key = (self.rank, self.ranks, self.overshoot, patches);
-        // Leaf k is own patch rank + k ranks, in increasing order, so the
+        // Leaf k is the rank's k-th own patch, in increasing order, so the
         // first of equal powers wins (the lowest index, as
         // `Candidate::best` breaks ties).
         let (fixed, best) =
