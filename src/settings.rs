@@ -79,7 +79,7 @@ impl Projection {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum DealBounds {
-    /// From [`DEAL_BOUNDS_RANKS`] ranks up, where the scene has at least
+    /// On every run of ranks whose scene has at least
     /// [`DEAL_BOUNDS_POLYGONS`] polygons.
     #[default]
     Auto,
@@ -89,16 +89,12 @@ pub enum DealBounds {
     Off,
 }
 
-/// The fewest ranks that deal the bounds under `--deal-bounds auto`:
-/// every run of ranks. Measured on cubes-b1 and classroom-c3 (README
-/// "Ranks") since the pieces travel as (proxy, cell rectangle), 20 bytes
-/// instead of the whole 152-byte rectangle: a shot 1.5-5 % faster dealt at
-/// 2 ranks, and a rank's CPU 7-9 % less at 4; the work it saves grows with
-/// the ranks (each undealt rank bounds every polygon whose sphere touches
-/// its tiles). With the 152-byte pieces, 2 ranks had not gained.
-pub const DEAL_BOUNDS_RANKS: usize = 2;
-
-/// The fewest polygons of a scene whose bounds `--deal-bounds auto` deals.
+/// The fewest polygons of a scene whose bounds `--deal-bounds auto` deals
+/// (on any number of ranks above one: measured on cubes-b1 and
+/// classroom-c3, README "Ranks", since the pieces travel as (proxy, cell
+/// rectangle), 20 bytes instead of the whole 152-byte rectangle, a shot is
+/// 1.5-5 % faster dealt at 2 ranks and a rank's CPU 7-9 % less at 4; with
+/// the 152-byte pieces 2 ranks had not gained).
 /// A smaller scene's bounds cost next to nothing (the 64-cube room's 396
 /// polygons: 0.08 ms a shot on one rank), and its few polygons, some of
 /// them walls of hundreds of elements, deal unevenly (the Cornell box on 2
@@ -110,7 +106,7 @@ impl DealBounds {
     /// `polygons` polygons.
     pub fn deals(self, ranks: usize, polygons: usize) -> bool {
         match self {
-            Self::Auto => ranks >= DEAL_BOUNDS_RANKS && polygons >= DEAL_BOUNDS_POLYGONS,
+            Self::Auto => ranks > 1 && polygons >= DEAL_BOUNDS_POLYGONS,
             Self::On => ranks > 1,
             Self::Off => false,
         }

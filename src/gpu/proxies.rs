@@ -3,7 +3,7 @@
 //! proxy's conservative cell rectangle with its edge planes, as the
 //! rectangles the GPU draws.
 
-use crate::hemisphere::{cell_bounds, Resolution};
+use crate::hemisphere::{cell_bounds, CellRect, Resolution};
 use crate::mesh::{Mesh, ShooterFrame};
 use crate::occlusion::{OcclusionMap, Piece};
 use bytemuck::{Pod, Zeroable};
@@ -447,23 +447,18 @@ impl Proxies {
         far: f32,
         out: &mut Vec<Bound>,
     ) -> usize {
-        let cols = res.cols as f32;
         let before = out.len();
         for i in poly.proxies.clone() {
             let d = self.local_corners(i, shooter);
             let Some(r) = cell_bounds(&d, res, far) else {
                 continue;
             };
-            out.push(Bound {
-                proxy: i,
-                rect: [r.x0, r.x1, r.y0, r.y1],
-            });
-            if r.x1 > cols {
-                out.push(Bound {
-                    proxy: i,
-                    rect: [r.x0 - cols, r.x1 - cols, r.y0, r.y1],
-                });
-            }
+            let (own, copy) = seam_rects(&r, res);
+            out.extend(
+                std::iter::once(own)
+                    .chain(copy)
+                    .map(|rect| Bound { proxy: i, rect }),
+            );
         }
         out.len() - before
     }
@@ -1094,16 +1089,14 @@ fn push_piece(
     let Some(r) = cell_bounds(d, res, far) else {
         return 0;
     };
-    let cols = res.cols as f32;
-    let mine = |x0: f32, x1: f32| ownership.is_none_or(|o| o.holds_own(x0, x1, r.y0, r.y1));
-    let (primary, wrapped) = (
-        mine(r.x0, r.x1),
-        r.x1 > cols && mine(r.x0 - cols, r.x1 - cols),
-    );
-    if !primary && !wrapped {
+    let mine =
+        |rect: &[f32; 4]| ownership.is_none_or(|o| o.holds_own(rect[0], rect[1], r.y0, r.y1));
+    let (own, copy) = seam_rects(&r, res);
+    let (primary, wrapped) = (mine(&own), copy.filter(mine));
+    if !primary && wrapped.is_none() {
         return 0;
     }
-    let inst = instance(d, n, element, lookup, [r.x0, r.x1, r.y0, r.y1]);
+    let inst = instance(d, n, element, lookup, own);
     // Pieces of one rectangle go out together, in order, so every cell
     // sees the same fragments in the same order as if it were drawn whole.
     let mut push = |rect: [f32; 4]| match ownership {
@@ -1113,10 +1106,18 @@ fn push_piece(
     if primary {
         push(inst.rect);
     }
-    if wrapped {
-        push([r.x0 - cols, r.x1 - cols, r.y0, r.y1]);
+    if let Some(rect) = wrapped {
+        push(rect);
     }
-    primary as usize + wrapped as usize
+    primary as usize + wrapped.is_some() as usize
+}
+
+/// A proxy's cell rectangle and, where it runs past the last column, its
+/// copy one turn of azimuth back (the seam): the rectangles it is drawn in.
+fn seam_rects(r: &CellRect, res: Resolution) -> ([f32; 4], Option<[f32; 4]>) {
+    let cols = res.cols as f32;
+    let copy = (r.x1 > cols).then_some([r.x0 - cols, r.x1 - cols, r.y0, r.y1]);
+    ([r.x0, r.x1, r.y0, r.y1], copy)
 }
 
 /// What the fragment test needs of one planar quad `d` (corners in the
