@@ -33,10 +33,13 @@ struct Shot {
 // test runs after this shader (it writes depth), so every hit is counted.
 @group(0) @binding(1) var<storage, read_write> coverage: array<atomic<u32>>;
 // Cell-centre directions, computed once in f64 (`hemisphere::direction_table`):
-// per row (sin phi, cos phi), then per column (cos theta, sin theta). The
-// driver's f32 sin/cos have unspecified precision; a table makes every
-// driver see the same rays.
-@group(0) @binding(2) var<storage, read> trig: array<vec2<f32>>;
+// entry k holds row k's (sin phi, cos phi) and column k's (cos theta, sin
+// theta), for up to 4096 rows and columns (64 KiB, the uniform binding
+// every device offers). The driver's f32 sin/cos have unspecified
+// precision; a table makes every driver see the same rays. Uniform, not
+// storage: lavapipe loads storage lane by lane with bounds checks, and the
+// two loads a fragment from a storage table cost 5 % of a shot.
+@group(0) @binding(2) var<uniform> trig: array<vec4<f32>, 4096>;
 
 struct Rect {
     @location(0) rect: vec4<f32>,   // x0, x1, y0, y1 in cells
@@ -179,8 +182,8 @@ struct FsOut {
 
 // Cell-centre direction in the shooter's frame, from the f64 table.
 fn cell_direction(cell: vec2<u32>) -> vec3<f32> {
-    let polar = trig[cell.y];
-    let azimuth = trig[shot.res.x + cell.x];
+    let polar = trig[cell.y].xy;
+    let azimuth = trig[cell.x].zw;
     return vec3<f32>(polar.x * azimuth.x, polar.x * azimuth.y, polar.y);
 }
 

@@ -21,6 +21,11 @@ pub const BLOCKED: u32 = u32::MAX - 1;
 /// hemisphere is split into tiles or ranks.
 pub const FIXED_ONE: f64 = (1u64 << 62) as f64;
 
+/// The most rows, and the most columns, a hemisphere may have: the
+/// rasteriser's table of cell directions is one 64 KiB uniform binding
+/// (16 bytes a row and column), the size every device offers.
+pub const MAX_COUNT: u32 = 4096;
+
 /// Hemisphere resolution: `rows` polar rows (R_phi) by `cols` azimuth columns (R_theta).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Resolution {
@@ -58,7 +63,7 @@ pub enum ResolutionError {
     #[error("bad column count '{0}'")]
     Cols(String),
     /// A count is out of range.
-    #[error("hemisphere resolution {0} out of range: each count must be 4..=8192")]
+    #[error("hemisphere resolution {0} out of range: each count must be 4..={MAX_COUNT}")]
     Range(Resolution),
 }
 
@@ -83,9 +88,10 @@ impl FromStr for Resolution {
 }
 
 impl Resolution {
-    /// Checks the resolution is usable (both counts in 4..=8192).
+    /// Checks the resolution is usable (both counts in 4..=[`MAX_COUNT`]).
     pub fn validate(&self) -> Result<(), ResolutionError> {
-        if !(4..=8192).contains(&self.rows) || !(4..=8192).contains(&self.cols) {
+        let range = 4..=MAX_COUNT;
+        if !range.contains(&self.rows) || !range.contains(&self.cols) {
             return Err(ResolutionError::Range(*self));
         }
         Ok(())
@@ -1018,5 +1024,8 @@ mod tests {
         );
         assert!("160".parse::<Resolution>().is_err());
         assert!("1x640".parse::<Resolution>().is_err());
+        // The shader's direction table bounds both counts.
+        assert!("1024x4096".parse::<Resolution>().is_ok());
+        assert!("1024x4097".parse::<Resolution>().is_err());
     }
 }

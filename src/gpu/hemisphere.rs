@@ -741,19 +741,36 @@ fn buffer(
 }
 
 /// The cell directions from f64 (`hemisphere::direction_table`), the same
-/// on every driver, as a storage buffer.
+/// on every driver, as the shader's uniform table: entry k holds row k's
+/// (sin phi, cos phi) and column k's (cos theta, sin theta).
 fn direction_buffer(device: &wgpu::Device, res: Resolution) -> Result<wgpu::Buffer, GpuError> {
     let table = crate::hemisphere::direction_table(res);
+    let (rows, cols) = table.split_at(res.rows as usize);
+    let most = crate::hemisphere::MAX_COUNT as usize;
+    if rows.len() > most || cols.len() > most {
+        return Err(GpuError::TooLarge(format!(
+            "hemisphere {res}: the shader's direction table holds at most {most} rows and columns"
+        )));
+    }
+    let mut entries = vec![[0.0f32; 4]; most];
+    for (k, e) in entries.iter_mut().enumerate() {
+        if let Some(r) = rows.get(k) {
+            e[..2].copy_from_slice(r);
+        }
+        if let Some(c) = cols.get(k) {
+            e[2..].copy_from_slice(c);
+        }
+    }
     let trig = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("cell directions"),
-        size: std::mem::size_of_val(table.as_slice()) as u64,
-        usage: wgpu::BufferUsages::STORAGE,
+        size: std::mem::size_of_val(entries.as_slice()) as u64,
+        usage: wgpu::BufferUsages::UNIFORM,
         mapped_at_creation: true,
     });
     trig.slice(..)
         .get_mapped_range_mut()
         .map_err(|e| GpuError::Failed(e.to_string()))?
-        .copy_from_slice(bytemuck::cast_slice(&table));
+        .copy_from_slice(bytemuck::cast_slice(&entries));
     trig.unmap();
     Ok(trig)
 }
