@@ -25,6 +25,7 @@ struct Shot {
     own: vec4<u32>,    // this rank's grid coordinates (x, y); z = 1: lattice mode (1 x 1 tiles);
                        // w = 1: count coverage
     depth: vec4<f32>,  // x: 1 / far (depth = distance / far)
+    per_tile: vec4<f32>, // 1 / tiles.x, 1 / tiles.y, 1 / tiles.z, 1 / tiles.w (see `div_by`)
 }
 
 @group(0) @binding(0) var<uniform> shot: Shot;
@@ -70,6 +71,8 @@ struct VsOut {
     @location(7) @interpolate(flat) axis: vec4<f32>,
     @location(8) @interpolate(flat) bilinear: vec4<f32>,
     @location(9) @interpolate(flat) grid: vec4<u32>,
+    // 1 / grid.z, 1 / grid.w and the patches along u (see `div_by`), once a rectangle.
+    @location(10) @interpolate(flat) per_grid: vec4<f32>,
 }
 
 // One instance per rectangle; four vertices as a triangle strip.
@@ -101,6 +104,7 @@ fn vs(@builtin(vertex_index) vi: u32, r: Rect) -> VsOut {
     out.axis = r.axis;
     out.bilinear = r.bilinear;
     out.grid = r.grid;
+    out.per_grid = grid_reciprocals(r.grid);
     return out;
 }
 
@@ -113,9 +117,24 @@ fn div_small(a: u32, d: u32) -> u32 {
     return u32(floor((f32(a) + 0.5) / f32(d)));
 }
 
-// a mod d, as `div_small`.
-fn mod_small(a: u32, d: u32) -> u32 {
-    return a - div_small(a, d) * d;
+// a / d as `div_small`, given r = 1 / d rounded (a multiply, not a divide,
+// a fragment): r is within 2.5 ulp of 1 / d (WGSL's division), so (a + 0.5) r
+// is off by under 2^-22 (a + 0.5) / d, less than its 0.5 / d from any
+// integer for a below 2^21; the floor is exact on every driver.
+fn div_by(a: u32, r: f32) -> u32 {
+    return u32(floor((f32(a) + 0.5) * r));
+}
+
+// a mod d, as `div_by`.
+fn mod_by(a: u32, d: u32, r: f32) -> u32 {
+    return a - div_by(a, r) * d;
+}
+
+// What `grid_element_of` divides by, once a rectangle: 1 / elements per
+// patch along u and along v, and the patches along u.
+fn grid_reciprocals(grid: vec4<u32>) -> vec4<f32> {
+    let per = max(grid.zw, vec2<u32>(1u));
+    return vec4<f32>(1.0 / f32(per.x), 1.0 / f32(per.y), f32(div_small(grid.x, per.x)), 0.0);
 }
 
 fn cross2(a: vec2<f32>, b: vec2<f32>) -> f32 {
@@ -152,6 +171,7 @@ fn grid_element_of(
     axis: vec4<f32>,
     bilinear: vec4<f32>,
     grid: vec4<u32>,
+    per_grid: vec4<f32>,
     p: vec3<f32>,
 ) -> u32 {
     let x = axis.xyz;
@@ -167,12 +187,14 @@ fn grid_element_of(
     let iu = min(u32(max(uv.x, 0.0) * f32(n.x)), n.x - 1u);
     let iv = min(u32(max(uv.y, 0.0) * f32(n.y)), n.y - 1u);
     let per = grid.zw;
-    let cell_patch = div_small(iv, per.y) * div_small(n.x, per.x) + div_small(iu, per.x);
-    return first + cell_patch * per.x * per.y + mod_small(iv, per.y) * per.x + mod_small(iu, per.x);
+    let ru = per_grid.x;
+    let rv = per_grid.y;
+    let cell_patch = div_by(iv, rv) * u32(per_grid.z) + div_by(iu, ru);
+    return first + cell_patch * per.x * per.y + mod_by(iv, per.y, rv) * per.x + mod_by(iu, per.x, ru);
 }
 
 fn grid_element(in: VsOut, p: vec3<f32>) -> u32 {
-    return grid_element_of(in.item.x, in.plane.xyz, in.origin, in.axis, in.bilinear, in.grid, p);
+    return grid_element_of(in.item.x, in.plane.xyz, in.origin, in.axis, in.bilinear, in.grid, in.per_grid, p);
 }
 
 struct FsOut {
@@ -190,8 +212,8 @@ fn cell_direction(cell: vec2<u32>) -> vec3<f32> {
 // Whether this rank's tiles hold the cell (full-size image, not the lattice).
 fn owns_cell(cell: vec2<u32>) -> bool {
     let owner = vec2<u32>(
-        mod_small(div_small(cell.x, shot.tiles.x), shot.tiles.z),
-        mod_small(div_small(cell.y, shot.tiles.y), shot.tiles.w),
+        mod_by(div_by(cell.x, shot.per_tile.x), shot.tiles.z, shot.per_tile.z),
+        mod_by(div_by(cell.y, shot.per_tile.y), shot.tiles.w, shot.per_tile.w),
     );
     return all(owner == shot.own.xy) && cell.x < shot.res.y && cell.y < shot.res.x;
 }
@@ -306,7 +328,7 @@ fn fs_tess(in: TessOut) -> @location(0) u32 {
         let cosine = dot(pc.plane.xyz, dir);
         let t = pc.plane.w / cosine;
         if (t > 0.0 && abs(cosine) > 1.0e-12) {
-            id = grid_element_of(pc.item.x, pc.plane.xyz, pc.origin, pc.axis, pc.bilinear, pc.grid, dir * t);
+            id = grid_element_of(pc.item.x, pc.plane.xyz, pc.origin, pc.axis, pc.bilinear, pc.grid, grid_reciprocals(pc.grid), dir * t);
         }
     }
     if (shot.own.w == 1u) {

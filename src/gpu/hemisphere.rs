@@ -26,6 +26,8 @@ struct ShotUniform {
     tiles: [u32; 4],
     own: [u32; 4],
     depth: [f32; 4],
+    /// 1 / each of `tiles` (the shader multiplies rather than divides).
+    per_tile: [f32; 4],
 }
 
 /// One piece as the tessellated projection's fragment shader reads it (see
@@ -398,6 +400,13 @@ impl HemisphereRasterizer {
             ],
             own: [own.0, own.1, lattice as u32, self.count_coverage as u32],
             depth: [1.0 / self.far, 0.0, 0.0, 0.0],
+            per_tile: [
+                layout.tile_w.max(1),
+                layout.tile_h.max(1),
+                layout.px.max(1),
+                layout.py.max(1),
+            ]
+            .map(|d| 1.0 / d as f32),
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
         if let Some(t) = self.tess.as_mut() {
