@@ -58,6 +58,11 @@ struct Packed {
     count: u32,
 }
 
+/// How many wide levels above a hinted ray's leaf its second try starts
+/// (chosen on cubes-b1's far receivers, where it walks a third fewer wide
+/// nodes; a fifth fewer on classroom-c3, a third on the 4096-cube room).
+const HINT_LEVELS: usize = 4;
+
 /// Marks a wide node's child that is a leaf of the binary hierarchy.
 const LEAF_BIT: u32 = 1 << 31;
 
@@ -78,6 +83,10 @@ pub struct Bvh {
     /// The binary leaves' triangles packed by four (the wide hierarchy's
     /// leaves: `LEAF_BIT` | an index here).
     packed: Vec<Packed>,
+    /// The wide node holding each packed leaf, and each wide node's parent
+    /// (`NO_CHILD` for the root): where a hinted walk looks after the hint.
+    leaf_up: Vec<u32>,
+    wide_up: Vec<u32>,
     /// Where the walks start: wide node 0, or the packed root when the
     /// root is a leaf (`NO_CHILD` when there are no triangles).
     root: u32,
@@ -120,6 +129,8 @@ impl Bvh {
             tris,
             wide: Vec::new(),
             packed: Vec::new(),
+            leaf_up: Vec::new(),
+            wide_up: Vec::new(),
             root: NO_CHILD,
         };
         if !bvh.tris.is_empty() {
@@ -173,6 +184,7 @@ impl Bvh {
             hi: [Vec4::ZERO; 3],
             child: [NO_CHILD; 4],
         });
+        self.wide_up.push(NO_CHILD);
         let mut wide = self.wide[w];
         for (lane, &k) in kids.iter().enumerate() {
             let n = self.nodes[k];
@@ -181,9 +193,13 @@ impl Bvh {
                 wide.hi[axis][lane] = n.hi[axis];
             }
             wide.child[lane] = if n.count > 0 {
-                self.pack(k)
+                let leaf = self.pack(k);
+                self.leaf_up.push(w as u32);
+                leaf
             } else {
-                self.widen(k)
+                let below = self.widen(k);
+                self.wide_up[below as usize] = w as u32;
+                below
             };
         }
         self.wide[w] = wide;
@@ -450,11 +466,14 @@ impl Bvh {
 
     /// [`Bvh::occluded`], trying first the leaf `hint` (the one that
     /// occluded an earlier ray: rays to neighbouring points are mostly
-    /// stopped by the same occluder) and leaving in it the leaf that
-    /// occluded this ray. The answer is `occluded`'s whatever the hint: a
-    /// leaf whose box the segment passes lies inside every ancestor's box,
-    /// which the segment then passes too (the box test rounds monotonically),
-    /// so the full walk would reach the same triangle.
+    /// stopped by the same occluder), then the subtree [`HINT_LEVELS`] wide
+    /// levels above it (the occluder's neighbours), then the rest, and
+    /// leaving in `hint` the leaf that occluded this ray. The answer is
+    /// `occluded`'s whatever the hint: a leaf whose box the segment passes
+    /// lies inside every ancestor's box, which the segment then passes too
+    /// (the box test rounds monotonically), so the full walk would reach
+    /// the same triangle; and a subtree found clear is clear in the full
+    /// walk too, which skips it.
     pub fn occluded_hinted(
         &self,
         origin: Vec3,
@@ -480,9 +499,38 @@ impl Bvh {
         if slab(root, origin, inv, t_min, t_max).is_none() {
             return false;
         }
-        // The wide walk: each lane's test is `slab`'s, bit for bit, on the
-        // same boxes, so it reaches exactly the leaves the binary walk does.
-        let mut stack = [self.root; 256];
+        let mut clear = NO_CHILD;
+        if let Some(&up) = hint.and_then(|h| self.leaf_up.get(h as usize)) {
+            let mut at = up;
+            for _ in 1..HINT_LEVELS {
+                match self.wide_up.get(at as usize) {
+                    Some(&parent) if parent != NO_CHILD => at = parent,
+                    _ => break,
+                }
+            }
+            if self.any_hit(&ray, at, NO_CHILD, skip, hint) {
+                return true;
+            }
+            clear = at;
+        }
+        self.any_hit(&ray, self.root, clear, skip, hint)
+    }
+
+    /// Whether a triangle below `start` (a wide node, or a packed leaf
+    /// with `LEAF_BIT`), outside the wide node `clear`, blocks the ray: the
+    /// wide walk, nearest box first (a shadow ray is mostly stopped near
+    /// its start). Each lane's test is `slab`'s, bit for bit, on the same
+    /// boxes, so it reaches exactly the leaves the binary walk does. A
+    /// blocking leaf becomes the hint.
+    fn any_hit(
+        &self,
+        ray: &WideRay,
+        start: u32,
+        clear: u32,
+        skip: [u32; 2],
+        hint: &mut Option<u32>,
+    ) -> bool {
+        let mut stack = [start; 256];
         let mut top = 1;
         while top > 0 {
             top -= 1;
@@ -495,10 +543,23 @@ impl Bvh {
                 }
                 continue;
             }
+            if at == clear {
+                continue;
+            }
             let wide = &self.wide[at as usize];
-            let passed = ray.passes(wide).bitmask();
+            let (passed, near) = ray.entries(wide);
+            let mut kids = [(NO_CHILD, 0.0f32); 4];
+            let mut n = 0;
             for (lane, &child) in wide.child.iter().enumerate() {
-                if passed & (1 << lane) != 0 && child != NO_CHILD && top < stack.len() {
+                if passed & (1 << lane) != 0 && child != NO_CHILD {
+                    kids[n] = (child, near[lane]);
+                    n += 1;
+                }
+            }
+            // Pushed farthest first, so the nearest is walked first.
+            kids[..n].sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+            for &(child, _) in &kids[..n] {
+                if top < stack.len() {
                     stack[top] = child;
                     top += 1;
                 }
@@ -597,14 +658,10 @@ impl WideRay {
         }
     }
 
-    /// Which of `wide`'s four boxes [`slab`] lets the ray through: the
-    /// same arithmetic a lane (an axis with a NaN bounds nothing; the rest
-    /// are exact minima and maxima, whatever their order).
-    fn passes(&self, wide: &Wide) -> BVec4A {
-        self.boxes(wide).0
-    }
-
-    /// [`WideRay::passes`] as a bit mask, with the entry distance a lane.
+    /// Which of `wide`'s four boxes [`slab`] lets the ray through (a bit
+    /// mask: the same arithmetic a lane; an axis with a NaN bounds nothing,
+    /// the rest are exact minima and maxima, whatever their order), with
+    /// the entry distance a lane.
     fn entries(&self, wide: &Wide) -> (u32, Vec4) {
         let (passed, near) = self.boxes(wide);
         (passed.bitmask(), near)
@@ -834,8 +891,9 @@ mod tests {
     #[test]
     fn a_hinted_shadow_ray_answers_as_the_full_walk_does() {
         // Squares scattered over a slab; segments to neighbouring points, in
-        // order, so the hint is often right and sometimes stale: the verdict
-        // is the plain walk's every time, and the hint does the work.
+        // order, so the hint (its leaf, then the subtree above it) is often
+        // right and sometimes stale: the verdict is the plain walk's and
+        // the binary walk's every time, and the hint does the work.
         let mut rng = crate::fuzz::Rng(11);
         let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
         let mut unit = || unit(&mut rng);
@@ -851,6 +909,12 @@ mod tests {
             );
             let skip = [(i % 300) as u32, u32::MAX];
             let want = bvh.occluded(o, to - o, 0.0, 1.0, skip);
+            // The binary walk, the wide walks' reference.
+            assert_eq!(
+                occluded_binary(&bvh, o, to - o, 1.0, skip),
+                want,
+                "segment {i}"
+            );
             let before = hint;
             let got = bvh.occluded_hinted(o, to - o, 0.0, 1.0, skip, &mut hint);
             assert_eq!(got, want, "segment {i}");
