@@ -144,7 +144,7 @@ impl Bvh {
             bvh.root = if bvh.nodes[0].count == 0 {
                 bvh.widen(0)
             } else {
-                bvh.pack(0)
+                bvh.pack(0, NO_CHILD)
             };
             // Every walk reads the packed copies; only the tests' binary
             // reference walk reads these (Sponza: 22 MB).
@@ -193,9 +193,7 @@ impl Bvh {
                 wide.hi[axis][lane] = n.hi[axis];
             }
             wide.child[lane] = if n.count > 0 {
-                let leaf = self.pack(k);
-                self.leaf_up.push(w as u32);
-                leaf
+                self.pack(k, w as u32)
             } else {
                 let below = self.widen(k);
                 self.wide_up[below as usize] = w as u32;
@@ -208,7 +206,7 @@ impl Bvh {
 
     /// Packs the binary leaf `at`'s triangles; returns the wide child
     /// naming them.
-    fn pack(&mut self, at: usize) -> u32 {
+    fn pack(&mut self, at: usize, up: u32) -> u32 {
         let node = self.nodes[at];
         let mut p = Packed {
             v0: [Vec4::ZERO; 3],
@@ -228,6 +226,7 @@ impl Bvh {
             p.polygon[lane] = t.polygon;
         }
         self.packed.push(p);
+        self.leaf_up.push(up);
         LEAF_BIT | (self.packed.len() - 1) as u32
     }
 
@@ -500,7 +499,11 @@ impl Bvh {
             return false;
         }
         let mut clear = NO_CHILD;
-        if let Some(&up) = hint.and_then(|h| self.leaf_up.get(h as usize)) {
+        // The hint's leaf and the wide node holding it (none: the root is that leaf).
+        let held = hint
+            .and_then(|h| Some((h, *self.leaf_up.get(h as usize)?)))
+            .filter(|&(_, up)| up != NO_CHILD);
+        if let Some((leaf, up)) = held {
             let mut at = up;
             for _ in 1..HINT_LEVELS {
                 match self.wide_up.get(at as usize) {
@@ -508,7 +511,8 @@ impl Bvh {
                     _ => break,
                 }
             }
-            if self.any_hit(&ray, at, NO_CHILD, skip, hint) {
+            // The hint's own leaf was just tested.
+            if self.any_hit(&ray, at, LEAF_BIT | leaf, skip, hint) {
                 return true;
             }
             clear = at;
@@ -517,7 +521,8 @@ impl Bvh {
     }
 
     /// Whether a triangle below `start` (a wide node, or a packed leaf
-    /// with `LEAF_BIT`), outside the wide node `clear`, blocks the ray: the
+    /// with `LEAF_BIT`), outside `clear` (a wide node or a packed leaf,
+    /// known clear), blocks the ray: the
     /// wide walk, nearest box first (a shadow ray is mostly stopped near
     /// its start). Each lane's test is `slab`'s, bit for bit, on the same
     /// boxes, so it reaches exactly the leaves the binary walk does. A
@@ -535,15 +540,15 @@ impl Bvh {
         while top > 0 {
             top -= 1;
             let at = stack[top];
+            if at == clear {
+                continue;
+            }
             if at & LEAF_BIT != 0 {
                 let k = at & !LEAF_BIT;
                 if ray.blocked_by(&self.packed[k as usize], skip) {
                     *hint = Some(k);
                     return true;
                 }
-                continue;
-            }
-            if at == clear {
                 continue;
             }
             let wide = &self.wide[at as usize];

@@ -390,23 +390,18 @@ impl HemisphereRasterizer {
         own: (u32, u32),
         lattice: bool,
     ) -> Result<(), GpuError> {
+        let tiles = [
+            layout.tile_w.max(1),
+            layout.tile_h.max(1),
+            layout.px.max(1),
+            layout.py.max(1),
+        ];
         let u = ShotUniform {
             res: [self.res.rows, self.res.cols, 0, 0],
-            tiles: [
-                layout.tile_w.max(1),
-                layout.tile_h.max(1),
-                layout.px.max(1),
-                layout.py.max(1),
-            ],
+            tiles,
             own: [own.0, own.1, lattice as u32, self.count_coverage as u32],
             depth: [1.0 / self.far, 0.0, 0.0, 0.0],
-            per_tile: [
-                layout.tile_w.max(1),
-                layout.tile_h.max(1),
-                layout.px.max(1),
-                layout.py.max(1),
-            ]
-            .map(|d| 1.0 / d as f32),
+            per_tile: tiles.map(|d| 1.0 / d as f32),
         };
         queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
         if let Some(t) = self.tess.as_mut() {
