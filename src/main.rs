@@ -243,6 +243,14 @@ pub struct SolveArgs {
     /// clusters them), else 0. See README "Weak shooters along the transport".
     #[arg(long, value_parser = parse_fraction)]
     transport_below: Option<f64>,
+    /// Shooters a step of the final solve. 1 (the default): one at a time,
+    /// each shot's hemisphere split over the ranks (the paper's method).
+    /// Above 1: the strongest BATCH patches shoot from the same state, each
+    /// rank drawing whole hemispheres for its turns of the batch, and the
+    /// rows go to their elements' owners; the numbers depend on BATCH, never
+    /// on the rank count. See README "Ranks".
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    batch: u32,
 }
 
 impl SolveArgs {
@@ -277,6 +285,7 @@ impl SolveArgs {
             coarse: self.coarse_resolution,
             coarse_below: self.coarse_below,
             transport_below: self.transport_below,
+            batch: self.batch as usize,
             ..RenderOptions::default()
         }
     }
@@ -525,7 +534,7 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
 }
 
 /// Flags the fuzzer passes, with odd values.
-const FUZZ_FLAGS: [&str; 22] = [
+const FUZZ_FLAGS: [&str; 23] = [
     "--resolution",
     "--threshold",
     "--max-shots",
@@ -548,6 +557,7 @@ const FUZZ_FLAGS: [&str; 22] = [
     "--coarse-resolution",
     "--coarse-below",
     "--overshoot",
+    "--batch",
 ];
 /// The values it gives them.
 const FUZZ_VALUES: [&str; 19] = [

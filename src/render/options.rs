@@ -90,6 +90,12 @@ pub struct RenderOptions {
     /// 1992): fewer shots to the same error, not less time on lavapipe
     /// (off by default).
     pub overshoot: bool,
+    /// Shooters a step of the final solve (1: one at a time, the paper's
+    /// decomposition of each shot over the ranks). Above 1 the strongest
+    /// `batch` patches shoot from the same state, each rank drawing whole
+    /// hemispheres for its turns of the batch: the numbers depend on
+    /// `batch`, not on the rank count.
+    pub batch: usize,
     /// Draw element edges over the image.
     pub wireframe: bool,
     /// Where and how often to save the solve's state (`None`: never).
@@ -137,6 +143,7 @@ impl Default for RenderOptions {
             coarse: None,
             coarse_below: DEFAULT_COARSE_BELOW,
             transport_below: None,
+            batch: 1,
             wireframe: false,
             checkpoint: None,
             interrupt: None,
@@ -275,6 +282,10 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
     // which the fingerprint holds.)
     let settings = match opts.transport_below {
         Some(t) if t > 0.0 => format!("{settings} transport {t}"),
+        _ => settings,
+    };
+    let settings = match opts.batch {
+        b if b > 1 => format!("{settings} batch {b}"),
         _ => settings,
     };
     crate::checkpoint::fingerprint(&[

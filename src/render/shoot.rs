@@ -179,6 +179,9 @@ pub struct ShotLoop<'m> {
     /// The power the last shot shot, until its landing is summed.
     last_power: Option<f64>,
     ff: Vec<Transfer>,
+    /// Shots a step (see [`ShotLoop::batched`]); 1 is progressive
+    /// refinement's one shooter at a time.
+    batch: usize,
     /// What the loop measured so far.
     pub stats: LoopStats,
 }
@@ -196,6 +199,7 @@ impl<'m> ShotLoop<'m> {
             delivered: 0,
             last_power: None,
             ff: Vec::new(),
+            batch: 1,
             stats: LoopStats {
                 patch_power: vec![0.0; mesh.patches.len()],
                 ..LoopStats::default()
@@ -203,8 +207,22 @@ impl<'m> ShotLoop<'m> {
         }
     }
 
+    /// The loop shooting `batch` shooters a step (at least 1): the
+    /// strongest `batch` patches are chosen at once, the ranks compute
+    /// their rows in turn (shot k on rank k mod ranks, each a whole
+    /// hemisphere with a source of one process: see
+    /// [`ShotLoop::step`]), and every rank lands every row on its own
+    /// elements, shot by shot in the batch's order. The numbers depend on
+    /// `batch`, never on the rank count.
+    pub fn batched(mut self, batch: usize) -> Self {
+        self.batch = batch.max(1);
+        self
+    }
+
     /// Decides, with every rank, whether to go on and who shoots; then
     /// shoots. `hooks` run after the shot and say when to save or stop.
+    /// In a batched loop `source` is a source of one process on every rank
+    /// (whole rows), and a step shoots a batch.
     pub fn step<'s>(
         &mut self,
         source: &mut GpuFormFactors,
@@ -237,11 +255,6 @@ impl<'m> ShotLoop<'m> {
         if solver.done_at(&self.stop, unshot_fraction) {
             return Ok(Step::Stopped(Stopped::Done));
         }
-        let best = Candidate::best(votes.iter().filter_map(|v| v.candidate));
-        self.stats.select += shot_start.elapsed();
-        let Some(best) = best.filter(|b| b.power >= self.floor) else {
-            return Ok(Step::Stopped(Stopped::Floor));
-        };
         // The whole solution's signed unshot power, summed exactly: every
         // rank gets the same ambient term, whatever their number.
         let mut net: NetUnshot = [0; 3];
@@ -250,7 +263,21 @@ impl<'m> ShotLoop<'m> {
                 *n += x;
             }
         }
-        let mut region = self.region(solver, &best, solver.ambient_from(net));
+        let ambient = solver.ambient_from(net);
+        if self.batch > 1 {
+            return self.step_batch(
+                source,
+                solver,
+                hooks,
+                (shot_start, unshot_fraction, ambient),
+            );
+        }
+        let best = Candidate::best(votes.iter().filter_map(|v| v.candidate));
+        self.stats.select += shot_start.elapsed();
+        let Some(best) = best.filter(|b| b.power >= self.floor) else {
+            return Ok(Step::Stopped(Stopped::Floor));
+        };
+        let mut region = self.region(solver, &best, ambient);
         if source.by_transport(best.power) && !solver.overshoot() {
             self.join_group(solver, &best, &mut region);
         }
@@ -258,6 +285,146 @@ impl<'m> ShotLoop<'m> {
         self.stats.shot_times.push(shot_start.elapsed());
         hooks.after_shot(solver, unshot_fraction);
         Ok(Step::Shot(shot))
+    }
+
+    /// One step of a batched loop, after the vote: the batch's shooters,
+    /// their rows (each from the rank whose turn it is), and their landing.
+    fn step_batch<'s>(
+        &mut self,
+        source: &mut GpuFormFactors,
+        solver: &mut Solver<'s>,
+        hooks: &mut dyn LoopHooks<'s>,
+        (shot_start, unshot_fraction, ambient): (Instant, f64, [f64; 3]),
+    ) -> Result<Step, RenderError> {
+        let (rank, ranks) = (self.comm.rank(), self.comm.size());
+        let room = self.stop.max_shots.saturating_sub(solver.shots()) as usize;
+        let batch = self.batch.min(room.max(1));
+        let chosen = self.choose(source, solver, batch);
+        self.stats.select += shot_start.elapsed();
+        if chosen.is_empty() {
+            return Ok(Step::Stopped(Stopped::Floor));
+        }
+        // A weak shooter along the transport shoots for its group (which
+        // empties other patches' stores): it goes alone, as in a loop of
+        // one shot a step, every rank computing its (cheap) row.
+        if chosen.len() == 1 && source.by_transport(chosen[0].power) && !solver.overshoot() {
+            let best = chosen[0];
+            let mut region = self.region(solver, &best, ambient);
+            self.join_group(solver, &best, &mut region);
+            source.form_factors(best.patch, &region, &mut self.ff)?;
+            let sums = row_sums(solver, best.patch, &self.ff, source.last_blocked());
+            let t = Instant::now();
+            let shot = solver.shoot_candidate(&best, &region, &self.ff);
+            self.after_landing(solver, &best, shot, sums, t.elapsed());
+            self.stats.shot_times.push(shot_start.elapsed());
+            hooks.after_shot(solver, unshot_fraction);
+            return Ok(Step::Shot(shot));
+        }
+        let regions: Vec<ShotRegion> = chosen
+            .iter()
+            .map(|c| self.region(solver, c, ambient))
+            .collect();
+        // This rank's rows, each sent in pieces to the owners of its elements.
+        let mut outgoing = vec![Vec::new(); ranks];
+        let mut rows = vec![Vec::new(); chosen.len()];
+        let mut sums = vec![0.0; chosen.len() * ROW_SUMS];
+        for (k, (c, region)) in chosen.iter().zip(&regions).enumerate() {
+            if k % ranks != rank {
+                continue;
+            }
+            source.form_factors(c.patch, region, &mut self.ff)?;
+            let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
+            sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
+            pack_row(solver, (k, rank), &self.ff, &mut outgoing, &mut rows[k]);
+        }
+        let t = Instant::now();
+        let cpu = crate::parallel::CpuSpan::start(self.comm);
+        let incoming = self.comm.all_to_all_pairs(&outgoing);
+        // Each shot's sums come from one rank; the others add exact zeros.
+        let all_sums = self.comm.all_gather_f64(&sums);
+        source.timings.exchange += t.elapsed();
+        unpack_rows(&incoming, &mut rows);
+        let landing_start = Instant::now();
+        let mut totals = vec![0.0; sums.len()];
+        for part in all_sums.chunks_exact(sums.len().max(1)) {
+            for (t, x) in totals.iter_mut().zip(part) {
+                *t += x;
+            }
+        }
+        // Every shooter gives up its store before any shot lands, so light
+        // one of them lands on another stays for a later batch.
+        let shares: Vec<[f64; 3]> = chosen
+            .iter()
+            .zip(&regions)
+            .map(|(c, r)| solver.take_shooter(c, r))
+            .collect();
+        let mut last = None;
+        for (k, (c, region)) in chosen.iter().zip(&regions).enumerate() {
+            let mut shot = solver.land(c, region, &rows[k], shares[k]);
+            let s = &totals[k * ROW_SUMS..(k + 1) * ROW_SUMS];
+            shot.form_factor_sum = s[3];
+            self.after_landing(solver, c, shot, [s[0], s[1], s[2], s[3]], Duration::ZERO);
+            last = Some(shot);
+        }
+        self.stats.update += landing_start.elapsed();
+        if let Some(b) = source.busy_cpu.last_mut() {
+            *b += cpu.own(self.comm);
+        }
+        let per_shot = shot_start.elapsed() / chosen.len() as u32;
+        self.stats
+            .shot_times
+            .extend(std::iter::repeat_n(per_shot, chosen.len()));
+        hooks.after_shot(solver, unshot_fraction);
+        Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
+    }
+
+    /// The batch's shooters: every rank's strongest `batch` patches
+    /// gathered, the strongest `batch` of them (the lowest patch on ties),
+    /// above the floor, and up to the first that shoots along the transport
+    /// (which goes alone).
+    fn choose(&self, source: &GpuFormFactors, solver: &Solver, batch: usize) -> Vec<Candidate> {
+        let mut mine = vec![-1.0; batch * CANDIDATE_LEN];
+        for (slot, c) in mine
+            .chunks_exact_mut(CANDIDATE_LEN)
+            .zip(solver.local_top(batch))
+        {
+            slot.copy_from_slice(&pack_candidate(&c));
+        }
+        let all = self.comm.all_gather_f64(&mine);
+        let mut chosen: Vec<Candidate> = all
+            .chunks_exact(CANDIDATE_LEN)
+            .filter_map(unpack_candidate)
+            .collect();
+        chosen.sort_by(|a, b| b.power.total_cmp(&a.power).then(a.patch.cmp(&b.patch)));
+        chosen.truncate(batch);
+        chosen.retain(|c| c.power >= self.floor);
+        if !solver.overshoot() {
+            if let Some(at) = chosen.iter().position(|c| source.by_transport(c.power)) {
+                chosen.truncate(at.max(1));
+            }
+        }
+        chosen
+    }
+
+    /// A batched shot's bookkeeping once landed: its energy (from the
+    /// whole row's sums) and the loop's statistics.
+    fn after_landing(
+        &mut self,
+        solver: &mut Solver,
+        best: &Candidate,
+        shot: Shot,
+        [landed, delivered, blocked, _]: [f64; ROW_SUMS],
+        update: Duration,
+    ) {
+        solver.note_retention(shot.shot_power, landed / UNSHOT_ONE);
+        let emitted = solver.emitted_power();
+        solver.note_energy(
+            shot.shot_power,
+            delivered / UNSHOT_ONE * emitted,
+            shot.shot_power * blocked,
+        );
+        self.stats.update += update;
+        self.stats.patch_power[best.patch as usize] += shot.power;
     }
 
     /// Every rank's vote, in rank order (one collective), after which the
@@ -407,6 +574,117 @@ impl<'m> ShotLoop<'m> {
             }
         }
         (landed, delivered)
+    }
+}
+
+/// f64 slots of a candidate in a batch's gather.
+const CANDIDATE_LEN: usize = 10;
+
+/// A candidate as f64 slots (every field travels exactly).
+fn pack_candidate(c: &Candidate) -> [f64; CANDIDATE_LEN] {
+    [
+        c.patch as f64,
+        c.power,
+        c.unshot[0],
+        c.unshot[1],
+        c.unshot[2],
+        c.centre.x as f64,
+        c.centre.y as f64,
+        c.centre.z as f64,
+        c.weighted as u8 as f64,
+        c.lit,
+    ]
+}
+
+/// A slot's candidate, `None` for an empty slot.
+fn unpack_candidate(v: &[f64]) -> Option<Candidate> {
+    (v[0] >= 0.0).then(|| Candidate {
+        patch: v[0] as u32,
+        power: v[1],
+        unshot: [v[2], v[3], v[4]],
+        centre: glam::Vec3::new(v[5] as f32, v[6] as f32, v[7] as f32),
+        weighted: v[8] != 0.0,
+        lit: v[9],
+    })
+}
+
+/// A whole row's sums a batched shot's energy needs: what it landed and
+/// delivered (fixed point, each element rounded on its own as
+/// [`ShotLoop::landed_here`] rounds them), the share that met back faces,
+/// and the sum of its form factors.
+const ROW_SUMS: usize = 4;
+
+fn row_sums(solver: &Solver, shooter: u32, ff: &[Transfer], blocked: f64) -> [f64; ROW_SUMS] {
+    let emitted = solver.emitted_power();
+    let area = solver.mesh().patches[shooter as usize].area;
+    let (mut landed, mut delivered, mut sum) = (0u64, 0i64, 0.0);
+    for t in ff {
+        sum += t.form_factor;
+        landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
+        if emitted > 0.0 {
+            let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
+            delivered += crate::numeric::round_i64(w / emitted * UNSHOT_ONE);
+        }
+    }
+    [landed as f64, delivered as f64, blocked, sum]
+}
+
+/// Marks a row's start in a batch's pairs (then the shot's index and its
+/// transfer count).
+const ROW_MARK: u32 = u32::MAX;
+
+/// Splits shot `k`'s row, computed on rank `rank`, between its elements'
+/// owners: this rank's transfers to `own`, the others' appended to their
+/// pairs as a mark, then four pairs a transfer (element with the form
+/// factor's bits, then with each channel's radiosity's bits).
+fn pack_row(
+    solver: &Solver,
+    (k, rank): (usize, usize),
+    ff: &[Transfer],
+    outgoing: &mut [Vec<(u32, u64)>],
+    own: &mut Vec<Transfer>,
+) {
+    let starts: Vec<usize> = outgoing.iter().map(Vec::len).collect();
+    for (r, out) in outgoing.iter_mut().enumerate() {
+        if r != rank {
+            out.push((ROW_MARK, 0));
+        }
+    }
+    for t in ff {
+        let r = solver.element_rank(t.element);
+        if r == rank {
+            own.push(*t);
+            continue;
+        }
+        let out = &mut outgoing[r];
+        out.push((t.element, t.form_factor.to_bits()));
+        out.extend(t.radiosity.map(|r| (t.element, r.to_bits())));
+    }
+    for (r, (out, start)) in outgoing.iter_mut().zip(starts).enumerate() {
+        if r != rank {
+            let count = (out.len() - start - 1) / 4;
+            out[start].1 = (k as u64) << 32 | count as u64;
+        }
+    }
+}
+
+/// Adds the rows [`pack_row`] sent this rank to `rows`, by shot (each in
+/// its row's order).
+fn unpack_rows(pairs: &[(u32, u64)], rows: &mut [Vec<Transfer>]) {
+    let mut at = 0;
+    while at < pairs.len() {
+        let (mark, head) = pairs[at];
+        debug_assert_eq!(mark, ROW_MARK);
+        let (k, count) = ((head >> 32) as usize, (head & 0xffff_ffff) as usize);
+        at += 1;
+        for t in pairs[at..at + 4 * count].chunks_exact(4) {
+            rows[k].push(Transfer {
+                element: t[0].0,
+                form_factor: f64::from_bits(t[0].1),
+                radiosity: [1, 2, 3].map(|c| f64::from_bits(t[c].1)),
+            });
+        }
+        at += 4 * count;
     }
 }
 

@@ -422,6 +422,11 @@ impl<'m> Solver<'m> {
         patch_owner(patch, self.ranks) == self.rank
     }
 
+    /// The rank that updates element `element` (its patch's owner).
+    pub fn element_rank(&self, element: u32) -> usize {
+        patch_owner(self.receiving[element as usize].patch, self.ranks)
+    }
+
     /// Whether this rank updates element `element` (its patch's owner).
     pub fn owns_element(&self, element: u32) -> bool {
         self.receiving
@@ -585,6 +590,18 @@ impl<'m> Solver<'m> {
         self.done_at(rule, self.unshot_fraction())
     }
 
+    /// This rank's `k` patches with the largest unshot power (the lowest
+    /// index first on ties), strongest first: its part of a batch of shots.
+    pub fn local_top(&self, k: usize) -> Vec<Candidate> {
+        let _ = self.local_vote();
+        let top = self.vote.lock().unwrap_or_else(|e| e.into_inner()).top(k);
+        top.into_iter()
+            .map(|(leaf, w)| {
+                self.patch_candidate(crate::parallel::owned_at(self.rank, self.ranks, leaf), w)
+            })
+            .collect()
+    }
+
     /// This rank's patch with the largest unshot power (lowest index on ties), if any has some.
     pub fn local_candidate(&self) -> Option<Candidate> {
         self.local_vote().1
@@ -708,6 +725,16 @@ impl<'m> Solver<'m> {
         region: &ShotRegion,
         ff: &[Transfer],
     ) -> Shot {
+        let direct_share = self.take_shooter(shooter, region);
+        self.land(shooter, region, ff, direct_share)
+    }
+
+    /// The first half of [`Solver::shoot_candidate`]: empties (or, when
+    /// overshooting, lowers) the shooter's store and returns the share of
+    /// the shot that is its own emission, per channel. A batch of shots
+    /// takes every shooter before it lands any, so light one of them lands
+    /// on another stays.
+    pub fn take_shooter(&mut self, shooter: &Candidate, region: &ShotRegion) -> [f64; 3] {
         let mesh = self.mesh;
         let i = shooter.patch as usize;
         let p = &mesh.patches[i];
@@ -730,11 +757,10 @@ impl<'m> Solver<'m> {
             }
             self.unshot[i] = rest;
         }
-        let area = p.area;
         // The share of this shot that is the shooter's own emission (its
         // first shot carries all of it), per channel.
         let emission = mesh.polygons[p.polygon as usize].exitance;
-        let direct_share = if std::mem::take(&mut self.emission_unshot[i]) {
+        if std::mem::take(&mut self.emission_unshot[i]) {
             [0, 1, 2].map(|c| {
                 if region.shoot[c] > 0.0 {
                     (emission[c] / region.shoot[c]).min(1.0)
@@ -744,7 +770,20 @@ impl<'m> Solver<'m> {
             })
         } else {
             [0.0; 3]
-        };
+        }
+    }
+
+    /// The second half of [`Solver::shoot_candidate`]: lands the shot on
+    /// this rank's elements through the transfers `ff`, `direct_share` of
+    /// it (from [`Solver::take_shooter`]) being the shooter's emission.
+    pub fn land(
+        &mut self,
+        shooter: &Candidate,
+        region: &ShotRegion,
+        ff: &[Transfer],
+        direct_share: [f64; 3],
+    ) -> Shot {
+        let area = self.mesh.patches[shooter.patch as usize].area;
         let mut form_factor_sum = 0.0;
         let (rank, ranks) = (self.rank, self.ranks);
         let vote = self.vote.get_mut().unwrap_or_else(|e| e.into_inner());

@@ -131,6 +131,45 @@ impl Vote {
         self.dirty = nodes;
     }
 
+    /// The `k` best leaves with their powers, best first (the tree's order:
+    /// the larger power, then the lower leaf), as of the last refresh: a
+    /// best-first walk down the tree, each node naming its subtree's best.
+    pub(super) fn top(&self, k: usize) -> Vec<(usize, f64)> {
+        #[derive(PartialEq)]
+        struct Node(f64, u32, usize);
+        impl Eq for Node {}
+        impl PartialOrd for Node {
+            fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+                Some(self.cmp(o))
+            }
+        }
+        impl Ord for Node {
+            fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+                self.0.total_cmp(&o.0).then(o.1.cmp(&self.1))
+            }
+        }
+        let mut out = Vec::with_capacity(k);
+        let mut heap = std::collections::BinaryHeap::new();
+        let push = |heap: &mut std::collections::BinaryHeap<Node>, node: usize| {
+            if let Some(&leaf) = self.tree.get(node).filter(|&&l| l != NONE) {
+                heap.push(Node(self.power[leaf as usize], leaf, node));
+            }
+        };
+        push(&mut heap, 1);
+        while out.len() < k {
+            let Some(Node(w, leaf, node)) = heap.pop() else {
+                break;
+            };
+            if node >= self.size {
+                out.push((leaf as usize, w));
+            } else {
+                push(&mut heap, 2 * node);
+                push(&mut heap, 2 * node + 1);
+            }
+        }
+        out
+    }
+
     /// A leaf's entry: itself when its power is positive (a NaN is not).
     fn leaf_value(&self, k: usize) -> u32 {
         if self.power[k] > 0.0 {
@@ -204,6 +243,20 @@ mod tests {
                     got.1.map(|(k, w)| (k, w.to_bits())),
                     want.1.map(|(k, w)| (k, w.to_bits())),
                     "{leaves} leaves, round {round}: the best"
+                );
+                // The top 5: a stable sort of the positive leaves by power.
+                let mut sorted: Vec<(usize, f64)> = power
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &w)| w > 0.0)
+                    .map(|(k, &w)| (k, w))
+                    .collect();
+                sorted.sort_by(|a, b| b.1.total_cmp(&a.1));
+                sorted.truncate(5);
+                assert_eq!(
+                    vote.top(5),
+                    sorted,
+                    "{leaves} leaves, round {round}: the top 5"
                 );
             }
         }

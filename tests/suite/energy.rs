@@ -125,3 +125,53 @@ fn weak_shooters_along_the_transport_conserve_energy_on_one_and_two_ranks() {
         }
     }
 }
+
+/// Batched shots (`--batch`): every shooter of a batch gives up its store
+/// before any lands, so light one lands on another stays. Energy balances in
+/// a closed room, weak shooters along the transport (which go alone)
+/// included, and 1, 2 and 3 ranks give the same bits (each row is drawn
+/// whole on the rank whose turn it is, and lands on its elements' owners).
+#[test]
+fn batched_shots_conserve_energy_and_agree_on_any_rank_count() {
+    let scene = radiosity::scene::open("family-stacked-2").expect("scene");
+    let mut opts = RenderOptions {
+        width: 0,
+        batch: 5,
+        transport_below: Some(1e-3),
+        resolution: Resolution {
+            rows: 64,
+            cols: 256,
+        },
+        ..RenderOptions::default()
+    };
+    opts.stop.threshold = 0.01;
+    let run = |ranks: usize| {
+        ThreadComm::run(ranks, |comm| {
+            render_on(gpu(), &scene, &opts, comm, Duration::ZERO, &mut |_| {})
+                .expect("render")
+                .map(|r| r.report)
+        })
+        .into_iter()
+        .flatten()
+        .next()
+        .expect("rank 0's report")
+    };
+    let one = run(1);
+    let e = one.energy;
+    assert!((e.balance - 1.0).abs() < 1e-3, "batched: {e:?}");
+    assert!(one.unshot_fraction <= 0.01, "{}", one.unshot_fraction);
+    assert!(
+        one.timings.transport_shots > 0 && one.timings.transport_shots < one.shots,
+        "both kinds of shot: {} of {} along the transport",
+        one.timings.transport_shots,
+        one.shots
+    );
+    for ranks in [2, 3] {
+        let r = run(ranks);
+        assert_eq!(r.energy, one.energy, "{ranks} ranks");
+        assert_eq!(r.shots, one.shots, "{ranks} ranks");
+        for (a, b) in one.surfaces.iter().zip(&r.surfaces) {
+            assert_eq!(a.radiosity, b.radiosity, "{ranks} ranks: {}", a.node);
+        }
+    }
+}

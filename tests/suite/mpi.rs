@@ -481,6 +481,39 @@ fn weak_shooters_along_the_transport_agree_across_ranks() {
 }
 
 #[test]
+fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
+    // Each rank draws whole hemispheres for its turns of a batch and sends
+    // each row to its elements' owners: the same bits on any rank count,
+    // overshooting too. A batch shoots from one state, so it converges a
+    // little slower a shot than one shooter at a time, not much.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let args = ["--max-shots", "60", "--batch", "4"];
+    let one = mpirun(1, dir.path(), "one", &args);
+    for ranks in [2, 3] {
+        let r = mpirun(ranks, dir.path(), &format!("n{ranks}"), &args);
+        same_result(&one, &r, &format!("{ranks} ranks, batches of 4"));
+        assert_eq!(r["energy"], one["energy"]);
+    }
+    let over = ["--max-shots", "60", "--batch", "3", "--overshoot"];
+    let a = mpirun(1, dir.path(), "over1", &over);
+    let b = mpirun(2, dir.path(), "over2", &over);
+    same_result(&a, &b, "overshooting in batches of 3");
+    let single = mpirun(1, dir.path(), "single", &["--max-shots", "60"]);
+    let (u1, u4) = (
+        single["unshot_fraction"].as_f64().expect("unshot"),
+        one["unshot_fraction"].as_f64().expect("unshot"),
+    );
+    assert!(
+        u4 >= u1 * 0.98 && u4 <= u1 * 1.3,
+        "unshot after 60 shots: {u4} batched, {u1} not"
+    );
+    assert_ne!(
+        single["surfaces"], one["surfaces"],
+        "a batch is not one shot at a time"
+    );
+}
+
+#[test]
 fn overshooting_and_coarse_shots_agree_across_ranks() {
     // The ambient term every rank overshoots by is summed in fixed point,
     // and a weak shooter's coarse hemisphere is chosen from the gathered
