@@ -40,7 +40,12 @@ runs=${RUNS:-docs/scaling/runs}
 mkdir -p "$runs"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 LP_NUM_THREADS=1
 export OMPI_MCA_btl=${OMPI_MCA_btl:-self,vader,tcp}
-run() { # ranks scene resolution exchange [repeat]
+# Batched shots (`--batch`, not the paper's method: each rank draws whole
+# hemispheres for its turns of a batch) on these scenes, in batches of
+# BATCH (at least the most ranks the model is read at: 64).
+BATCH=${BATCH:-64}
+BATCH_SCENES=${BATCH_SCENES:-"cubes-b1 classroom-c3"}
+run() { # ranks scene resolution exchange [repeat] (exchange batches-K: --batch K)
   local n=$1 scene=$2 res=$3 ex=$4 rep=${5:-1}
   local out="$runs/$scene-$res-n$n-$ex.json"
   if [ "$rep" != 1 ]; then out="$runs/$scene-$res-n$n-$ex-rep$rep.json"; fi
@@ -50,7 +55,9 @@ run() { # ranks scene resolution exchange [repeat]
   # shading criterion serves the camera image (these runs make none) and,
   # after the big scenes' short coarse pass, refines thousands of their
   # small faces (cubes-b1: 200 244 -> 296 580 elements).
-  local args=(render "$scene" --resolution "$res" --exchange "$ex" --max-shots "$SHOTS"
+  local exchange=(--exchange "$ex")
+  case "$ex" in batches-*) exchange=(--exchange hemispheres --batch "${ex#batches-}") ;; esac
+  local args=(render "$scene" --resolution "$res" "${exchange[@]}" --max-shots "$SHOTS"
     --threshold 0 --width 0 --refine-shading 0 --deal-bounds "$DEAL" --report "$out")
   if [ "$n" = 1 ]; then
     taskset -c 0 "$bin" "${args[@]}" >/dev/null 2>&1
@@ -67,6 +74,12 @@ for rep in $(seq 1 "$REPEAT"); do
   done
   # The paper's figure 12: B3 at a finer hemisphere.
   for n in 1 2; do run "$n" cubes-b3 192x768 hemispheres "$rep"; done
+  for scene in $BATCH_SCENES; do
+    for n in 1 2; do run "$n" "$scene" 128x512 "batches-$BATCH" "$rep"; done
+  done
+done
+for scene in $BATCH_SCENES; do
+  for n in $OVER; do run "$n" "$scene" 128x512 "batches-$BATCH"; done
 done
 for scene in $SCENES; do
   for n in $OVER; do run "$n" "$scene" 128x512 hemispheres; done

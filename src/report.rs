@@ -311,8 +311,13 @@ pub struct Parallel {
     pub rank_grid: [u32; 2],
     /// Tile size in cells (along theta, along phi).
     pub tile: [u32; 2],
-    /// The form-factor exchange.
+    /// The form-factor exchange (of a shot's hemisphere split over the
+    /// ranks; unused by batched shots).
     pub exchange: crate::parallel::Exchange,
+    /// Shooters a step (`--batch`): above 1 each rank draws whole
+    /// hemispheres for its turns of a batch and sends the rows to their
+    /// elements' owners, instead of the exchange.
+    pub batch: usize,
     /// Per rank: seconds per phase (summed over shots) and bytes exchanged.
     pub per_rank: Vec<RankStats>,
     /// Bytes per shot received by a rank, by the paper's formulas: hemispheres
@@ -356,6 +361,7 @@ impl Parallel {
             rank_grid: [layout.px, layout.py],
             tile: [layout.tile_w, layout.tile_h],
             exchange,
+            batch: 1,
             per_rank,
             formula_bytes_per_shot: formula,
             measured_bytes_per_shot: received / n / shots.max(1) as f64,

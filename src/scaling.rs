@@ -135,7 +135,12 @@ impl Run {
                 num(&v["settings"]["resolution"]["cols"], "cols")? as u32,
             ],
             ranks: per_rank.len(),
-            exchange: p["exchange"].as_str().unwrap_or("?").to_string(),
+            // Batched shots (`--batch`) are their own decomposition, fitted
+            // against 1-rank runs of the same batch.
+            exchange: match p["batch"].as_u64() {
+                Some(b) if b > 1 => format!("batches-{b}"),
+                _ => p["exchange"].as_str().unwrap_or("?").to_string(),
+            },
             shots,
             solve: num(&v["timings"]["solve"], "solve")?
                 - num(&v["refinement"]["seconds"], "refinement.seconds")?,
@@ -418,9 +423,17 @@ pub struct Model {
     pub imbalance2: f64,
     /// Growth of the imbalance with the rank count.
     pub gamma: f64,
+    /// The most ranks the divided work splits over: a batch's shots
+    /// (`batches-K`: K rows a step; more ranks wait), else unbounded.
+    pub split_limit: f64,
 }
 
 impl Model {
+    /// The ranks the divided work is split over on `n` ranks.
+    fn busy(&self, n: f64) -> f64 {
+        n.min(self.split_limit)
+    }
+
     /// The imbalance u(N): the slowest rank's divided work over the mean,
     /// less one (0 on one rank; at most 1, when one rank has twice its share).
     pub fn imbalance(&self, n: f64) -> f64 {
@@ -436,7 +449,7 @@ impl Model {
         if n <= 1.0 {
             self.serial
         } else {
-            self.replicated + self.divided / n
+            self.replicated + self.divided / self.busy(n)
         }
     }
 
@@ -445,7 +458,8 @@ impl Model {
         if n <= 1.0 {
             self.serial
         } else {
-            self.replicated + self.divided / n * (1.0 + self.imbalance(n))
+            let m = self.busy(n);
+            self.replicated + self.divided / m * (1.0 + self.imbalance(m))
         }
     }
 
@@ -454,8 +468,8 @@ impl Model {
         if n <= 1.0 {
             return 1.0;
         }
-        let q = self.divided / n;
-        let u = self.imbalance(n);
+        let q = self.divided / self.busy(n);
+        let u = self.imbalance(self.busy(n));
         (self.replicated + q * (1.0 - u)) / (self.replicated + q * (1.0 + u))
     }
 
@@ -580,9 +594,20 @@ impl Calibration {
     pub fn fit_up_to(runs: Vec<Run>, max_ranks: usize) -> Result<Self, ScalingError> {
         let runs = fastest_of_repeats(runs);
         let used = |r: &&Run| r.ranks <= max_ranks;
-        let one = |scene: &str, res: [u32; 2]| {
-            runs.iter()
-                .find(|r| r.ranks == 1 && r.scene == scene && r.resolution == res)
+        // A batched run's 1-rank run is of the same batch; the exchanges'
+        // is any other (one rank exchanges nothing).
+        let one = |scene: &str, res: [u32; 2], exchange: &str| {
+            let batched = |ex: &str| ex.starts_with("batches");
+            runs.iter().find(|r| {
+                r.ranks == 1
+                    && r.scene == scene
+                    && r.resolution == res
+                    && if batched(exchange) {
+                        r.exchange == exchange
+                    } else {
+                        !batched(&r.exchange)
+                    }
+            })
         };
         // replicated + divided / N through the mean CPU seconds of an
         // exchange's runs on 2 or more ranks, when there are 2 rank counts.
@@ -603,7 +628,7 @@ impl Calibration {
         let mut models = Vec::new();
         let mut net_rows = Vec::new();
         for two in runs.iter().filter(|r| r.ranks == 2) {
-            let Some(single) = one(&two.scene, two.resolution) else {
+            let Some(single) = one(&two.scene, two.resolution, &two.exchange) else {
                 return Err(ScalingError::Report {
                     path: two.path.clone(),
                     what: format!(
@@ -710,6 +735,11 @@ impl Calibration {
                 bytes,
                 imbalance2: 0.0,
                 gamma: 0.0,
+                split_limit: two
+                    .exchange
+                    .strip_prefix("batches-")
+                    .and_then(|k| k.parse::<f64>().ok())
+                    .unwrap_or(f64::INFINITY),
             };
             // Imbalance: u(N) = u2 (N / 2)^gamma, least squares in logs
             // through every run of this scene's hemispheres beyond 2 ranks.
@@ -721,6 +751,13 @@ impl Calibration {
                 )
             };
             model.imbalance2 = u(two).1;
+            // Batched shots' imbalance is their own; the exchanges share the
+            // hemispheres' (the drawing is the same).
+            let grows_as = if two.exchange.starts_with("batches") {
+                two.exchange.as_str()
+            } else {
+                "hemispheres"
+            };
             let more: Vec<(f64, f64)> = runs
                 .iter()
                 .filter(used)
@@ -728,7 +765,7 @@ impl Calibration {
                     r.ranks > 2
                         && r.scene == two.scene
                         && r.resolution == two.resolution
-                        && r.exchange == "hemispheres"
+                        && r.exchange == grows_as
                 })
                 .map(u)
                 .filter(|&(_, u)| u > 0.0)
@@ -795,15 +832,20 @@ impl Calibration {
         {
             m.bytes.occlusion.power = mean;
         }
-        // Scenes without runs beyond 2 ranks take the mean growth of those with.
-        let known: Vec<f64> = models
-            .iter()
-            .map(|m| m.gamma)
-            .filter(|g| !g.is_nan())
-            .collect();
-        let pooled = mean_or(&known, 0.5);
-        for m in models.iter_mut().filter(|m| m.gamma.is_nan()) {
-            m.gamma = pooled;
+        // Scenes without runs beyond 2 ranks take the mean growth of those
+        // with, batched shots apart.
+        for batched in [false, true] {
+            let kind = |m: &Model| m.exchange.starts_with("batches") == batched;
+            let known: Vec<f64> = models
+                .iter()
+                .filter(|m| kind(m))
+                .map(|m| m.gamma)
+                .filter(|g| !g.is_nan())
+                .collect();
+            let pooled = mean_or(&known, 0.5);
+            for m in models.iter_mut().filter(|m| kind(m) && m.gamma.is_nan()) {
+                m.gamma = pooled;
+            }
         }
         let (latency, inv_bw) = least_squares_2(&net_rows);
         let local = Network {
@@ -835,7 +877,7 @@ impl Calibration {
     pub fn validation(&self) -> Vec<Check> {
         let mut out = Vec::new();
         for r in &self.runs {
-            let exchange = if r.ranks == 1 {
+            let exchange = if r.ranks == 1 && !r.exchange.starts_with("batches") {
                 "hemispheres"
             } else {
                 r.exchange.as_str()
@@ -1022,7 +1064,19 @@ mod tests {
             },
             imbalance2,
             gamma,
+            split_limit: f64::INFINITY,
         }
+    }
+
+    #[test]
+    fn a_batch_splits_over_at_most_its_shots() {
+        let mut m = model(0.095, 0.05, 0.5);
+        m.exchange = "batches-16".into();
+        m.split_limit = 16.0;
+        assert_eq!(m.compute_max(64.0), m.compute_max(16.0));
+        assert!(m.compute_max(16.0) < m.compute_max(8.0));
+        let free = model(0.095, 0.05, 0.5);
+        assert!(free.compute_max(64.0) < free.compute_max(16.0));
     }
 
     #[test]

@@ -166,6 +166,20 @@ fn speedup_series(cal: &Calibration, scenes: &[&str], net: &Network) -> crate::b
             }
         }
     }
+    // Batched shots (not the paper's method: whole hemispheres a rank).
+    for m in cal.models.iter().filter(|m| {
+        m.resolution == STD
+            && m.exchange.starts_with("batches")
+            && scenes.contains(&m.scene.as_str())
+    }) {
+        series.push((
+            format!("{}, {}", m.scene, m.exchange.replace('-', " of ")),
+            RANKS
+                .iter()
+                .map(|&n| (n.log2(), m.speedup(n, net)))
+                .collect(),
+        ));
+    }
     series
 }
 

@@ -346,6 +346,13 @@ impl<'m> Gathered<'m> {
             LoadBalance::from_busy(&self.busy),
         );
         parallel.load_balance_cpu = LoadBalance::from_busy(&self.busy_cpu);
+        if opts.batch > 1 {
+            // Batched rows travel as pairs to their owners: no closed form.
+            parallel.batch = opts.batch;
+            if parallel.ranks > 1 {
+                parallel.formula_bytes_per_shot = None;
+            }
+        }
         (self.whole, parallel)
     }
 }
