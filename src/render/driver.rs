@@ -230,6 +230,7 @@ pub fn render_on(
         comm
     };
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, source_comm, scene.extent())?;
+    source.set_transport_ranks(comm.rank(), comm.size());
     timings.setup = t.elapsed().as_secs_f64();
     crate::report::log_memory("the rasteriser's set-up");
     let (mut solver, trace, so_far) =

@@ -306,16 +306,14 @@ impl<'m> ShotLoop<'m> {
         }
         // A weak shooter along the transport shoots for its group (which
         // empties other patches' stores): it goes alone, as in a loop of
-        // one shot a step, every rank computing its (cheap) row.
+        // one shot a step, every rank making its own elements' part of the
+        // (cheap) row (the source's transport ranks are the run's), its
+        // landing summed at the next vote.
         if chosen.len() == 1 && source.by_transport(chosen[0].power) && !solver.overshoot() {
             let best = chosen[0];
             let mut region = self.region(solver, &best, ambient);
             self.join_group(solver, &best, &mut region);
-            source.form_factors(best.patch, &region, &mut self.ff)?;
-            let sums = row_sums(solver, best.patch, &self.ff, source.last_blocked());
-            let t = Instant::now();
-            let shot = solver.shoot_candidate(&best, &region, &self.ff);
-            self.after_landing(solver, &best, shot, sums, t.elapsed());
+            let shot = self.shoot(source, solver, &best, &region)?;
             self.stats.shot_times.push(shot_start.elapsed());
             hooks.after_shot(solver, unshot_fraction);
             return Ok(Step::Shot(shot));
@@ -324,12 +322,24 @@ impl<'m> ShotLoop<'m> {
             .iter()
             .map(|c| self.region(solver, c, ambient))
             .collect();
+        // Which rank draws each row: the one it costs least (its cache),
+        // else the least loaded so far. Only time depends on it.
+        let drawer = if ranks > 1 {
+            let costs: Vec<f64> = chosen
+                .iter()
+                .zip(&regions)
+                .map(|(c, r)| source.row_cost(c.patch, r))
+                .collect();
+            assign_rows(&self.comm.all_gather_f64(&costs), ranks)
+        } else {
+            vec![0; chosen.len()]
+        };
         // This rank's rows, each sent in pieces to the owners of its elements.
         let mut outgoing = vec![Vec::new(); ranks];
         let mut rows = vec![Vec::new(); chosen.len()];
         let mut sums = vec![0.0; chosen.len() * ROW_SUMS];
         for (k, (c, region)) in chosen.iter().zip(&regions).enumerate() {
-            if k % ranks != rank {
+            if drawer[k] != rank {
                 continue;
             }
             source.form_factors(c.patch, region, &mut self.ff)?;
@@ -577,6 +587,38 @@ impl<'m> ShotLoop<'m> {
     }
 }
 
+/// Which rank draws each of a batch's rows, from `costs` (every rank's
+/// cost of every row, rank by rank, as [`GpuFormFactors::row_cost`] gives
+/// them): the costliest rows first, each to the rank where the sum of its
+/// load and the row's cost there is least (the lower rank on ties). The
+/// same answer on every rank.
+fn assign_rows(costs: &[f64], ranks: usize) -> Vec<usize> {
+    let k = costs.len() / ranks.max(1);
+    let cost = |rank: usize, row: usize| costs[rank * k + row];
+    // A row's cost where it is cheapest orders the rows.
+    let least = |row: usize| {
+        (0..ranks)
+            .map(|r| cost(r, row))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut order: Vec<usize> = (0..k).collect();
+    order.sort_by(|&a, &b| least(b).total_cmp(&least(a)).then(a.cmp(&b)));
+    let mut load = vec![0.0; ranks];
+    let mut drawer = vec![0; k];
+    for row in order {
+        let best = (0..ranks)
+            .min_by(|&a, &b| {
+                (load[a] + cost(a, row))
+                    .total_cmp(&(load[b] + cost(b, row)))
+                    .then(a.cmp(&b))
+            })
+            .unwrap_or(0);
+        load[best] += cost(best, row);
+        drawer[row] = best;
+    }
+    drawer
+}
+
 /// f64 slots of a candidate in a batch's gather.
 const CANDIDATE_LEN: usize = 10;
 
@@ -706,6 +748,26 @@ pub fn shoot_until<'m>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rows_go_where_they_cost_least_and_balance() {
+        // Two ranks, four rows: row 1 is cached on rank 1, row 3 coarse.
+        let costs = [
+            1.0, 1.0, 1.0, 0.25, // rank 0
+            1.0, 0.02, 1.0, 0.25, // rank 1
+        ];
+        let drawer = assign_rows(&costs, 2);
+        assert_eq!(drawer[1], 1, "the cached row on its cache's rank");
+        let load = |r: usize| -> f64 {
+            (0..4)
+                .filter(|&k| drawer[k] == r)
+                .map(|k| costs[r * 4 + k])
+                .sum()
+        };
+        assert!((load(0) - load(1)).abs() <= 1.0, "{drawer:?}");
+        // One rank draws everything.
+        assert_eq!(assign_rows(&[1.0, 0.5], 1), vec![0, 0]);
+    }
 
     #[test]
     fn a_vote_travels_exactly() {

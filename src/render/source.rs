@@ -104,6 +104,10 @@ impl Tier {
     }
 }
 
+/// A cached row's cost against a fresh fine one (a rank combines it with
+/// the shot's radiosities: measured in microseconds against milliseconds).
+const CACHED_ROW_COST: f64 = 0.02;
+
 /// Form factors by rasterising the hemisphere on the GPU, tile by tile, and
 /// exchanging them between ranks as DESIGN.md section 3 describes. Returns
 /// the form factors of this rank's elements only.
@@ -115,6 +119,11 @@ pub struct GpuFormFactors<'a> {
     /// shooters (see [`RenderOptions::coarse_below`]).
     tiers: Vec<Tier>,
     choice: TierChoice,
+    /// The rank and rank count whose elements a transport row reaches:
+    /// the communicator's, or, for a batched solve's source of one process,
+    /// the run's (a weak shooter's transport row is cheap and split by
+    /// owner, not drawn whole).
+    transport_ranks: (usize, usize),
     /// The tier the last hemisphere was drawn in.
     last_tier: usize,
     method: FormFactorMethod,
@@ -203,6 +212,7 @@ impl<'a> GpuFormFactors<'a> {
             // against the surfaces' emission alone, a scene lit only by a
             // sun had no weak shot and never drew the coarse tier.
             choice: TierChoice::new(opts, mesh.source_power(), mesh.patches.len()),
+            transport_ranks: (comm.rank(), comm.size()),
             last_tier: 0,
             method: opts.form_factor,
             exchanger: Exchanger::new(comm, opts.exchange, opts.form_factor, patches),
@@ -647,6 +657,36 @@ impl GpuFormFactors<'_> {
         self.choice.measuring = true;
     }
 
+    /// Builds transport rows for rank `rank` of `ranks`' elements only
+    /// (a batched solve's source of one process: see `ShotLoop::batched`).
+    pub fn set_transport_ranks(&mut self, rank: usize, ranks: usize) {
+        self.transport_ranks = (rank, ranks);
+    }
+
+    /// What the row of `shooter` shooting `region` would cost this rank,
+    /// in hemispheres of the fine tier: nothing much when its row is in
+    /// this rank's cache, a coarse tier's share of the cells, else one
+    /// (split shots draw more, which no one knows before). A batch gives
+    /// each row to the rank it costs least (see `ShotLoop::step`).
+    pub fn row_cost(&self, shooter: u32, region: &ShotRegion) -> f64 {
+        if self.choice.by_transport(region.power) {
+            return 0.0;
+        }
+        let polygon = self.mesh.patches[shooter as usize].polygon as usize;
+        let tier = self
+            .choice
+            .tier_for(region.power, self.mesh.polygons[polygon].emits());
+        if self
+            .cache
+            .get(&RowKey::new(shooter, region.centre, tier))
+            .is_some()
+        {
+            return CACHED_ROW_COST;
+        }
+        self.tiers[tier].cells.resolution.cells() as f64
+            / self.tiers[0].cells.resolution.cells() as f64
+    }
+
     /// Whether a shooter of unshot power `power` shoots along the ambient
     /// term's transport (`--transport-below`).
     pub fn by_transport(&self, power: f64) -> bool {
@@ -674,7 +714,7 @@ impl GpuFormFactors<'_> {
         let mesh = self.mesh;
         let transport = mesh.ambient_transport();
         let g = transport.group_of(shooter);
-        let (rank, ranks) = (self.comm.rank(), self.comm.size());
+        let (rank, ranks) = self.transport_ranks;
         out.clear();
         for &(h, share) in transport.row(g) {
             let h = h as usize;
