@@ -45,7 +45,7 @@ export OMPI_MCA_btl=${OMPI_MCA_btl:-self,vader,tcp}
 # hemispheres for its turns of a batch) on these scenes, in batches of
 # BATCH (at least the most ranks the model is read at: 64).
 BATCH=${BATCH:-64}
-BATCH_SCENES=${BATCH_SCENES:-"cubes-b1 classroom-c3"}
+BATCH_SCENES=${BATCH_SCENES:-"cubes-b1 classroom-c3 cubes-b2 cubes-b3"}
 run() { # ranks scene resolution exchange [repeat] (exchange batches-K: --batch K)
   local n=$1 scene=$2 res=$3 ex=$4 rep=${5:-1}
   local out="$runs/$scene-$res-n$n-$ex.json"
@@ -84,7 +84,9 @@ done
 # moves its CPU seconds far more than a split shot's.
 for rep in $(seq 1 "$REPEAT"); do
   for scene in $BATCH_SCENES; do
-    for n in $OVER; do run "$n" "$scene" 128x512 "batches-$BATCH" "$rep"; done
+    over=$OVER
+    case " $BIG " in *" $scene "*) over=$OVER_BIG ;; esac
+    for n in $over; do run "$n" "$scene" 128x512 "batches-$BATCH" "$rep"; done
   done
 done
 for scene in $SCENES; do
