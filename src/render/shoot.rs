@@ -103,22 +103,11 @@ impl Vote {
         v[0] = self.unshot as f64;
         v[1] = -1.0;
         if let Some(c) = self.candidate {
-            v[1..10].copy_from_slice(&[
-                c.patch as f64,
-                c.power,
-                c.unshot[0],
-                c.unshot[1],
-                c.unshot[2],
-                c.centre.x as f64,
-                c.centre.y as f64,
-                c.centre.z as f64,
-                c.weighted as u8 as f64,
-            ]);
-            v[13] = c.lit;
+            v[1..1 + CANDIDATE_LEN].copy_from_slice(&pack_candidate(&c));
         }
-        v[10] = self.landed as f64;
-        v[11] = self.pending_bytes as f64;
-        v[12] = self.flags.bits() as f64;
+        v[11] = self.landed as f64;
+        v[12] = self.pending_bytes as f64;
+        v[13] = self.flags.bits() as f64;
         v[14..17].copy_from_slice(&self.net.map(|x| x as f64));
         v[17] = self.delivered as f64;
         v
@@ -127,18 +116,11 @@ impl Vote {
     fn unpack(v: &[f64]) -> Self {
         Self {
             unshot: v[0] as u64,
-            candidate: (v[1] >= 0.0).then(|| Candidate {
-                patch: v[1] as u32,
-                power: v[2],
-                unshot: [v[3], v[4], v[5]],
-                // f32 -> f64 -> f32 is exact, so every rank gets the owner's point.
-                centre: glam::Vec3::new(v[6] as f32, v[7] as f32, v[8] as f32),
-                weighted: v[9] != 0.0,
-                lit: v[13],
-            }),
-            landed: v[10] as u64,
-            pending_bytes: v[11] as u64,
-            flags: Flags::from_bits(v[12] as u32),
+            // f32 -> f64 -> f32 is exact, so every rank gets the owner's point.
+            candidate: unpack_candidate(&v[1..1 + CANDIDATE_LEN]),
+            landed: v[11] as u64,
+            pending_bytes: v[12] as u64,
+            flags: Flags::from_bits(v[13] as u32),
             net: [v[14] as i64, v[15] as i64, v[16] as i64],
             delivered: v[17] as i64,
         }

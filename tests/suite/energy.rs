@@ -11,6 +11,23 @@ use radiosity::render::{render_on, FormFactorMethod, RenderOptions};
 use radiosity::solver::Energy;
 use std::time::Duration;
 
+/// Rank 0's report of `scene` rendered with `opts` on `ranks` ranks (threads).
+fn report_on(
+    scene: &radiosity::scene::Scene,
+    opts: &RenderOptions,
+    ranks: usize,
+) -> radiosity::report::Report {
+    ThreadComm::run(ranks, |comm| {
+        render_on(gpu(), scene, opts, comm, Duration::ZERO, &mut |_| {})
+            .expect("render")
+            .map(|r| r.report)
+    })
+    .into_iter()
+    .flatten()
+    .next()
+    .expect("rank 0's report")
+}
+
 /// The report's energy and unshot fraction on `ranks` ranks (threads).
 fn energy(scene: &str, method: FormFactorMethod, ranks: usize) -> (Energy, f64) {
     let scene = radiosity::scene::open(scene).expect("a family scene");
@@ -96,17 +113,7 @@ fn weak_shooters_along_the_transport_conserve_energy_on_one_and_two_ranks() {
         opts.mesh.refine = refine;
         opts.stop.threshold = 0.02;
         opts.stop.max_shots = shots;
-        let run = |ranks: usize| {
-            ThreadComm::run(ranks, |comm| {
-                render_on(gpu(), &scene, &opts, comm, Duration::ZERO, &mut |_| {})
-                    .expect("render")
-                    .map(|r| r.report)
-            })
-            .into_iter()
-            .flatten()
-            .next()
-            .expect("rank 0's report")
-        };
+        let run = |ranks: usize| report_on(&scene, &opts, ranks);
         let (one, two) = (run(1), run(2));
         let name = &scene.name;
         assert!(
@@ -145,17 +152,7 @@ fn batched_shots_conserve_energy_and_agree_on_any_rank_count() {
         ..RenderOptions::default()
     };
     opts.stop.threshold = 0.01;
-    let run = |ranks: usize| {
-        ThreadComm::run(ranks, |comm| {
-            render_on(gpu(), &scene, &opts, comm, Duration::ZERO, &mut |_| {})
-                .expect("render")
-                .map(|r| r.report)
-        })
-        .into_iter()
-        .flatten()
-        .next()
-        .expect("rank 0's report")
-    };
+    let run = |ranks: usize| report_on(&scene, &opts, ranks);
     let one = run(1);
     let e = one.energy;
     assert!((e.balance - 1.0).abs() < 1e-3, "batched: {e:?}");
