@@ -355,7 +355,7 @@ impl<'m> ShotLoop<'m> {
             let mut shot = solver.land(c, region, &rows[k], shares[k]);
             let s = &totals[k * ROW_SUMS..(k + 1) * ROW_SUMS];
             shot.form_factor_sum = s[3];
-            self.after_landing(solver, c, shot, [s[0], s[1], s[2], s[3]], Duration::ZERO);
+            self.after_landing(solver, c, shot, [s[0], s[1], s[2], s[3]]);
             last = Some(shot);
         }
         self.stats.update += landing_start.elapsed();
@@ -406,7 +406,6 @@ impl<'m> ShotLoop<'m> {
         best: &Candidate,
         shot: Shot,
         [landed, delivered, blocked, _]: [f64; ROW_SUMS],
-        update: Duration,
     ) {
         solver.note_retention(shot.shot_power, landed / UNSHOT_ONE);
         let emitted = solver.emitted_power();
@@ -415,7 +414,6 @@ impl<'m> ShotLoop<'m> {
             delivered / UNSHOT_ONE * emitted,
             shot.shot_power * blocked,
         );
-        self.stats.update += update;
         self.stats.patch_power[best.patch as usize] += shot.power;
     }
 
@@ -552,21 +550,30 @@ impl<'m> ShotLoop<'m> {
     /// collective. Each element's share is rounded on its own, so the sums
     /// over ranks do not depend on how elements are split between them.
     fn landed_here(&self, solver: &Solver, best: &Candidate) -> (u64, i64) {
-        let emitted = solver.emitted_power();
-        let area = self.mesh.patches[best.patch as usize].area;
-        let (mut landed, mut delivered) = (0u64, 0i64);
-        for t in &self.ff {
-            if !solver.owns_element(t.element) {
-                continue;
-            }
-            landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
-            if emitted > 0.0 {
-                let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
-                delivered += crate::numeric::round_i64(w / emitted * UNSHOT_ONE);
-            }
-        }
-        (landed, delivered)
+        let own = self.ff.iter().filter(|t| solver.owns_element(t.element));
+        landing(solver, best.patch, own)
     }
+}
+
+/// What the transfers `ff` of `shooter`'s shot land and deliver, over the
+/// emitted power, in [`UNSHOT_ONE`] fixed point: each element's share
+/// rounded on its own, so that sums over any split of the elements agree.
+fn landing<'t>(
+    solver: &Solver,
+    shooter: u32,
+    ff: impl Iterator<Item = &'t Transfer>,
+) -> (u64, i64) {
+    let emitted = solver.emitted_power();
+    let area = solver.mesh().patches[shooter as usize].area;
+    let (mut landed, mut delivered) = (0u64, 0i64);
+    for t in ff {
+        landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
+        if emitted > 0.0 {
+            let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
+            delivered += crate::numeric::round_i64(w / emitted * UNSHOT_ONE);
+        }
+    }
+    (landed, delivered)
 }
 
 /// Which rank draws each of a batch's rows, from `costs` (every rank's
@@ -633,23 +640,13 @@ fn unpack_candidate(v: &[f64]) -> Option<Candidate> {
 }
 
 /// A whole row's sums a batched shot's energy needs: what it landed and
-/// delivered (fixed point, each element rounded on its own as
-/// [`ShotLoop::landed_here`] rounds them), the share that met back faces,
-/// and the sum of its form factors.
+/// delivered ([`landing`]), the share that met back faces, and the sum of
+/// its form factors.
 const ROW_SUMS: usize = 4;
 
 fn row_sums(solver: &Solver, shooter: u32, ff: &[Transfer], blocked: f64) -> [f64; ROW_SUMS] {
-    let emitted = solver.emitted_power();
-    let area = solver.mesh().patches[shooter as usize].area;
-    let (mut landed, mut delivered, mut sum) = (0u64, 0i64, 0.0);
-    for t in ff {
-        sum += t.form_factor;
-        landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
-        if emitted > 0.0 {
-            let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
-            delivered += crate::numeric::round_i64(w / emitted * UNSHOT_ONE);
-        }
-    }
+    let (landed, delivered) = landing(solver, shooter, ff.iter());
+    let sum = ff.iter().map(|t| t.form_factor).sum();
     [landed as f64, delivered as f64, blocked, sum]
 }
 
