@@ -40,9 +40,9 @@ fn solve_scene(
 ) -> Rendered {
     let flag = opts.interrupt.clone();
     render(gpu(), scene, opts, Duration::ZERO, &mut |p| {
-        // A signal arriving after shot `stop_at`.
+        // A signal arriving after shot `stop_at` (or the batch holding it).
         if let (Some(f), Some(n)) = (&flag, stop_at) {
-            if p.shots == n {
+            if p.shots >= n {
                 f.store(true, Ordering::Relaxed);
             }
         }
@@ -120,6 +120,47 @@ fn an_interrupted_solve_resumes_to_the_same_bits() {
     let resumed = cornell(&opts, None);
     assert!(!resumed.interrupted);
     same_solution(&resumed, &straight);
+}
+
+/// Batched shots stop between two batches: the checkpoint holds whole
+/// batches, and the resumed solve takes the batches the straight one took.
+#[test]
+fn an_interrupted_batched_solve_resumes_to_the_same_bits() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("batched.ckpt");
+    let batched = |interrupt| {
+        let mut opts = interruptible(&path, interrupt);
+        opts.batch = 8;
+        opts
+    };
+    let straight = cornell(&batched(false), None);
+    assert_eq!(straight.report.parallel.batch, 8);
+
+    let mut opts = batched(true);
+    // Asked for mid-batch (150 is not a multiple of 8): the batch ends first.
+    let stopped = cornell(&opts, Some(150));
+    assert!(stopped.interrupted);
+    let shots = stopped.report.shots;
+    assert!((150..150 + 8).contains(&shots), "stopped after {shots}");
+    let saved = Checkpoint::read(&path).expect("checkpoint written");
+    assert_eq!(saved.state.shots, shots);
+
+    opts.interrupt = None;
+    opts.resume = Some(Arc::new(saved.clone()));
+    let resumed = cornell(&opts, None);
+    assert!(!resumed.interrupted);
+    same_solution(&resumed, &straight);
+
+    // The batch is part of the settings a checkpoint must match.
+    opts.batch = 4;
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let err = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
 }
 
 #[test]
