@@ -145,9 +145,51 @@ impl Collectives for Single {
 /// The cores this process may use, asked once: `available_parallelism`
 /// reads the affinity mask and the cgroup's quota files on every call
 /// (about 20 us), and every shot of a small scene asked it several times.
+/// Under mpirun the ranks on one host share its cores, as their lavapipe
+/// devices do (`launch::share_cores_between_ranks`), so unbound ranks do
+/// not each spawn a worker for every core of the host.
 pub fn cores() -> usize {
     static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
-    *CORES.get_or_init(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+    *CORES.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let local: usize = std::env::var("OMPI_COMM_WORLD_LOCAL_SIZE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1);
+        (cores / local.max(1)).max(1)
+    })
+}
+
+/// Which rank draws each of a batch's rows, from `costs` (every rank's
+/// cost of every row, rank by rank, as the render's source weighs them:
+/// `GpuFormFactors::row_cost`): the costliest rows first, each to the rank where the sum of its
+/// load and the row's cost there is least (the lower rank on ties). The
+/// same answer on every rank.
+pub fn assign_rows(costs: &[f64], ranks: usize) -> Vec<usize> {
+    let k = costs.len() / ranks.max(1);
+    let cost = |rank: usize, row: usize| costs[rank * k + row];
+    // A row's cost where it is cheapest orders the rows.
+    let least = |row: usize| {
+        (0..ranks)
+            .map(|r| cost(r, row))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut order: Vec<usize> = (0..k).collect();
+    order.sort_by(|&a, &b| least(b).total_cmp(&least(a)).then(a.cmp(&b)));
+    let mut load = vec![0.0; ranks];
+    let mut drawer = vec![0; k];
+    for row in order {
+        let best = (0..ranks)
+            .min_by(|&a, &b| {
+                (load[a] + cost(a, row))
+                    .total_cmp(&(load[b] + cost(b, row)))
+                    .then(a.cmp(&b))
+            })
+            .unwrap_or(0);
+        load[best] += cost(best, row);
+        drawer[row] = best;
+    }
+    drawer
 }
 
 /// Patches a rank owns in a row (see [`patch_owner`]).
@@ -376,6 +418,26 @@ pub fn rank_grid(n: usize) -> (u32, u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rows_go_where_they_cost_least_and_balance() {
+        // Two ranks, four rows: row 1 is cached on rank 1, row 3 coarse.
+        let costs = [
+            1.0, 1.0, 1.0, 0.25, // rank 0
+            1.0, 0.02, 1.0, 0.25, // rank 1
+        ];
+        let drawer = assign_rows(&costs, 2);
+        assert_eq!(drawer[1], 1, "the cached row on its cache's rank");
+        let load = |r: usize| -> f64 {
+            (0..4)
+                .filter(|&k| drawer[k] == r)
+                .map(|k| costs[r * 4 + k])
+                .sum()
+        };
+        assert!((load(0) - load(1)).abs() <= 1.0, "{drawer:?}");
+        // One rank draws everything.
+        assert_eq!(assign_rows(&[1.0, 0.5], 1), vec![0, 0]);
+    }
 
     #[test]
     fn rank_grids() {

@@ -320,6 +320,9 @@ pub struct Parallel {
     pub batch: usize,
     /// Per rank: seconds per phase (summed over shots) and bytes exchanged.
     pub per_rank: Vec<RankStats>,
+    /// Batched shots' rows in shot order (the first 10 000 shots'; empty
+    /// unbatched).
+    pub rows: Vec<BatchRow>,
     /// Bytes per shot received by a rank, by the paper's formulas: hemispheres
     /// 4 N_M (N - 1) / N (over N stages); form factors one stage's 8 N_El
     /// (64-bit fixed point; the reduction and broadcast take ceil(log2 N) + 1
@@ -363,6 +366,7 @@ impl Parallel {
             exchange,
             batch: 1,
             per_rank,
+            rows: Vec::new(),
             formula_bytes_per_shot: formula,
             measured_bytes_per_shot: received / n / shots.max(1) as f64,
             load_balance,
@@ -427,6 +431,27 @@ pub struct RankStats {
     /// Collective calls in the final solve (the exchange's, the cull's and
     /// the deal's).
     pub mpi_calls: u64,
+    /// Of `cpu_seconds`, drawing the rows of batched shots (0 unbatched):
+    /// the work the ranks divide; the rest every rank does.
+    pub rows_cpu_seconds: f64,
+}
+
+/// One row of a batched shot (`--batch`): which rank drew it, what the
+/// assignment weighed it at and what it cost, so the performance model can
+/// replay each batch's assignment on any number of ranks.
+#[derive(Clone, Debug, Serialize)]
+pub struct BatchRow {
+    /// The solve's shot count when its batch began.
+    pub batch_start: u64,
+    /// Its place in the batch.
+    pub index: u32,
+    /// The rank that drew it.
+    pub rank: usize,
+    /// Its weight in the assignment (1 a fresh row, less at a coarse tier
+    /// or in a rank's row cache).
+    pub cost: f64,
+    /// Process CPU seconds drawing it and packing it for its owners.
+    pub cpu_seconds: f64,
 }
 
 /// This process's peak resident memory so far, bytes (`VmHWM` in

@@ -325,6 +325,8 @@ struct Gathered<'m> {
     busy: Vec<Vec<f64>>,
     /// ... and its busy CPU seconds per shot.
     busy_cpu: Vec<Vec<f64>>,
+    /// Batched shots' rows, in shot order.
+    rows: Vec<crate::report::BatchRow>,
 }
 
 impl<'m> Gathered<'m> {
@@ -350,6 +352,7 @@ impl<'m> Gathered<'m> {
         if opts.batch > 1 {
             // Batched rows travel as pairs to their owners: no closed form.
             parallel.batch = opts.batch;
+            parallel.rows = self.rows;
             if parallel.ranks > 1 {
                 parallel.formula_bytes_per_shot = None;
             }
@@ -379,7 +382,34 @@ fn gather_to_root<'m>(
     let all_stats = comm.gather_f64(&mine);
     let busy = comm.gather_f64(&source.busy);
     let busy_cpu = comm.gather_f64(&source.busy_cpu);
-    let (whole, all_stats, busy, busy_cpu) = (whole?, all_stats?, busy?, busy_cpu?);
+    let rows: Vec<f64> = stats
+        .rows
+        .iter()
+        .flat_map(|r| {
+            [
+                r.batch_start as f64,
+                f64::from(r.index),
+                r.cost,
+                r.cpu_seconds,
+            ]
+        })
+        .collect();
+    let rows = comm.gather_f64(&rows);
+    let (whole, all_stats, busy, busy_cpu, rows) = (whole?, all_stats?, busy?, busy_cpu?, rows?);
+    let mut rows: Vec<crate::report::BatchRow> = rows
+        .iter()
+        .enumerate()
+        .flat_map(|(rank, v)| {
+            v.chunks_exact(4).map(move |r| crate::report::BatchRow {
+                batch_start: r[0] as u64,
+                index: r[1] as u32,
+                rank,
+                cost: r[2],
+                cpu_seconds: r[3],
+            })
+        })
+        .collect();
+    rows.sort_by_key(|r| (r.batch_start, r.index));
     Some(Gathered {
         whole,
         phases: source.timings,
@@ -390,6 +420,7 @@ fn gather_to_root<'m>(
             .collect(),
         busy,
         busy_cpu,
+        rows,
     })
 }
 
@@ -419,6 +450,7 @@ fn pack_rank_stats(t: &PhaseTimes, stats: &LoopStats, traffic: Traffic, cpu: f64
         t.bounded as f64,
         t.cull_traffic.received as f64,
         t.rect_traffic.received as f64,
+        stats.rows_cpu_seconds,
     ]
 }
 
@@ -445,6 +477,7 @@ fn unpack_rank_stats(rank: usize, v: &[f64]) -> RankStats {
         bounded: v[16] as u64,
         occlusion_bytes_received: v[17] as u64,
         rect_bytes_received: v[18] as u64,
+        rows_cpu_seconds: v[19],
     }
 }
 

@@ -72,6 +72,29 @@ pub struct LoopStats {
     pub shot_times: Vec<Duration>,
     /// Power each patch shot, summed (sum over RGB; the same on every rank).
     pub patch_power: Vec<f64>,
+    /// The rows of batched shots this rank drew, in order (the first
+    /// [`MAX_ROW_RECORDS`] shots' only): what the performance model needs
+    /// to replay a batch's assignment on any number of ranks.
+    pub rows: Vec<RowRecord>,
+    /// Process CPU seconds drawing the batched rows this rank drew (all of
+    /// them; the divided work of a batched solve).
+    pub rows_cpu_seconds: f64,
+}
+
+/// Batched shots whose rows are recorded ([`LoopStats::rows`]).
+pub const MAX_ROW_RECORDS: u64 = 10_000;
+
+/// One row of a batched shot, as its drawing rank saw it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RowRecord {
+    /// The solve's shot count when its batch began.
+    pub batch_start: u64,
+    /// Its place in the batch.
+    pub index: u32,
+    /// The cost the assignment weighed it at (`GpuFormFactors::row_cost`).
+    pub cost: f64,
+    /// Process CPU seconds drawing it and packing it for its owners.
+    pub cpu_seconds: f64,
 }
 
 /// What one rank tells the others before a shot.
@@ -306,28 +329,41 @@ impl<'m> ShotLoop<'m> {
             .collect();
         // Which rank draws each row: the one it costs least (its cache),
         // else the least loaded so far. Only time depends on it.
-        let drawer = if ranks > 1 {
-            let costs: Vec<f64> = chosen
-                .iter()
-                .zip(&regions)
-                .map(|(c, r)| source.row_cost(c.patch, r))
-                .collect();
-            assign_rows(&self.comm.all_gather_f64(&costs), ranks)
+        let costs: Vec<f64> = chosen
+            .iter()
+            .zip(&regions)
+            .map(|(c, r)| source.row_cost(c.patch, r))
+            .collect();
+        let (drawer, costs) = if ranks > 1 {
+            let all = self.comm.all_gather_f64(&costs);
+            (crate::parallel::assign_rows(&all, ranks), all)
         } else {
-            vec![0; chosen.len()]
+            (vec![0; chosen.len()], costs)
         };
         // This rank's rows, each sent in pieces to the owners of its elements.
         let mut outgoing = vec![Vec::new(); ranks];
         let mut rows = vec![Vec::new(); chosen.len()];
         let mut sums = vec![0.0; chosen.len() * ROW_SUMS];
+        let batch_start = solver.shots();
         for (k, (c, region)) in chosen.iter().zip(&regions).enumerate() {
             if drawer[k] != rank {
                 continue;
             }
+            let cpu = crate::parallel::process_cpu_seconds();
             source.form_factors(c.patch, region, &mut self.ff)?;
             let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
             sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
             pack_row(solver, (k, rank), &self.ff, &mut outgoing, &mut rows[k]);
+            let cpu_seconds = crate::parallel::process_cpu_seconds() - cpu;
+            self.stats.rows_cpu_seconds += cpu_seconds;
+            if batch_start + (k as u64) < MAX_ROW_RECORDS {
+                self.stats.rows.push(RowRecord {
+                    batch_start,
+                    index: k as u32,
+                    cost: costs.get(rank * chosen.len() + k).copied().unwrap_or(1.0),
+                    cpu_seconds,
+                });
+            }
         }
         let t = Instant::now();
         let cpu = crate::parallel::CpuSpan::start(self.comm);
@@ -576,38 +612,6 @@ fn landing<'t>(
     (landed, delivered)
 }
 
-/// Which rank draws each of a batch's rows, from `costs` (every rank's
-/// cost of every row, rank by rank, as [`GpuFormFactors::row_cost`] gives
-/// them): the costliest rows first, each to the rank where the sum of its
-/// load and the row's cost there is least (the lower rank on ties). The
-/// same answer on every rank.
-fn assign_rows(costs: &[f64], ranks: usize) -> Vec<usize> {
-    let k = costs.len() / ranks.max(1);
-    let cost = |rank: usize, row: usize| costs[rank * k + row];
-    // A row's cost where it is cheapest orders the rows.
-    let least = |row: usize| {
-        (0..ranks)
-            .map(|r| cost(r, row))
-            .fold(f64::INFINITY, f64::min)
-    };
-    let mut order: Vec<usize> = (0..k).collect();
-    order.sort_by(|&a, &b| least(b).total_cmp(&least(a)).then(a.cmp(&b)));
-    let mut load = vec![0.0; ranks];
-    let mut drawer = vec![0; k];
-    for row in order {
-        let best = (0..ranks)
-            .min_by(|&a, &b| {
-                (load[a] + cost(a, row))
-                    .total_cmp(&(load[b] + cost(b, row)))
-                    .then(a.cmp(&b))
-            })
-            .unwrap_or(0);
-        load[best] += cost(best, row);
-        drawer[row] = best;
-    }
-    drawer
-}
-
 /// f64 slots of a candidate in a batch's gather.
 const CANDIDATE_LEN: usize = 10;
 
@@ -727,26 +731,6 @@ pub fn shoot_until<'m>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn rows_go_where_they_cost_least_and_balance() {
-        // Two ranks, four rows: row 1 is cached on rank 1, row 3 coarse.
-        let costs = [
-            1.0, 1.0, 1.0, 0.25, // rank 0
-            1.0, 0.02, 1.0, 0.25, // rank 1
-        ];
-        let drawer = assign_rows(&costs, 2);
-        assert_eq!(drawer[1], 1, "the cached row on its cache's rank");
-        let load = |r: usize| -> f64 {
-            (0..4)
-                .filter(|&k| drawer[k] == r)
-                .map(|k| costs[r * 4 + k])
-                .sum()
-        };
-        assert!((load(0) - load(1)).abs() <= 1.0, "{drawer:?}");
-        // One rank draws everything.
-        assert_eq!(assign_rows(&[1.0, 0.5], 1), vec![0, 0]);
-    }
 
     #[test]
     fn a_vote_travels_exactly() {
