@@ -399,24 +399,52 @@ fn groups(mesh: &Mesh) -> Vec<u32> {
         let sign = (poly.normal[axis] < 0.0) as usize;
         (axis * 2 + sign) as u8 + if poly.back_side { 6 } else { 0 }
     };
+    // A patch's (cell, facing) as one index into a dense table: cells^3 x 12.
+    let slot = |p: &crate::mesh::Patch, cells: u32| -> usize {
+        let c = ((p.centre - lo) / size * cells as f32)
+            .as_uvec3()
+            .min(glam::UVec3::splat(cells - 1));
+        let cell = (c.z as usize * cells as usize + c.y as usize) * cells as usize + c.x as usize;
+        cell * 12 + facing(p) as usize
+    };
     let mut cells = 64u32;
     loop {
-        let mut ids = std::collections::HashMap::new();
-        let out: Vec<u32> = mesh
+        let slots = (cells as usize).pow(3) * 12;
+        // Too many groups shows early: count the distinct slots until the
+        // count passes the limit (every rank repeats this; a hash map of
+        // every patch at every grid took 0.1 s of cubes-b3's solve).
+        if cells > 1 {
+            let mut seen = vec![0u64; slots.div_ceil(64)];
+            let mut distinct = 0;
+            let too_many = mesh.patches.iter().any(|p| {
+                let s = slot(p, cells);
+                let (word, bit) = (s / 64, 1u64 << (s % 64));
+                if seen[word] & bit == 0 {
+                    seen[word] |= bit;
+                    distinct += 1;
+                }
+                distinct > PATCH_GROUPS
+            });
+            if too_many {
+                cells = (cells * 3 / 4).max(1);
+                continue;
+            }
+        }
+        // Numbered in order of first appearance.
+        let mut ids = vec![u32::MAX; slots];
+        let mut next = 0;
+        return mesh
             .patches
             .iter()
             .map(|p| {
-                let c = ((p.centre - lo) / size * cells as f32)
-                    .as_uvec3()
-                    .min(glam::UVec3::splat(cells - 1));
-                let next = ids.len() as u32;
-                *ids.entry((c, facing(p))).or_insert(next)
+                let id = &mut ids[slot(p, cells)];
+                if *id == u32::MAX {
+                    *id = next;
+                    next += 1;
+                }
+                *id
             })
             .collect();
-        if ids.len() <= PATCH_GROUPS || cells == 1 {
-            return out;
-        }
-        cells = (cells * 3 / 4).max(1);
     }
 }
 

@@ -100,6 +100,13 @@ pub struct Run {
     pub hemisphere_cells: f64,
     /// Mean load balance of the shots' busy CPU seconds.
     pub epsilon_cpu: f64,
+    /// Batched runs: per rank, CPU seconds a shot drawing rows (the
+    /// divided work; empty in reports without it).
+    pub rows_cpu: Vec<f64>,
+    /// Batched runs: every row in shot order as (the shot its batch began
+    /// at, its weight in the assignment, its CPU seconds, the rank that
+    /// drew it).
+    pub rows: Vec<(u64, f64, f64, usize)>,
 }
 
 impl Run {
@@ -153,6 +160,22 @@ impl Run {
             cells: Vec::new(),
             hemisphere_cells: num(&v["counts"]["cells"], "cells")?,
             epsilon_cpu: num(&p["load_balance_cpu"]["mean"], "load_balance_cpu")?,
+            rows_cpu: Vec::new(),
+            rows: p["rows"]
+                .as_array()
+                .map(|rows| {
+                    rows.iter()
+                        .filter_map(|r| {
+                            Some((
+                                r["batch_start"].as_u64()?,
+                                r["cost"].as_f64()?,
+                                r["cpu_seconds"].as_f64()?,
+                                r["rank"].as_u64()? as usize,
+                            ))
+                        })
+                        .collect()
+                })
+                .unwrap_or_default(),
         };
         for r in per_rank {
             let mut ph = [0.0; 6];
@@ -173,6 +196,12 @@ impl Run {
                     / shots,
             );
             run.cells.push(num(&r["cells"], "cells")? / shots);
+            if let Some(x) = r["rows_cpu_seconds"].as_f64() {
+                run.rows_cpu.push(x / shots);
+            }
+        }
+        if run.rows_cpu.len() != run.ranks {
+            run.rows_cpu.clear();
         }
         Ok(run)
     }
@@ -191,6 +220,26 @@ impl Run {
     /// Mean over ranks of a per-rank figure.
     pub fn mean(v: &[f64]) -> f64 {
         v.iter().sum::<f64>() / v.len().max(1) as f64
+    }
+
+    /// Batched runs: the slowest rank's row CPU seconds, batch by batch
+    /// (each batch waits for its slowest rank), a shot.
+    pub fn slowest_rows(&self) -> f64 {
+        let mut total = 0.0;
+        let mut load = vec![0.0; self.ranks];
+        let mut start = None;
+        for &(b, _, cpu, rank) in &self.rows {
+            if start != Some(b) {
+                total += load.iter().copied().fold(0.0, f64::max);
+                load.iter_mut().for_each(|l| *l = 0.0);
+                start = Some(b);
+            }
+            if let Some(l) = load.get_mut(rank) {
+                *l += cpu;
+            }
+        }
+        total += load.iter().copied().fold(0.0, f64::max);
+        total / self.shots
     }
 
     /// Hemispheres drawn per shot (split shots draw several, coarse ones
@@ -426,6 +475,102 @@ pub struct Model {
     /// The most ranks the divided work splits over: a batch's shots
     /// (`batches-K`: K rows a step; more ranks wait), else unbounded.
     pub split_limit: f64,
+    /// Batched shots with their rows recorded: the rows replayed on N
+    /// ranks, which takes the place of `divided` and `u(N)` (see [`Replay`]).
+    pub replay: Option<Replay>,
+}
+
+/// A batched run's rows replayed on any number of ranks: every batch's
+/// rows with the weights the render dealt them by and the CPU seconds they
+/// took on one rank, dealt again as the render deals them
+/// ([`crate::parallel::assign_rows`]). The slowest rank's rows set a
+/// batch's time, so the imbalance is the rows' own, not a fitted law. A
+/// rank's CPU seconds outside its rows follow `rest_a + rest_b / N`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Replay {
+    /// Per batch, each row's (weight, CPU seconds).
+    pub batches: Vec<Vec<(f64, f64)>>,
+    /// Shots of the run.
+    pub shots: f64,
+    /// CPU seconds a shot every rank spends outside its rows (the vote, the
+    /// choice, the rows' exchange, the landing's bookkeeping)...
+    pub rest_a: f64,
+    /// ... and what of it the ranks divide (the landing on a rank's own
+    /// elements, the display transport's rays).
+    pub rest_b: f64,
+    /// The rows' CPU seconds on 2 ranks, one core each, over one rank's:
+    /// what two busy cores sharing caches and memory cost each other.
+    pub contention2: f64,
+    /// With more ranks than this machine's 2 cores the rows' CPU seconds
+    /// grow further, as `contention2 (N / 2)^contention_power` (time
+    /// slicing); one core a rank stays at `contention2`.
+    pub contention_power: f64,
+}
+
+impl Replay {
+    /// From a run's rows (batch start, weight, CPU seconds, rank).
+    pub fn from_rows(rows: &[(u64, f64, f64, usize)], shots: f64) -> Self {
+        let mut batches: Vec<Vec<(f64, f64)>> = Vec::new();
+        let mut start = None;
+        for &(b, w, cpu, _) in rows {
+            if start != Some(b) {
+                batches.push(Vec::new());
+                start = Some(b);
+            }
+            if let Some(last) = batches.last_mut() {
+                last.push((w, cpu));
+            }
+        }
+        Self {
+            batches,
+            shots,
+            contention2: 1.0,
+            ..Self::default()
+        }
+    }
+
+    /// Row CPU seconds a shot on one rank.
+    pub fn rows(&self) -> f64 {
+        self.batches.iter().flatten().map(|r| r.1).sum::<f64>() / self.shots
+    }
+
+    /// The most and the least row CPU seconds a shot a rank draws on `n`
+    /// ranks, batch by batch, at one rank's speed.
+    pub fn loads(&self, n: usize) -> (f64, f64) {
+        let n = n.max(1);
+        let (mut most, mut least) = (0.0, 0.0);
+        for batch in &self.batches {
+            // Every rank weighs a row alike here (no row caches).
+            let weights: Vec<f64> = (0..n).flat_map(|_| batch.iter().map(|r| r.0)).collect();
+            let mut load = vec![0.0; n];
+            for (row, rank) in crate::parallel::assign_rows(&weights, n)
+                .into_iter()
+                .enumerate()
+            {
+                load[rank] += batch[row].1;
+            }
+            most += load.iter().copied().fold(0.0, f64::max);
+            least += load.iter().copied().fold(f64::INFINITY, f64::min);
+        }
+        (most / self.shots, least / self.shots)
+    }
+
+    /// The rows' contention on `n` ranks: on this machine (`here`, its 2
+    /// cores time-sliced beyond 2 ranks), or one core a rank.
+    pub fn contention(&self, n: f64, here: bool) -> f64 {
+        if n <= 1.0 {
+            1.0
+        } else if here && n > 2.0 {
+            from_two(self.contention2, self.contention_power, n)
+        } else {
+            self.contention2
+        }
+    }
+
+    /// A rank's CPU seconds a shot outside its rows on `n` ranks.
+    pub fn rest(&self, n: f64) -> f64 {
+        self.rest_a + self.rest_b / n.max(1.0)
+    }
 }
 
 impl Model {
@@ -444,10 +589,18 @@ impl Model {
         }
     }
 
-    /// A rank's mean compute seconds a shot on `n` ranks.
+    /// A rank's mean compute seconds a shot on `n` ranks, one core each.
     pub fn compute_mean(&self, n: f64) -> f64 {
+        self.compute_mean_on(n, false)
+    }
+
+    /// ... on `n` ranks of this machine (`here`: beyond its 2 cores they
+    /// share them), or one core each.
+    pub fn compute_mean_on(&self, n: f64, here: bool) -> f64 {
         if n <= 1.0 {
             self.serial
+        } else if let Some(r) = &self.replay {
+            r.rest(n) + r.contention(n, here) * r.rows() / n
         } else {
             self.replicated + self.divided / self.busy(n)
         }
@@ -457,6 +610,8 @@ impl Model {
     pub fn compute_max(&self, n: f64) -> f64 {
         if n <= 1.0 {
             self.serial
+        } else if let Some(r) = &self.replay {
+            r.rest(n) + r.contention(n, false) * r.loads(n as usize).0
         } else {
             let m = self.busy(n);
             self.replicated + self.divided / m * (1.0 + self.imbalance(m))
@@ -467,6 +622,11 @@ impl Model {
     pub fn epsilon(&self, n: f64) -> f64 {
         if n <= 1.0 {
             return 1.0;
+        }
+        if let Some(r) = &self.replay {
+            let (most, least) = r.loads(n as usize);
+            let c = r.contention(n, false);
+            return (r.rest(n) + c * least) / (r.rest(n) + c * most);
         }
         let q = self.divided / self.busy(n);
         let u = self.imbalance(self.busy(n));
@@ -592,6 +752,34 @@ impl Calibration {
     /// and resolution needs a 1-rank run and a 2-rank run per exchange;
     /// hemisphere runs on more ranks (CPU seconds) pin the compute law.
     pub fn fit_up_to(runs: Vec<Run>, max_ranks: usize) -> Result<Self, ScalingError> {
+        // Each batched row's least CPU seconds over every run of one core
+        // a rank (every run draws the same rows: the same bits; a row only
+        // ever gets dearer from its neighbours on the machine).
+        let least_rows = |of: &Run| -> Vec<(u64, f64, f64, usize)> {
+            let mut rows = of.rows.clone();
+            let count = rows.len();
+            for r in runs.iter().filter(|r| {
+                r.ranks <= 2.min(max_ranks) && key(r) == key(of) && r.rows.len() == count
+            }) {
+                for (mine, theirs) in rows.iter_mut().zip(&r.rows) {
+                    if mine.0 == theirs.0 {
+                        mine.2 = mine.2.min(theirs.2);
+                    }
+                }
+            }
+            rows
+        };
+        type Rows = Vec<(u64, f64, f64, usize)>;
+        let least: Vec<((String, [u32; 2], String), Rows)> = runs
+            .iter()
+            .filter(|r| r.ranks == 1 && !r.rows.is_empty())
+            .map(|r| {
+                (
+                    (r.scene.clone(), r.resolution, r.exchange.clone()),
+                    least_rows(r),
+                )
+            })
+            .collect();
         let runs = fastest_of_repeats(runs);
         let used = |r: &&Run| r.ranks <= max_ranks;
         // A batched run's 1-rank run is of the same batch; the exchanges'
@@ -740,6 +928,7 @@ impl Calibration {
                     .strip_prefix("batches-")
                     .and_then(|k| k.parse::<f64>().ok())
                     .unwrap_or(f64::INFINITY),
+                replay: None,
             };
             // Imbalance: u(N) = u2 (N / 2)^gamma, least squares in logs
             // through every run of this scene's hemispheres beyond 2 ranks.
@@ -778,6 +967,56 @@ impl Calibration {
                 model.gamma = (num / den).max(0.0);
             } else {
                 model.gamma = f64::NAN;
+            }
+            // Batched shots whose rows were recorded: replayed (the rows'
+            // own imbalance), with the rest of a rank's CPU seconds fitted
+            // as a + b / N through every rank count, and the rows' CPU
+            // seconds on N ranks over one rank's as the contention.
+            let own_runs: Vec<&Run> = runs
+                .iter()
+                .filter(used)
+                .filter(|r| key(r) == key(two) && !r.rows_cpu.is_empty())
+                .collect();
+            if two.exchange.starts_with("batches") && !single.rows.is_empty() && own_runs.len() > 1
+            {
+                let rows = least
+                    .iter()
+                    .find(|(k, _)| (k.0.as_str(), k.1, k.2.as_str()) == key(single))
+                    .map_or(&single.rows, |(_, rows)| rows);
+                let mut replay = Replay::from_rows(rows, single.shots);
+                let rows1 = replay.rows();
+                let rest: Vec<(f64, f64, f64)> = own_runs
+                    .iter()
+                    .map(|r| {
+                        let rest: Vec<f64> = r
+                            .cpu_own
+                            .iter()
+                            .zip(&r.rows_cpu)
+                            .map(|(c, w)| c - w)
+                            .collect();
+                        (1.0, 1.0 / r.ranks as f64, Run::mean(&rest))
+                    })
+                    .collect();
+                let (a, b) = least_squares_2(&rest);
+                replay.rest_a = a.max(0.0);
+                replay.rest_b = b.max(0.0);
+                let contention = |r: &Run| r.rows_cpu.iter().sum::<f64>() / rows1;
+                replay.contention2 = contention(two);
+                replay.contention_power = power_through(
+                    replay.contention2,
+                    own_runs
+                        .iter()
+                        .filter(|r| r.ranks > 2)
+                        .map(|r| (r.ranks, contention(r))),
+                );
+                if replay.contention_power.is_nan() {
+                    replay.contention_power = 0.0;
+                }
+                model.replicated = replay.rest_a;
+                model.divided = replay.rest_b + rows1;
+                model.imbalance2 = f64::NAN;
+                model.gamma = f64::NAN;
+                model.replay = Some(replay);
             }
             // The exchange is what the 2-rank wall time leaves over the
             // slowest rank's compute (waits in collectives are the
@@ -835,7 +1074,8 @@ impl Calibration {
         // Scenes without runs beyond 2 ranks take the mean growth of those
         // with, batched shots apart.
         for batched in [false, true] {
-            let kind = |m: &Model| m.exchange.starts_with("batches") == batched;
+            let kind =
+                |m: &Model| m.exchange.starts_with("batches") == batched && m.replay.is_none();
             let known: Vec<f64> = models
                 .iter()
                 .filter(|m| kind(m))
@@ -898,7 +1138,7 @@ impl Calibration {
             out.push(what(
                 "mean CPU seconds a shot",
                 Run::mean(&r.cpu_own),
-                m.compute_mean(n),
+                m.compute_mean_on(n, true),
             ));
             if r.ranks <= 2 {
                 // One core per rank: wall times.
@@ -907,9 +1147,20 @@ impl Calibration {
                     r.seconds_per_shot(),
                     m.seconds_per_shot(n, &self.local),
                 ));
-            } else {
+            } else if m.replay.is_none() {
                 // Oversubscribed: the balance of the CPU seconds.
                 out.push(what(LOAD_BALANCE, r.epsilon_cpu, m.epsilon(n)));
+            }
+            if let (Some(replay), false) = (&m.replay, r.rows_cpu.is_empty()) {
+                if r.ranks > 1 {
+                    // The replay's deal against the run's own: the slowest
+                    // rank's rows (the run dealt by its own row caches).
+                    out.push(what(
+                        SLOWEST_ROWS,
+                        r.slowest_rows(),
+                        replay.contention(n, true) * replay.loads(r.ranks).0,
+                    ));
+                }
             }
             if r.ranks > 1 {
                 out.push(what(
@@ -1016,6 +1267,9 @@ pub const LOAD_BALANCE: &str = "load balance (CPU)";
 /// The quantity of a check of the bytes beside the exchange (the occlusion
 /// cull's lists and the dealt rectangles).
 pub const BESIDE: &str = "cull and deal bytes a shot";
+/// A batched run's slowest rank's row CPU seconds a shot, against the
+/// replay's deal of the same rows.
+pub const SLOWEST_ROWS: &str = "slowest rank's rows CPU seconds a shot";
 
 /// Reads every `*.json` report in `dir`, sorted by name.
 pub fn read_runs(dir: &Path) -> Result<Vec<Run>, ScalingError> {
@@ -1068,7 +1322,31 @@ mod tests {
             imbalance2,
             gamma,
             split_limit: f64::INFINITY,
+            replay: None,
         }
+    }
+
+    #[test]
+    fn a_replay_deals_rows_by_their_weights_and_times_them_by_their_cpu() {
+        // One batch of four rows alike in weight, the first four times dearer.
+        let rows = [
+            (0, 1.0, 4.0, 0),
+            (0, 1.0, 1.0, 0),
+            (0, 1.0, 1.0, 0),
+            (0, 1.0, 1.0, 0),
+        ];
+        let r = Replay::from_rows(&rows, 4.0);
+        assert_eq!(r.batches.len(), 1);
+        assert!((r.rows() - 7.0 / 4.0).abs() < 1e-12);
+        assert_eq!(r.loads(1), (7.0 / 4.0, 7.0 / 4.0));
+        // Two ranks: rows 0 and 2 to rank 0 (ties to the lower rank).
+        assert_eq!(r.loads(2), (5.0 / 4.0, 2.0 / 4.0));
+        // More ranks than rows: the dearest row alone sets the time.
+        assert_eq!(r.loads(8), (4.0 / 4.0, 0.0));
+        // A second batch starts at another shot.
+        let two = Replay::from_rows(&[(0, 1.0, 1.0, 0), (5, 0.5, 2.0, 0)], 2.0);
+        assert_eq!(two.batches.len(), 2);
+        assert_eq!(two.loads(2).0, 3.0 / 2.0);
     }
 
     #[test]

@@ -280,9 +280,14 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
                 m.phases[k].divided * 1e3
             )
         };
+        let (u2, gamma) = if m.replay.is_some() {
+            ("replay".to_string(), "replay".to_string())
+        } else {
+            (format!("{:.3}", m.imbalance2), format!("{:.2}", m.gamma))
+        };
         writeln!(
             s,
-            "| {} | {} | {} | {:.1} ms | {:.1} ms | {:.1} ms | {:.1} | {} | {} | {} | {:.1} | {:.3} | {:.2} |",
+            "| {} | {} | {} | {:.1} ms | {:.1} ms | {:.1} ms | {:.1} | {} | {} | {} | {:.1} | {} | {} |",
             m.scene,
             res_name(m.resolution),
             m.exchange,
@@ -294,8 +299,35 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
             rd(2),
             rd(4),
             m.calls,
-            m.imbalance2,
-            m.gamma
+            u2,
+            gamma
+        )?;
+    }
+    writeln!(
+        s,
+        "\n## Batched shots replayed (rows as one rank drew them, dealt again on N ranks)\n"
+    )?;
+    writeln!(
+        s,
+        "| scene | exchange | batches | rows | rest a + b / N | contention s(2), power | slowest rank's rows at 16 / 64 ranks | speedup 64 (cluster) |"
+    )?;
+    writeln!(s, "|---|---|---|---|---|---|---|---|")?;
+    for m in &cal.models {
+        let Some(r) = &m.replay else { continue };
+        writeln!(
+            s,
+            "| {} | {} | {} | {:.1} ms | {:.2} + {:.2} / N ms | {:.3}, {:.2} | {:.2} / {:.2} ms | {:.1} |",
+            m.scene,
+            m.exchange,
+            r.batches.len(),
+            r.rows() * 1e3,
+            r.rest_a * 1e3,
+            r.rest_b * 1e3,
+            r.contention2,
+            r.contention_power,
+            r.loads(16).0 * 1e3,
+            r.loads(64).0 * 1e3,
+            m.speedup(64.0, &CLUSTER)
         )?;
     }
     writeln!(s, "\n## Validation\n")?;
