@@ -118,9 +118,12 @@ pub struct HemisphereRasterizer {
     cull_occluded: bool,
     /// The occlusion cull's map, reused from shot to shot.
     occlusion: crate::occlusion::OcclusionMap,
-    /// Shots to draw without the cull before trying it again (it did not
-    /// pay on the last shot that tried it).
-    cull_wait: u32,
+    /// Per shooter polygon, its shots to draw without the cull before
+    /// trying it again (it did not pay on the polygon's last shot that
+    /// tried it). Per polygon, because a batch hands one rank rows of many
+    /// polygons in turn: a light that sees nothing hidden must not turn
+    /// the cull off for the next shooter's row.
+    cull_waits: std::collections::HashMap<u32, u32>,
     /// This rank's tiles as the bounds read them, kept while the layout
     /// and the rank's place in it stay the same.
     ownership: Option<Ownership>,
@@ -222,7 +225,7 @@ impl HemisphereRasterizer {
             count_coverage: false,
             cull_occluded: true,
             occlusion: crate::occlusion::OcclusionMap::new(res),
-            cull_wait: 0,
+            cull_waits: std::collections::HashMap::new(),
             ownership: None,
             coverage: Vec::new(),
             elements: mesh.elements.len(),
@@ -656,8 +659,18 @@ impl HemisphereRasterizer {
             Some(p) => (Some(p.agree), p.scatter),
             None => (None, None),
         };
-        let cull = self.cull_occluded && self.cull_wait == 0 && agree.is_some();
-        self.cull_wait = self.cull_wait.saturating_sub(1);
+        let waiting = match self.cull_waits.get_mut(&shooter.polygon) {
+            Some(wait) if *wait > 1 => {
+                *wait -= 1;
+                true
+            }
+            Some(_) => {
+                self.cull_waits.remove(&shooter.polygon);
+                true
+            }
+            None => false,
+        };
+        let cull = self.cull_occluded && !waiting && agree.is_some();
         let mut collected = super::proxies::Collected::default();
         if self.tess.is_some() {
             self.collect_triangles(shooter);
@@ -674,11 +687,11 @@ impl HemisphereRasterizer {
                 scatter,
                 &mut self.instances,
             );
-            // Where the cull left little out, the next shots (most likely
-            // of nearby shooters) skip it: its cost is that of drawing
-            // every rectangle's cells on the CPU. The bits are the same.
+            // Where the cull left little out, the polygon's next shots skip
+            // it: its cost is that of drawing every rectangle's cells on the
+            // CPU. The bits are the same.
             if collected.culled.is_some_and(|c| c.share < CULL_PAYS) {
-                self.cull_wait = CULL_RETRY;
+                self.cull_waits.insert(shooter.polygon, CULL_RETRY);
             }
         }
         let bounds = start.elapsed();
@@ -720,7 +733,7 @@ const COVERAGE_BLOCK: usize = 64;
 /// times what the cull's test of a cell costs on the CPU).
 const CULL_PAYS: f64 = 0.1;
 
-/// Shots drawn without the cull after one where it did not pay.
+/// Shots of a polygon drawn without the cull after one where it did not pay.
 const CULL_RETRY: u32 = 16;
 
 /// The most rectangles one draw call draws (see [`HemisphereRasterizer::submit`]).

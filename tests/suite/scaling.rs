@@ -4,7 +4,7 @@
 //! at 1 to 16 ranks within 15 %. The runs are measurements, not outputs of
 //! this build: the test checks the model, not the renderer's speed.
 
-use radiosity::scaling::{read_runs, Calibration, AP1000, CLUSTER};
+use radiosity::scaling::{read_runs, Calibration, AP1000, CLUSTER, SLOWEST_ROWS};
 use std::path::Path;
 
 fn calibration() -> Calibration {
@@ -26,6 +26,10 @@ fn the_model_reproduces_its_calibration_within_15_percent() {
     assert!(timed
         .iter()
         .any(|c| c.ranks == 16 && c.quantity.contains("CPU")));
+    // Batched runs: the replay's deal of the rows against the runs' own.
+    assert!(timed
+        .iter()
+        .any(|c| c.ranks == 16 && c.quantity == SLOWEST_ROWS));
     let bad: Vec<String> = timed
         .iter()
         .filter(|c| c.relative_error().abs() > 0.15)
