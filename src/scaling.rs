@@ -752,34 +752,8 @@ impl Calibration {
     /// and resolution needs a 1-rank run and a 2-rank run per exchange;
     /// hemisphere runs on more ranks (CPU seconds) pin the compute law.
     pub fn fit_up_to(runs: Vec<Run>, max_ranks: usize) -> Result<Self, ScalingError> {
-        // Each batched row's least CPU seconds over every run of one core
-        // a rank (every run draws the same rows: the same bits; a row only
-        // ever gets dearer from its neighbours on the machine).
-        let least_rows = |of: &Run| -> Vec<(u64, f64, f64, usize)> {
-            let mut rows = of.rows.clone();
-            let count = rows.len();
-            for r in runs.iter().filter(|r| {
-                r.ranks <= 2.min(max_ranks) && key(r) == key(of) && r.rows.len() == count
-            }) {
-                for (mine, theirs) in rows.iter_mut().zip(&r.rows) {
-                    if mine.0 == theirs.0 {
-                        mine.2 = mine.2.min(theirs.2);
-                    }
-                }
-            }
-            rows
-        };
-        type Rows = Vec<(u64, f64, f64, usize)>;
-        let least: Vec<((String, [u32; 2], String), Rows)> = runs
-            .iter()
-            .filter(|r| r.ranks == 1 && !r.rows.is_empty())
-            .map(|r| {
-                (
-                    (r.scene.clone(), r.resolution, r.exchange.clone()),
-                    least_rows(r),
-                )
-            })
-            .collect();
+        // Every repeat, for each batched row's least CPU seconds.
+        let all = runs.clone();
         let runs = fastest_of_repeats(runs);
         let used = |r: &&Run| r.ranks <= max_ranks;
         // A batched run's 1-rank run is of the same batch; the exchanges'
@@ -979,11 +953,8 @@ impl Calibration {
                 .collect();
             if two.exchange.starts_with("batches") && !single.rows.is_empty() && own_runs.len() > 1
             {
-                let rows = least
-                    .iter()
-                    .find(|(k, _)| (k.0.as_str(), k.1, k.2.as_str()) == key(single))
-                    .map_or(&single.rows, |(_, rows)| rows);
-                let mut replay = Replay::from_rows(rows, single.shots);
+                let rows = least_rows(&all, single, max_ranks);
+                let mut replay = Replay::from_rows(&rows, single.shots);
                 let rows1 = replay.rows();
                 let rest: Vec<(f64, f64, f64)> = own_runs
                     .iter()
@@ -1176,6 +1147,26 @@ impl Calibration {
         }
         out
     }
+}
+
+/// `of`'s batched rows, each at its least CPU seconds over every run of
+/// one core a rank (at most `max_ranks`) of the same scene, resolution and
+/// batch: every run draws the same rows (the same bits), and a row only
+/// ever gets dearer from its neighbours on the machine.
+fn least_rows(all: &[Run], of: &Run, max_ranks: usize) -> Vec<(u64, f64, f64, usize)> {
+    let mut rows = of.rows.clone();
+    let count = rows.len();
+    for r in all
+        .iter()
+        .filter(|r| r.ranks <= 2.min(max_ranks) && key(r) == key(of) && r.rows.len() == count)
+    {
+        for (mine, theirs) in rows.iter_mut().zip(&r.rows) {
+            if mine.0 == theirs.0 {
+                mine.2 = mine.2.min(theirs.2);
+            }
+        }
+    }
+    rows
 }
 
 /// The mean of `values`, or `default` when there are none.
