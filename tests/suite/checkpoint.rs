@@ -68,6 +68,19 @@ fn same_solution(a: &Rendered, b: &Rendered) {
     assert_eq!(points(a), points(b), "the convergence traces differ");
 }
 
+/// Renders the Cornell box with `opts` (which resume a checkpoint made with
+/// other settings) and checks that the resume is refused as such.
+fn refused_as_other_settings(opts: &RenderOptions) {
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    let err = render(gpu(), &scene, opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}
+
 /// The Cornell box to unshot 2e-3, saving to `path` when interrupted
 /// (with the flag `interrupt`, or never without it).
 fn interruptible(path: &std::path::Path, interrupt: bool) -> RenderOptions {
@@ -153,14 +166,7 @@ fn an_interrupted_batched_solve_resumes_to_the_same_bits() {
 
     // The batch is part of the settings a checkpoint must match.
     opts.batch = 4;
-    let scene = radiosity::scene::open("cornell").expect("built-in scene");
-    let err = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    refused_as_other_settings(&opts);
 }
 
 #[test]
@@ -185,14 +191,7 @@ fn a_checkpoint_from_other_settings_is_refused() {
         cols: 256,
     };
     opts.resume = Some(Arc::new(saved));
-    let scene = radiosity::scene::open("cornell").expect("built-in scene");
-    let err = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    refused_as_other_settings(&opts);
 }
 
 #[test]
