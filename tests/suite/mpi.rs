@@ -270,14 +270,26 @@ fn fault_run(ranks: usize, extra: &[&str]) -> Command {
     } else {
         Command::new(bin)
     };
-    cmd.args(["render", "cornell", "--width", "0", "--no-cache"])
-        .args(["--threshold", "1e-6", "--max-shots", "2500"])
-        .args(extra)
-        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-        .env("OMPI_MCA_btl", "self,vader,tcp")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped());
+    // No refinement pass: a signal or a fault that lands in the pass keeps
+    // the pass's solution and refines from it (checkpoint.rs tests that),
+    // so the same bits as a straight run need the stop in the final solve,
+    // wherever a loaded machine's timing puts it.
+    cmd.args([
+        "render",
+        "cornell",
+        "--width",
+        "0",
+        "--no-cache",
+        "--refine",
+        "0",
+    ])
+    .args(["--threshold", "1e-6", "--max-shots", "2500"])
+    .args(extra)
+    .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    .env("OMPI_MCA_btl", "self,vader,tcp")
+    .stdout(std::process::Stdio::null())
+    .stderr(std::process::Stdio::piped());
     cmd
 }
 
