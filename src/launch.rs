@@ -18,10 +18,7 @@ pub fn launched_ranks() -> Option<usize> {
 /// give each rank cores / ranks-on-this-host worker threads (unless set).
 /// Call before any thread starts (it sets an environment variable).
 pub fn share_cores_between_ranks() {
-    let local: usize = std::env::var("OMPI_COMM_WORLD_LOCAL_SIZE")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1);
+    let local = crate::parallel::ranks_on_this_host();
     if local > 1 && std::env::var_os("LP_NUM_THREADS").is_none() {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         std::env::set_var("LP_NUM_THREADS", (cores / local).max(1).to_string());

@@ -152,12 +152,18 @@ pub fn cores() -> usize {
     static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
     *CORES.get_or_init(|| {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let local: usize = std::env::var("OMPI_COMM_WORLD_LOCAL_SIZE")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(1);
-        (cores / local.max(1)).max(1)
+        (cores / ranks_on_this_host()).max(1)
     })
+}
+
+/// The ranks mpirun started on this host (Open MPI's
+/// `OMPI_COMM_WORLD_LOCAL_SIZE`; 1 outside mpirun).
+pub fn ranks_on_this_host() -> usize {
+    std::env::var("OMPI_COMM_WORLD_LOCAL_SIZE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1)
+        .max(1)
 }
 
 /// Which rank draws each of a batch's rows, from `costs` (every rank's

@@ -226,19 +226,15 @@ impl Run {
     /// (each batch waits for its slowest rank), a shot.
     pub fn slowest_rows(&self) -> f64 {
         let mut total = 0.0;
-        let mut load = vec![0.0; self.ranks];
-        let mut start = None;
-        for &(b, _, cpu, rank) in &self.rows {
-            if start != Some(b) {
-                total += load.iter().copied().fold(0.0, f64::max);
-                load.iter_mut().for_each(|l| *l = 0.0);
-                start = Some(b);
+        for batch in self.rows.chunk_by(|a, b| a.0 == b.0) {
+            let mut load = vec![0.0; self.ranks];
+            for &(_, _, cpu, rank) in batch {
+                if let Some(l) = load.get_mut(rank) {
+                    *l += cpu;
+                }
             }
-            if let Some(l) = load.get_mut(rank) {
-                *l += cpu;
-            }
+            total += load.iter().copied().fold(0.0, f64::max);
         }
-        total += load.iter().copied().fold(0.0, f64::max);
         total / self.shots
     }
 
@@ -510,19 +506,11 @@ pub struct Replay {
 impl Replay {
     /// From a run's rows (batch start, weight, CPU seconds, rank).
     pub fn from_rows(rows: &[(u64, f64, f64, usize)], shots: f64) -> Self {
-        let mut batches: Vec<Vec<(f64, f64)>> = Vec::new();
-        let mut start = None;
-        for &(b, w, cpu, _) in rows {
-            if start != Some(b) {
-                batches.push(Vec::new());
-                start = Some(b);
-            }
-            if let Some(last) = batches.last_mut() {
-                last.push((w, cpu));
-            }
-        }
         Self {
-            batches,
+            batches: rows
+                .chunk_by(|a, b| a.0 == b.0)
+                .map(|batch| batch.iter().map(|&(_, w, cpu, _)| (w, cpu)).collect())
+                .collect(),
             shots,
             contention2: 1.0,
             ..Self::default()
