@@ -52,6 +52,7 @@ pub fn process_cpu_seconds() -> f64 {
 }
 
 /// A span of this process's CPU time, less what collective calls used in it.
+#[derive(Clone, Copy, Debug)]
 pub struct CpuSpan {
     cpu: f64,
     mpi: f64,

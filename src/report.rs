@@ -443,8 +443,12 @@ pub struct RankStats {
 pub struct BatchRow {
     /// The solve's shot count when its batch began.
     pub batch_start: u64,
-    /// Its place in the batch.
+    /// Its place in the batch (round 1: in the batch's list of groups).
     pub index: u32,
+    /// 0: a row (its first hemisphere, and, for a split shot, its
+    /// assembly); 1: one group of a split shot, dealt in a second round
+    /// (a batch waits for each round's slowest rank).
+    pub round: u32,
     /// The rank that drew it.
     pub rank: usize,
     /// Its weight in the assignment (1 a fresh row, less at a coarse tier

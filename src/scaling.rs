@@ -103,9 +103,10 @@ pub struct Run {
     /// Batched runs: per rank, CPU seconds a shot drawing rows (the
     /// divided work; empty in reports without it).
     pub rows_cpu: Vec<f64>,
-    /// Batched runs: every row in shot order as (the shot its batch began
-    /// at, its weight in the assignment, its CPU seconds, the rank that
-    /// drew it).
+    /// Batched runs: every row in shot order as (its step: twice the shot
+    /// its batch began at, plus its round (1: a split shot's groups, dealt
+    /// after the rows), its weight in the assignment, its CPU seconds, the
+    /// rank that drew it).
     pub rows: Vec<(u64, f64, f64, usize)>,
 }
 
@@ -166,8 +167,11 @@ impl Run {
                 .map(|rows| {
                     rows.iter()
                         .filter_map(|r| {
+                            // A round of a batch is a step of its own:
+                            // every rank waits for the round's slowest.
+                            let round = r["round"].as_u64().unwrap_or(0);
                             Some((
-                                r["batch_start"].as_u64()?,
+                                2 * r["batch_start"].as_u64()? + round.min(1),
                                 r["cost"].as_f64()?,
                                 r["cpu_seconds"].as_f64()?,
                                 r["rank"].as_u64()? as usize,

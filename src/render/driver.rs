@@ -389,6 +389,7 @@ fn gather_to_root<'m>(
             [
                 r.batch_start as f64,
                 f64::from(r.index),
+                f64::from(r.round),
                 r.cost,
                 r.cpu_seconds,
             ]
@@ -400,16 +401,17 @@ fn gather_to_root<'m>(
         .iter()
         .enumerate()
         .flat_map(|(rank, v)| {
-            v.chunks_exact(4).map(move |r| crate::report::BatchRow {
+            v.chunks_exact(5).map(move |r| crate::report::BatchRow {
                 batch_start: r[0] as u64,
                 index: r[1] as u32,
+                round: r[2] as u32,
                 rank,
-                cost: r[2],
-                cpu_seconds: r[3],
+                cost: r[3],
+                cpu_seconds: r[4],
             })
         })
         .collect();
-    rows.sort_by_key(|r| (r.batch_start, r.index));
+    rows.sort_by_key(|r| (r.batch_start, r.round, r.index));
     Some(Gathered {
         whole,
         phases: source.timings,

@@ -237,6 +237,10 @@ pub enum RenderError {
     /// scene or resolution is beyond what the sums can hold).
     #[error("the fixed-point form-factor sums of shooter {0} overflowed 64 bits")]
     Overflow(u32),
+    /// Ranks of a batched solve disagreed on a split shot (a part sent
+    /// to the wrong rank, or one missing): a bug, reported, not a hang.
+    #[error("split shot of shooter {0}: {1}")]
+    SplitShot(u32, String),
     /// The scene cannot be rendered as it is (nothing lights it).
     #[error(transparent)]
     Scene(#[from] crate::scene::SceneError),

@@ -5,7 +5,7 @@
 //! at the same shot.
 
 use super::options::RenderError;
-use super::source::GpuFormFactors;
+use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
 use crate::parallel::{patch_owner, Collectives};
 use crate::solver::{
@@ -81,6 +81,14 @@ pub struct LoopStats {
     pub rows_cpu_seconds: f64,
 }
 
+/// What a batch's rounds fill: per rank the row pieces to send, per row
+/// this rank's own transfers, and per row its sums.
+type BatchOut<'a> = (
+    &'a mut [Vec<(u32, u64)>],
+    &'a mut [Vec<Transfer>],
+    &'a mut [f64],
+);
+
 /// Batched shots whose rows are recorded ([`LoopStats::rows`]).
 pub const MAX_ROW_RECORDS: u64 = 10_000;
 
@@ -89,9 +97,13 @@ pub const MAX_ROW_RECORDS: u64 = 10_000;
 pub struct RowRecord {
     /// The solve's shot count when its batch began.
     pub batch_start: u64,
-    /// Its place in the batch.
+    /// Its place in the batch (round 1: in the batch's list of groups).
     pub index: u32,
-    /// The cost the assignment weighed it at (`GpuFormFactors::row_cost`).
+    /// 0: a row (its first hemisphere, and, for a split shot, its
+    /// assembly); 1: a group of a split shot, dealt in a second round.
+    pub round: u32,
+    /// The cost the assignment weighed it at (`GpuFormFactors::row_cost`,
+    /// `GpuFormFactors::group_cost`).
     pub cost: f64,
     /// Process CPU seconds drawing it and packing it for its owners.
     pub cpu_seconds: f64,
@@ -345,26 +357,42 @@ impl<'m> ShotLoop<'m> {
         let mut rows = vec![Vec::new(); chosen.len()];
         let mut sums = vec![0.0; chosen.len() * ROW_SUMS];
         let batch_start = solver.shots();
+        let recorded = batch_start < MAX_ROW_RECORDS;
+        // Per row: its record's place in `stats.rows`, and its split shot's groups.
+        let mut record_of = vec![usize::MAX; chosen.len()];
+        let mut groups = vec![0u32; chosen.len()];
         for (k, (c, region)) in chosen.iter().zip(&regions).enumerate() {
             if drawer[k] != rank {
                 continue;
             }
             let cpu = crate::parallel::process_cpu_seconds();
-            source.form_factors(c.patch, region, &mut self.ff)?;
-            let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
-            sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
-            pack_row(solver, (k, rank), &self.ff, &mut outgoing, &mut rows[k]);
+            match source.start_row(c.patch, region, &mut self.ff)? {
+                Started::Row => {
+                    let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
+                    sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
+                    pack_row(solver, (k, rank), &self.ff, &mut outgoing, &mut rows[k]);
+                }
+                Started::Split(n) => groups[k] = n as u32,
+            }
             let cpu_seconds = crate::parallel::process_cpu_seconds() - cpu;
             self.stats.rows_cpu_seconds += cpu_seconds;
-            if batch_start + (k as u64) < MAX_ROW_RECORDS {
+            if recorded {
+                record_of[k] = self.stats.rows.len();
                 self.stats.rows.push(RowRecord {
                     batch_start,
                     index: k as u32,
+                    round: 0,
                     cost: costs.get(rank * chosen.len() + k).copied().unwrap_or(1.0),
                     cpu_seconds,
                 });
             }
         }
+        self.split_round(
+            (source, solver),
+            (&chosen, &regions, &drawer),
+            (groups, &record_of),
+            (&mut outgoing, &mut rows, &mut sums),
+        )?;
         let t = Instant::now();
         let cpu = crate::parallel::CpuSpan::start(self.comm);
         let incoming = self.comm.all_to_all_pairs(&outgoing);
@@ -404,6 +432,110 @@ impl<'m> ShotLoop<'m> {
             .extend(std::iter::repeat_n(per_shot, chosen.len()));
         hooks.after_shot(solver, unshot_fraction);
         Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
+    }
+
+    /// A batch's second round: the groups of its split shots (`groups[k]`
+    /// of row k, started by its drawer), dealt over every rank as work of
+    /// their own, sent to the rows' drawers, who assemble the rows (in
+    /// group order: the bits of a shot drawn whole) and pack them as the
+    /// first round's.
+    fn split_round<'s>(
+        &mut self,
+        (source, solver): (&mut GpuFormFactors, &mut Solver<'s>),
+        (chosen, regions, drawer): (&[Candidate], &[ShotRegion], &[usize]),
+        (groups, record_of): (Vec<u32>, &[usize]),
+        (outgoing, rows, sums): BatchOut<'_>,
+    ) -> Result<(), RenderError> {
+        let (rank, ranks) = (self.comm.rank(), self.comm.size());
+        let groups = if ranks > 1 {
+            let mut all = vec![0u32; groups.len()];
+            for part in self.comm.all_gather_u32(&groups, None) {
+                for (a, g) in all.iter_mut().zip(part) {
+                    *a += g;
+                }
+            }
+            all
+        } else {
+            groups
+        };
+        let units: Vec<(usize, usize)> = groups
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &n)| (0..n as usize).map(move |g| (k, g)))
+            .collect();
+        if units.is_empty() {
+            return Ok(());
+        }
+        let batch_start = solver.shots();
+        // Every rank weighs a group alike.
+        let weights: Vec<f64> = units
+            .iter()
+            .map(|&(k, _)| source.group_cost(chosen[k].patch, &regions[k]))
+            .collect();
+        let all_weights: Vec<f64> = (0..ranks).flat_map(|_| weights.iter().copied()).collect();
+        let taker = crate::parallel::assign_rows(&all_weights, ranks);
+        let mut parts_out = vec![Vec::new(); ranks];
+        for (u, &(k, g)) in units.iter().enumerate() {
+            if taker[u] != rank {
+                continue;
+            }
+            let cpu = crate::parallel::process_cpu_seconds();
+            let part = source.group_part(chosen[k].patch, &regions[k], g)?;
+            part.pack(k, g, &mut parts_out[drawer[k]]);
+            let cpu_seconds = crate::parallel::process_cpu_seconds() - cpu;
+            self.stats.rows_cpu_seconds += cpu_seconds;
+            if batch_start < MAX_ROW_RECORDS {
+                self.stats.rows.push(RowRecord {
+                    batch_start,
+                    index: u as u32,
+                    round: 1,
+                    cost: weights[u],
+                    cpu_seconds,
+                });
+            }
+        }
+        let t = Instant::now();
+        let incoming = if ranks > 1 {
+            self.comm.all_to_all_u32(&parts_out)
+        } else {
+            parts_out
+        };
+        source.timings.exchange += t.elapsed();
+        let columns = |k: usize| {
+            chosen.get(k).map_or(0, |c| {
+                solver.mesh().patches[c.patch as usize].elements.len()
+            })
+        };
+        let mut parts: Vec<Vec<(usize, GroupPart)>> = vec![Vec::new(); chosen.len()];
+        for words in &incoming {
+            let unpacked = GroupPart::unpack(words, columns).ok_or_else(|| {
+                RenderError::SplitShot(u32::MAX, "a part cut short in transit".into())
+            })?;
+            for (k, g, part) in unpacked {
+                if let Some(p) = parts.get_mut(k) {
+                    p.push((g, part));
+                }
+            }
+        }
+        for (k, mut mine) in parts.into_iter().enumerate() {
+            if groups[k] == 0 || drawer[k] != rank {
+                continue;
+            }
+            let cpu = crate::parallel::process_cpu_seconds();
+            let (c, region) = (&chosen[k], &regions[k]);
+            mine.sort_by_key(|p| p.0);
+            let in_order: Vec<&GroupPart> = mine.iter().map(|p| &p.1).collect();
+            source.finish_row(c.patch, region, &in_order, &mut self.ff)?;
+            let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
+            sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
+            pack_row(solver, (k, rank), &self.ff, outgoing, &mut rows[k]);
+            let cpu_seconds = crate::parallel::process_cpu_seconds() - cpu;
+            self.stats.rows_cpu_seconds += cpu_seconds;
+            if let Some(r) = record_of.get(k).and_then(|&i| self.stats.rows.get_mut(i)) {
+                r.cpu_seconds += cpu_seconds;
+            }
+        }
+        Ok(())
     }
 
     /// The batch's shooters: every rank's strongest `batch` patches

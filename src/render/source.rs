@@ -17,9 +17,12 @@ use crate::solver::{FormFactorSource, ShotRegion, Transfer};
 use std::time::{Duration, Instant};
 
 mod far;
+mod split;
 
 use far::FarPatch;
 pub use far::FAR_CELLS;
+use split::{First, Split};
+pub use split::{GroupPart, Started};
 
 /// Time one rank spent per phase, summed over shots.
 #[derive(Clone, Copy, Debug, Default)]
@@ -169,6 +172,9 @@ pub struct GpuFormFactors<'a> {
     whole_items: Vec<Vec<u32>>,
     /// A split group's items with the whole hemisphere's beyond its reach.
     composite: Vec<u32>,
+    /// Split shots started here whose groups are being drawn (a batched
+    /// solve's: see [`GpuFormFactors::start_row`]).
+    pending: Vec<split::Pending>,
     /// A transport row's sort keys and its transfers in element order
     /// (kept between shots).
     sort_keys: Vec<u64>,
@@ -241,6 +247,7 @@ impl<'a> GpuFormFactors<'a> {
                 .fold(0.0, f32::max),
             whole_items: Vec::new(),
             composite: Vec::new(),
+            pending: Vec::new(),
             sort_keys: Vec::new(),
             sorted: Vec::new(),
             last_centre: glam::Vec3::ZERO,
@@ -448,6 +455,32 @@ impl<'a> GpuFormFactors<'a> {
     /// The hybrid row from the hemisphere just drawn, redrawn split into
     /// groups of the shooter's elements where visibility varies across it.
     fn hybrid_row(&mut self, shooter: u32, tier: usize) -> Result<(Row, Duration), RenderError> {
+        let (first, mut exchange) = self.hybrid_first(shooter, tier)?;
+        let mut split = match first {
+            First::Whole(row) => return Ok((row, exchange)),
+            First::Split(split) => split,
+        };
+        let mut views = Vec::with_capacity(3 * split.groups.len());
+        for g in 0..split.groups.len() {
+            let (part, spent) = self.group_row(&split.groups[g], shooter, tier)?;
+            exchange += spent;
+            split.row.merge(&part);
+            views.extend(self.view);
+        }
+        let (row, spent) = self.finish_split(split, &views);
+        Ok((row, exchange + spent))
+    }
+
+    /// The hybrid row of the hemisphere just drawn, or, where a near
+    /// receiver is partly hidden from the shooter's centre (visibility
+    /// varies across the shooter), the start of a split shot: that row
+    /// without its near receivers, which each group of the shooter's
+    /// elements then looks at for itself ([`Self::group_row`]).
+    fn hybrid_first(
+        &mut self,
+        shooter: u32,
+        tier: usize,
+    ) -> Result<(First, Duration), RenderError> {
         let m = self.mesh.patches[shooter as usize].elements.len();
         let columns = if m <= formfactor::MAX_SHOOTER_COLUMNS {
             m
@@ -465,10 +498,7 @@ impl<'a> GpuFormFactors<'a> {
         let v = self.view;
         let mut parts = vec![row.near_hidden, row.total, v[0], v[1], v[2]];
         parts.extend(row.column_totals());
-        let (sums, mut exchange) = self.sum_over_ranks(parts);
-        // Refinement by need: a near receiver partly hidden from the
-        // shooter's centre means visibility varies across the shooter, so
-        // each group of its elements looks for itself.
+        let (sums, exchange) = self.sum_over_ranks(parts);
         // The refinement passes measure with one hemisphere a shot, as
         // coarse as the shot (the emitters' shots split as in the solve).
         let split = self.split && !(self.choice.measuring && tier > 0);
@@ -476,46 +506,72 @@ impl<'a> GpuFormFactors<'a> {
             let scales = self.normalisers(shooter, 0..columns, [sums[2], sums[4]], &sums[5..]);
             row.scale_columns(&scales);
             row.blocked = vec![sums[3] as f64 / formfactor::SHARE_ONE; columns];
-            return Ok((row, exchange));
+            return Ok((First::Whole(row), exchange));
         }
-        // Only near receivers look again, each group of the shooter's
-        // elements from its own point: a segment from a point of the shooter
-        // to a near receiver stays within `near` of the shooter's centre, so
-        // only polygons that close can hide it, and each group draws only
-        // those (in a big scene, a small part of it). Farther receivers
-        // keep the first hemisphere's visibility.
-        let (is_near, near) = formfactor::near_receivers(self.mesh, shooter);
+        // Only near receivers look again; farther ones keep this
+        // hemisphere's visibility.
+        let (is_near, _) = formfactor::near_receivers(self.mesh, shooter);
         let stats = (row.near_hidden, row.total, row.partial);
         row.retain(|j| !is_near(j));
+        let split = Split {
+            shooter,
+            columns,
+            row,
+            stats,
+            groups: formfactor::split_groups(self.mesh, shooter, columns),
+        };
+        Ok((First::Split(split), exchange))
+    }
+
+    /// One group of a split shot's elements looking from its own point
+    /// `at`: a segment from a point of the shooter to a near receiver stays
+    /// within `near` of the shooter's centre, so only polygons that close
+    /// can hide it, and the group draws only those (in a big scene, a small
+    /// part of it). Its row holds near receivers only; `self.view` is what
+    /// its hemisphere showed (see [`Self::view_of`]).
+    fn group_row(
+        &mut self,
+        (group, at): &(std::ops::Range<usize>, glam::Vec3),
+        shooter: u32,
+        tier: usize,
+    ) -> Result<(Row, Duration), RenderError> {
+        let (is_near, near) = formfactor::near_receivers(self.mesh, shooter);
         let patch_centre = self.mesh.patches[shooter as usize].centre;
-        let groups = formfactor::split_groups(self.mesh, shooter, columns);
-        let mut views = Vec::with_capacity(3 * groups.len());
-        for (group, at) in &groups {
-            let reach = near as f32 + at.distance(patch_centre);
-            exchange += self.hemisphere(shooter, *at, tier, reach)?;
-            // Its own far receivers, near ones only (few rays).
-            let within = reach + self.max_patch_radius;
-            self.add_far_receivers(shooter, *at, tier, within, &is_near);
-            self.timings.receivers += self.visible_receivers();
-            let mut part = formfactor::hybrid_row(
-                self.mesh,
-                &self.receivers,
-                shooter,
-                &self.pairs,
-                group.clone(),
-            );
-            part.retain(&is_near);
-            row.merge(&part);
-            views.extend(self.view);
-        }
+        let reach = near as f32 + at.distance(patch_centre);
+        let exchange = self.hemisphere(shooter, *at, tier, reach)?;
+        // Its own far receivers, near ones only (few rays).
+        let within = reach + self.max_patch_radius;
+        self.add_far_receivers(shooter, *at, tier, within, &is_near);
+        self.timings.receivers += self.visible_receivers();
+        let mut part = formfactor::hybrid_row(
+            self.mesh,
+            &self.receivers,
+            shooter,
+            &self.pairs,
+            group.clone(),
+        );
+        part.retain(&is_near);
+        Ok((part, exchange))
+    }
+
+    /// A split shot's row once every group's part is merged into it:
+    /// `views` holds each group's view shares (three a group, over this
+    /// rank's cells).
+    fn finish_split(&mut self, split: Split, views: &[u64]) -> (Row, Duration) {
+        let Split {
+            shooter,
+            columns,
+            mut row,
+            stats,
+            groups,
+        } = split;
         (row.near_hidden, row.total, row.partial) = stats;
         // Each group's columns normalised to what its hemisphere (beyond its
         // reach, the first one) saw, as the row of an unsplit shot is.
         let mut parts = row.column_totals();
         let n = parts.len();
-        parts.extend(views);
-        let (sums, spent) = self.sum_over_ranks(parts);
-        exchange += spent;
+        parts.extend_from_slice(views);
+        let (sums, exchange) = self.sum_over_ranks(parts);
         let (totals, views) = sums.split_at(n);
         row.blocked = vec![0.0; columns];
         let mut scales = vec![1.0; columns];
@@ -528,7 +584,7 @@ impl<'a> GpuFormFactors<'a> {
         }
         row.scale_columns(&scales);
         self.timings.split += 1;
-        Ok((row, exchange))
+        (row, exchange)
     }
 
     /// Where the hemisphere is closed (every cell shows an element or a
@@ -672,10 +728,7 @@ impl GpuFormFactors<'_> {
         if self.choice.by_transport(region.power) {
             return 0.0;
         }
-        let polygon = self.mesh.patches[shooter as usize].polygon as usize;
-        let tier = self
-            .choice
-            .tier_for(region.power, self.mesh.polygons[polygon].emits());
+        let tier = self.tier_of(shooter, region);
         if self
             .cache
             .get(&RowKey::new(shooter, region.centre, tier))
@@ -683,8 +736,7 @@ impl GpuFormFactors<'_> {
         {
             return CACHED_ROW_COST;
         }
-        self.tiers[tier].cells.resolution.cells() as f64
-            / self.tiers[0].cells.resolution.cells() as f64
+        self.group_cost(shooter, region)
     }
 
     /// Whether a shooter of unshot power `power` shoots along the ambient
@@ -775,30 +827,60 @@ impl FormFactorSource for GpuFormFactors<'_> {
     ) -> Result<(), RenderError> {
         let start = Instant::now();
         let cpu = parallel::CpuSpan::start(self.comm);
+        let Some((key, tier)) = self.fresh_key(shooter, region, out, (start, cpu)) else {
+            return Ok(());
+        };
+        let before = self.timings.drawing();
+        let (row, exchange) = self.fresh_row(shooter, region.centre, tier)?;
+        self.take_row(key, row, region, out, (start, cpu, before, exchange));
+        Ok(())
+    }
+}
+
+impl GpuFormFactors<'_> {
+    /// A row that needs no drawing (a transport row, a cached one) into
+    /// `out`, returning `None`; else the cache key and tier of the row to
+    /// draw. `started` is when (and at what CPU time) the row began.
+    fn fresh_key(
+        &mut self,
+        shooter: u32,
+        region: &ShotRegion,
+        out: &mut Vec<Transfer>,
+        (start, cpu): (Instant, parallel::CpuSpan),
+    ) -> Option<(RowKey, usize)> {
         if self.choice.by_transport(region.power) {
             self.transport_row(shooter, region, out);
             self.note_quick_row(start, cpu);
-            return Ok(());
+            return None;
         }
-        let polygon = self.mesh.patches[shooter as usize].polygon as usize;
-        let tier = self
-            .choice
-            .tier_for(region.power, self.mesh.polygons[polygon].emits());
+        let tier = self.tier_of(shooter, region);
         let key = RowKey::new(shooter, region.centre, tier);
         if let Some(row) = self.cache.get(&key) {
             row.combine(region, out);
             self.last_blocked = back_share(self.mesh, shooter, row, region);
             self.timings.cached += 1;
             self.note_quick_row(start, cpu);
-            return Ok(());
+            return None;
         }
-        let before = self.timings.drawing();
         if tier > 0 {
             self.timings.coarse += 1;
         }
-        let (row, exchange) = self.fresh_row(shooter, region.centre, tier)?;
+        Some((key, tier))
+    }
+
+    /// A freshly drawn `row` into `out` and offered to the cache, its time
+    /// noted: `start`, `cpu` and the drawing time `before` from when it
+    /// began, and `exchange` spent in exchanges.
+    fn take_row(
+        &mut self,
+        key: RowKey,
+        row: Row,
+        region: &ShotRegion,
+        out: &mut Vec<Transfer>,
+        (start, cpu, before, exchange): (Instant, parallel::CpuSpan, Duration, Duration),
+    ) {
         row.combine(region, out);
-        self.last_blocked = back_share(self.mesh, shooter, &row, region);
+        self.last_blocked = back_share(self.mesh, key.patch, &row, region);
         self.cache.offer(key, row);
         if self.comm.size() == 1 {
             // One process: the decision needs nobody else.
@@ -810,6 +892,5 @@ impl FormFactorSource for GpuFormFactors<'_> {
         self.timings.sum += total.saturating_sub(exchange + drawn);
         self.busy.push((total - exchange).as_secs_f64());
         self.busy_cpu.push(cpu.own(self.comm));
-        Ok(())
     }
 }

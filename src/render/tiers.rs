@@ -239,6 +239,50 @@ impl TierCells {
         out
     }
 
+    /// Where a whole hemisphere's `items` show nothing, as runs of cells
+    /// (start and end, end excluded, flattened; none across a row of cells).
+    pub fn empty_runs(&self, items: &[u32]) -> Vec<u32> {
+        let cols = self.resolution.cols as usize;
+        let mut runs = Vec::new();
+        for (row, cells) in items.chunks_exact(cols).enumerate() {
+            let base = (row * cols) as u32;
+            let mut open = None;
+            for (t, &id) in cells.iter().enumerate() {
+                match (id == crate::hemisphere::EMPTY, open) {
+                    (true, None) => open = Some(base + t as u32),
+                    (false, Some(start)) => {
+                        runs.extend([start, base + t as u32]);
+                        open = None;
+                    }
+                    _ => {}
+                }
+            }
+            if let Some(start) = open {
+                runs.extend([start, base + cols as u32]);
+            }
+        }
+        runs
+    }
+
+    /// [`Self::view_shares`] of a whole hemisphere's `items`, over the
+    /// cells of `runs` (as [`Self::empty_runs`] gives them) only.
+    pub fn view_shares_within(&self, items: &[u32], runs: &[u32]) -> [u64; 3] {
+        let cols = self.resolution.cols as usize;
+        let mut out = [0u64; 3];
+        for run in runs.chunks_exact(2) {
+            let (start, end) = (run[0] as usize, run[1] as usize);
+            let w = self.shares[start / cols];
+            for &id in items.get(start..end).unwrap_or(&[]) {
+                match id {
+                    crate::hemisphere::EMPTY => out[2] += 1,
+                    crate::hemisphere::BLOCKED => out[1] += w,
+                    _ => out[0] += w,
+                }
+            }
+        }
+        out
+    }
+
     /// The rank-grid position (x, y) of rank `rank`.
     pub fn grid_position(&self, rank: usize) -> (u32, u32) {
         let rank = rank as u32;
@@ -249,6 +293,43 @@ impl TierCells {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_group_view_splits_into_its_drawn_cells_and_the_first_hemisphere_beyond() {
+        use crate::hemisphere::{BLOCKED, EMPTY};
+        let res = Resolution { rows: 6, cols: 10 };
+        let cells = TierCells::new(res, TileLayout::whole(res), 1, FormFactorMethod::Hemisphere);
+        // A whole hemisphere and a reach-limited one: every kind of cell,
+        // empty runs that start, end and fill rows.
+        let pick = |k: usize, salt: usize| match (k * 7 + salt) % 5 {
+            0 | 1 => EMPTY,
+            2 => BLOCKED,
+            _ => k as u32,
+        };
+        let whole: Vec<u32> = (0..res.cells()).map(|k| pick(k, 1)).collect();
+        let mut group: Vec<u32> = (0..res.cells()).map(|k| pick(k, 3)).collect();
+        group[10..20].fill(EMPTY);
+        group[0] = EMPTY;
+        let composite: Vec<u32> = group
+            .iter()
+            .zip(&whole)
+            .map(|(&g, &w)| if g == EMPTY { w } else { g })
+            .collect();
+        let want = cells.view_shares(&composite, (0, 0));
+        let runs = cells.empty_runs(&group);
+        assert!(runs
+            .chunks_exact(2)
+            .all(|r| r[0] < r[1] && r[0] / res.cols == (r[1] - 1) / res.cols));
+        let drawn = cells.view_shares(&group, (0, 0));
+        let beyond = cells.view_shares_within(&whole, &runs);
+        assert_eq!(beyond[2], want[2]);
+        assert_eq!(
+            [drawn[0] + beyond[0], drawn[1] + beyond[1]],
+            [want[0], want[1]]
+        );
+        let empty: usize = runs.chunks_exact(2).map(|r| (r[1] - r[0]) as usize).sum();
+        assert_eq!(empty as u64, drawn[2]);
+    }
 
     #[test]
     fn every_cell_belongs_to_exactly_one_rank() {
