@@ -485,7 +485,8 @@ pub struct Model {
 /// took on one rank, dealt again as the render deals them
 /// ([`crate::parallel::assign_rows`]). The slowest rank's rows set a
 /// batch's time, so the imbalance is the rows' own, not a fitted law. A
-/// rank's CPU seconds outside its rows follow `rest_a + rest_b / N`.
+/// rank's CPU seconds outside its rows follow `rest_a + rest_b / N` (on
+/// this machine beyond its 2 cores, times the rows' growth there).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Replay {
     /// Per batch, each row's (weight, CPU seconds).
@@ -559,9 +560,21 @@ impl Replay {
         }
     }
 
-    /// A rank's CPU seconds a shot outside its rows on `n` ranks.
+    /// A rank's CPU seconds a shot outside its rows on `n` ranks, one
+    /// core a rank.
     pub fn rest(&self, n: f64) -> f64 {
         self.rest_a + self.rest_b / n.max(1.0)
+    }
+
+    /// The same on `n` ranks of this machine (`here`), where beyond its 2
+    /// cores time slicing slows it as it slows the rows.
+    pub fn rest_on(&self, n: f64, here: bool) -> f64 {
+        let slicing = if self.contention2 > 0.0 {
+            self.contention(n, here) / self.contention2
+        } else {
+            1.0
+        };
+        self.rest(n) * if here && n > 2.0 { slicing } else { 1.0 }
     }
 }
 
@@ -592,7 +605,7 @@ impl Model {
         if n <= 1.0 {
             self.serial
         } else if let Some(r) = &self.replay {
-            r.rest(n) + r.contention(n, here) * r.rows() / n
+            r.rest_on(n, here) + r.contention(n, here) * r.rows() / n
         } else {
             self.replicated + self.divided / self.busy(n)
         }
@@ -948,6 +961,12 @@ impl Calibration {
                 let rows = least_rows(&all, single, max_ranks);
                 let mut replay = Replay::from_rows(&rows, single.shots);
                 let rows1 = replay.rows();
+                let contention = |r: &Run| r.rows_cpu.iter().sum::<f64>() / rows1;
+                let contention2 = contention(two);
+                // Oversubscribed ranks slow their other work as they slow
+                // their rows (time slicing: each rank's caches refilled
+                // after the others'), so a run beyond 2 ranks gives its
+                // rest at one core a rank divided by its rows' own growth.
                 let rest: Vec<(f64, f64, f64)> = own_runs
                     .iter()
                     .map(|r| {
@@ -957,14 +976,18 @@ impl Calibration {
                             .zip(&r.rows_cpu)
                             .map(|(c, w)| c - w)
                             .collect();
-                        (1.0, 1.0 / r.ranks as f64, Run::mean(&rest))
+                        let slicing = if r.ranks > 2 && contention2 > 0.0 {
+                            (contention(r) / contention2).max(1.0)
+                        } else {
+                            1.0
+                        };
+                        (1.0, 1.0 / r.ranks as f64, Run::mean(&rest) / slicing)
                     })
                     .collect();
                 let (a, b) = least_squares_2(&rest);
                 replay.rest_a = a.max(0.0);
                 replay.rest_b = b.max(0.0);
-                let contention = |r: &Run| r.rows_cpu.iter().sum::<f64>() / rows1;
-                replay.contention2 = contention(two);
+                replay.contention2 = contention2;
                 replay.contention_power = power_through(
                     replay.contention2,
                     own_runs
@@ -1330,6 +1353,22 @@ mod tests {
         let two = Replay::from_rows(&[(0, 1.0, 1.0, 0), (5, 0.5, 2.0, 0)], 2.0);
         assert_eq!(two.batches.len(), 2);
         assert_eq!(two.loads(2).0, 3.0 / 2.0);
+    }
+
+    #[test]
+    fn time_slicing_slows_a_ranks_rest_as_it_slows_its_rows() {
+        let r = Replay {
+            rest_a: 1.0,
+            rest_b: 4.0,
+            contention2: 1.1,
+            contention_power: 0.5,
+            ..Replay::default()
+        };
+        // One core a rank: the rest as fitted, wherever.
+        assert_eq!(r.rest_on(8.0, false), r.rest(8.0));
+        assert_eq!(r.rest_on(2.0, true), 3.0);
+        // 8 ranks on this machine's 2 cores: (8 / 2)^0.5 = 2 times.
+        assert!((r.rest_on(8.0, true) - 2.0 * 1.5).abs() < 1e-12);
     }
 
     #[test]

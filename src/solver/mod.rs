@@ -787,6 +787,10 @@ impl<'m> Solver<'m> {
         let mut form_factor_sum = 0.0;
         let (rank, ranks) = (self.rank, self.ranks);
         let vote = self.vote.get_mut().unwrap_or_else(|e| e.into_inner());
+        // Only an emitter's first shot carries direct light: the others
+        // leave `direct` alone (adding d * 0 changed no bit, and the loop
+        // is bound by its memory traffic).
+        let direct = direct_share != [0.0; 3];
         for t in ff {
             form_factor_sum += t.form_factor;
             let j = t.element as usize;
@@ -796,12 +800,16 @@ impl<'m> Solver<'m> {
             }
             Self::touch(vote, rank, ranks, el.patch as usize);
             let scale = area / el.area;
-            for (c, r) in el.reflectance.iter().enumerate() {
-                let d = r * t.radiosity[c] * scale;
-                self.direct[j][c] += d * direct_share[c];
-                self.radiosity[j][c] += d;
-                self.element_unshot[j][c] += d;
-                self.unshot[el.patch as usize][c] += d * el.patch_share;
+            let d = [0, 1, 2].map(|c| el.reflectance[c] * t.radiosity[c] * scale);
+            if direct {
+                for c in 0..3 {
+                    self.direct[j][c] += d[c] * direct_share[c];
+                }
+            }
+            for c in 0..3 {
+                self.radiosity[j][c] += d[c];
+                self.element_unshot[j][c] += d[c];
+                self.unshot[el.patch as usize][c] += d[c] * el.patch_share;
             }
         }
         self.shots += 1;
