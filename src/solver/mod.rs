@@ -802,14 +802,15 @@ impl<'m> Solver<'m> {
             let scale = area / el.area;
             let d = [0, 1, 2].map(|c| el.reflectance[c] * t.radiosity[c] * scale);
             if direct {
-                for c in 0..3 {
-                    self.direct[j][c] += d[c] * direct_share[c];
+                for ((x, d), s) in self.direct[j].iter_mut().zip(d).zip(direct_share) {
+                    *x += d * s;
                 }
             }
-            for c in 0..3 {
-                self.radiosity[j][c] += d[c];
-                self.element_unshot[j][c] += d[c];
-                self.unshot[el.patch as usize][c] += d[c] * el.patch_share;
+            let patch = el.patch as usize;
+            for (c, d) in d.into_iter().enumerate() {
+                self.radiosity[j][c] += d;
+                self.element_unshot[j][c] += d;
+                self.unshot[patch][c] += d * el.patch_share;
             }
         }
         self.shots += 1;
