@@ -506,6 +506,21 @@ fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
         same_result(&one, &r, &format!("{ranks} ranks, batches of 4"));
         assert_eq!(r["energy"], one["energy"]);
     }
+    // Split shots' groups are dealt over the ranks in a second round of
+    // their batch and travel back to their rows' drawers over MPI (the
+    // Cornell box's 60 shots split none; this room's do).
+    let split = ["--max-shots", "60", "--batch", "5"];
+    let a = mpirun_scene(1, dir.path(), "split1", "family-stacked-2", &split);
+    let b = mpirun_scene(2, dir.path(), "split2", "family-stacked-2", &split);
+    same_result(&a, &b, "split shots in batches of 5");
+    let takers: std::collections::BTreeSet<_> = b["parallel"]["rows"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .filter(|x| x["round"] == 1)
+        .map(|x| x["rank"].as_u64())
+        .collect();
+    assert_eq!(takers.len(), 2, "split groups drawn by {takers:?}");
     let over = ["--max-shots", "60", "--batch", "3", "--overshoot"];
     let a = mpirun(1, dir.path(), "over1", &over);
     let b = mpirun(2, dir.path(), "over2", &over);
