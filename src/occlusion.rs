@@ -180,6 +180,23 @@ impl OcclusionMap {
         (p1 - p0) * column_runs(self.res, rect).map(|r| r.len()).sum::<usize>()
     }
 
+    /// Whether every cell whose centre `rect` holds is covered nearer than
+    /// `nearest` (a block of polygons, none nearer than that, is hidden
+    /// whole).
+    pub fn hides_rect(&self, rect: [f32; 4], nearest: f32) -> bool {
+        let cols = self.res.cols as usize;
+        let (p0, p1) = row_span(self.res, rect, 0..self.res.rows as usize);
+        // The farthest cover of each run of cells (a branch-free reduction:
+        // a hidden block has every cell read anyway).
+        (p0..p1).all(|p| {
+            let depth = &self.depth[p * cols..(p + 1) * cols];
+            column_runs(self.res, rect).all(|run| {
+                let far = depth[run].iter().fold(0.0f32, |m, &d| m.max(d));
+                far * (1.0 + DEPTH_MARGIN) < nearest
+            })
+        })
+    }
+
     /// Whether every cell the piece could draw is covered nearer than the
     /// piece is there; `nearest` bounds its distance from below (used where
     /// its plane is seen edge-on).
