@@ -267,6 +267,11 @@ pub struct Timings {
     /// geometry (occlusion culling; rank 0's, of `rects_per_shot`).
     #[serde(default)]
     pub occluded_per_shot: f64,
+    /// Mean proxies per shot the occlusion cull left out before bounding
+    /// them, not among `rects_per_shot` (one process on one core walks
+    /// the polygons nearest first and skips what nearer ones hide; rank 0's).
+    #[serde(default)]
+    pub skipped_per_shot: f64,
     /// Shots whose form factors came from the row cache (a patch shooting again).
     pub cached_shots: u64,
     /// The row cache each rank could hold, bytes: what its memory budget

@@ -78,6 +78,10 @@ pub struct RasterStats {
     /// Of `rects`, those left undrawn as hidden behind nearer geometry
     /// ([`HemisphereRasterizer::set_cull_occluded`]).
     pub occluded: u32,
+    /// Proxies the cull left out before bounding them (not in `rects`):
+    /// one process on one core walks the polygons nearest first and skips
+    /// what nearer ones already hide.
+    pub skipped: u32,
     /// Uploading, drawing and waiting for the GPU.
     pub rasterise: Duration,
     /// Mapping the item buffer and copying it out.
@@ -709,6 +713,7 @@ impl HemisphereRasterizer {
             },
             bounded: collected.bounded as u32,
             occluded: collected.culled.map_or(0, |c| c.rects as u32),
+            skipped: collected.skipped as u32,
             rasterise,
             readback: read_start.elapsed(),
         })

@@ -357,6 +357,13 @@ impl Proxies {
         done
     }
 
+    /// How many proxies polygons `range` (cut to the polygons) hold.
+    fn proxies_of(&self, range: std::ops::Range<usize>) -> usize {
+        let polys = &self.polygons
+            [range.start.min(self.polygons.len())..range.end.min(self.polygons.len())];
+        polys.iter().map(|p| p.proxies.len()).sum()
+    }
+
     /// `visit` block by block ([`BLOCK`] polygons in a bounding sphere),
     /// the nearest blocks first, each polygon's pieces added to `map` once
     /// drawn. A block whose sphere's cells are all covered nearer than the
@@ -401,6 +408,7 @@ impl Proxies {
                 if let Some(rect) = sphere_cells(local, r, res, [true, true]) {
                     if map.hides_rect(rect, nearest) {
                         filled.skipped_cells += map.cells_held(rect);
+                        done.skipped += self.proxies_of(b * BLOCK..(b + 1) * BLOCK);
                         continue;
                     }
                 }
@@ -422,6 +430,7 @@ impl Proxies {
                     if let Some(rect) = sphere_cells(local, poly.radius, res, [true, true]) {
                         if map.hides_rect(rect, sphere) {
                             filled.skipped_cells += map.cells_held(rect);
+                            done.skipped += poly.proxies.len();
                             continue;
                         }
                     }
@@ -919,6 +928,10 @@ pub(super) struct Collected {
     pub(super) rects: usize,
     /// Proxies whose cell rectangle was computed (the bounds pass's work).
     pub(super) bounded: usize,
+    /// Proxies the occlusion cull left out before bounding them (polygons
+    /// in view, and every polygon of a block, that nearer ones hide: see
+    /// [`Proxies::visit_near_first`]).
+    pub(super) skipped: usize,
     /// What the occlusion cull did, when it ran.
     pub(super) culled: Option<Culled>,
 }

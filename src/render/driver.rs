@@ -490,6 +490,7 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.bounds = t.bounds.as_secs_f64();
     timings.rects_per_shot = t.rects as f64 / shots.max(1) as f64;
     timings.occluded_per_shot = t.occluded as f64 / shots.max(1) as f64;
+    timings.skipped_per_shot = t.skipped as f64 / shots.max(1) as f64;
     timings.cached_shots = t.cached;
     timings.row_cache_bytes = t.cache_budget;
     timings.split_shots = t.split;

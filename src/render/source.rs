@@ -44,6 +44,8 @@ pub struct PhaseTimes {
     pub rects: u64,
     /// Of those, rectangles the occlusion cull left undrawn.
     pub occluded: u64,
+    /// Proxies the occlusion cull left out before bounding them.
+    pub skipped: u64,
     /// What the ranks' agreements on the cull moved (not the exchange's).
     pub cull_traffic: parallel::Traffic,
     /// What the ranks' deal of the rectangles moved (not the exchange's).
@@ -417,6 +419,7 @@ impl<'a> GpuFormFactors<'a> {
         self.timings.bounds += stats.bounds;
         self.timings.rects += stats.rects as u64;
         self.timings.occluded += stats.occluded as u64;
+        self.timings.skipped += stats.skipped as u64;
         self.timings.bounded += stats.bounded as u64;
         self.timings.cells += tier.cells.cells_at(own) as u64;
         self.timings.rasterise += stats.rasterise;
