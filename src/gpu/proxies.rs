@@ -1437,6 +1437,28 @@ mod tests {
         assert!(4 * skipped > all, "{skipped} of {all} blocks skipped");
     }
 
+    /// `p`'s rectangles for `shooter`, culled on one process.
+    fn culled_walk(
+        p: &Proxies,
+        shooter: &ShooterFrame,
+        outside: &[bool],
+        res: Resolution,
+        map: &mut OcclusionMap,
+        out: &mut Vec<Instance>,
+    ) -> Collected {
+        let mut agree = |m: &[u32]| vec![m.to_vec()];
+        p.collect_rects(
+            shooter,
+            outside,
+            res,
+            1e3,
+            None,
+            Some((map, &mut agree)),
+            None,
+            out,
+        )
+    }
+
     #[test]
     fn walking_blocks_nearest_first_leaves_the_same_rectangles_drawn() {
         // The cull's verdicts on what the nearest-first walk draws leave the
@@ -1454,33 +1476,14 @@ mod tests {
         };
         let outside = vec![true; mesh.solids.len()];
         let mut map = OcclusionMap::new(res);
-        let mut agree = |m: &[u32]| vec![m.to_vec()];
         let (mut bounded, mut plain_bounded, mut culled) = (0, 0, 0);
         for (k, patch) in mesh.patches.iter().enumerate().step_by(53) {
             let poly = &mesh.polygons[patch.polygon as usize];
             let frame = ShooterFrame::new(patch.centre, poly.normal, poly.tangent, patch.polygon);
             for shooter in [frame, frame.within(1.5)] {
                 let (mut a, mut b) = (Vec::new(), Vec::new());
-                let got = near.collect_rects(
-                    &shooter,
-                    &outside,
-                    res,
-                    1e3,
-                    None,
-                    Some((&mut map, &mut agree)),
-                    None,
-                    &mut a,
-                );
-                let want = plain.collect_rects(
-                    &shooter,
-                    &outside,
-                    res,
-                    1e3,
-                    None,
-                    Some((&mut map, &mut agree)),
-                    None,
-                    &mut b,
-                );
+                let got = culled_walk(&near, &shooter, &outside, res, &mut map, &mut a);
+                let want = culled_walk(&plain, &shooter, &outside, res, &mut map, &mut b);
                 assert!(
                     bytemuck::cast_slice::<Instance, u8>(&a)
                         == bytemuck::cast_slice::<Instance, u8>(&b),
