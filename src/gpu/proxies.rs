@@ -273,6 +273,26 @@ impl Proxies {
         } else {
             crate::parallel::cores().min(8)
         };
+        // Polygon `at`, in view: its rectangles into `out`, counted in `done`.
+        let draw = |at: usize, poly: &PolygonProxies, out: &mut Drawn, done: &mut Collected| {
+            // Over several ranks, a polygon whose bounding sphere holds
+            // none of this rank's cells is left to the others before any
+            // per-proxy work: the ranks divide the bounds.
+            if let Some(o) = ownership {
+                let c = shooter.to_local(poly.centre - shooter.centre);
+                if !o.may_see(c, poly.radius, res) {
+                    return;
+                }
+            }
+            done.bounded += poly.proxies.len();
+            let start = out.instances.len();
+            done.rects += self.push_polygon(poly, shooter, res, far, ownership, &mut out.instances);
+            if culling {
+                let end = out.instances.len();
+                out.polygons
+                    .push((start, end, nearest(poly, shooter), at as u32));
+            }
+        };
         // Returns the rectangles drawn (each cut to a rank's tiles counts
         // once) and the proxies bounded.
         let visit = |polys: &[PolygonProxies], first: usize, out: &mut Drawn| {
@@ -289,26 +309,8 @@ impl Proxies {
                 }
                 let poly = &polys[k];
                 k += 1;
-                if !in_view(at, poly, outside, shooter) {
-                    continue;
-                }
-                // Over several ranks, a polygon whose bounding sphere holds
-                // none of this rank's cells is left to the others before
-                // any per-proxy work: the ranks divide the bounds.
-                if let Some(o) = ownership {
-                    let c = shooter.to_local(poly.centre - shooter.centre);
-                    if !o.may_see(c, poly.radius, res) {
-                        continue;
-                    }
-                }
-                done.bounded += poly.proxies.len();
-                let start = out.instances.len();
-                done.rects +=
-                    self.push_polygon(poly, shooter, res, far, ownership, &mut out.instances);
-                if culling {
-                    let end = out.instances.len();
-                    out.polygons
-                        .push((start, end, nearest(poly, shooter), at as u32));
+                if in_view(at, poly, outside, shooter) {
+                    draw(at, poly, out, &mut done);
                 }
             }
             done
@@ -342,7 +344,7 @@ impl Proxies {
                 if culling && ownership.is_none() && self.near_first.unwrap_or(threads <= 1) =>
             {
                 let (done, held) =
-                    self.visit_near_first(&visit, (shooter, outside), res, map, &mut drawn);
+                    self.visit_near_first(&draw, (shooter, outside), res, map, &mut drawn);
                 filled = Some(held);
                 done
             }
@@ -364,7 +366,7 @@ impl Proxies {
         polys.iter().map(|p| p.proxies.len()).sum()
     }
 
-    /// `visit` block by block ([`BLOCK`] polygons in a bounding sphere),
+    /// `draw` block by block ([`BLOCK`] polygons in a bounding sphere),
     /// the nearest blocks first, each polygon's pieces added to `map` once
     /// drawn. A block whose sphere's cells are all covered nearer than the
     /// sphere's nearest point is skipped before any per-polygon work, and
@@ -377,14 +379,14 @@ impl Proxies {
     /// [`Filled`].
     fn visit_near_first<F>(
         &self,
-        visit: &F,
+        draw: &F,
         (shooter, outside): (&ShooterFrame, &[bool]),
         res: Resolution,
         map: &mut OcclusionMap,
         drawn: &mut Drawn,
     ) -> (Collected, Filled)
     where
-        F: Fn(&[PolygonProxies], usize, &mut Drawn) -> Collected,
+        F: Fn(usize, &PolygonProxies, &mut Drawn, &mut Collected),
     {
         let mut order: Vec<(f32, usize)> = (0..self.blocks.len())
             .filter(|&b| !self.block_out(b, shooter, res, None))
@@ -436,9 +438,7 @@ impl Proxies {
                     }
                 }
                 let at = part.instances.len();
-                let n = visit(&self.polygons[k..k + 1], k, &mut part);
-                done.rects += n.rects;
-                done.bounded += n.bounded;
+                draw(k, poly, &mut part, &mut done);
                 for inst in &part.instances[at..] {
                     filled.held += map.add(&piece(inst));
                 }

@@ -368,9 +368,8 @@ impl<'m> ShotLoop<'m> {
             let cpu = crate::parallel::process_cpu_seconds();
             match source.start_row(c.patch, region, &mut self.ff)? {
                 Started::Row => {
-                    let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
-                    sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
-                    pack_row(solver, (k, rank), &self.ff, &mut outgoing, &mut rows[k]);
+                    let out = (&mut outgoing[..], &mut rows[..], &mut sums[..]);
+                    self.send_row(solver, source, (c.patch, k), out);
                 }
                 Started::Split(n) => groups[k] = n as u32,
             }
@@ -432,6 +431,26 @@ impl<'m> ShotLoop<'m> {
             .extend(std::iter::repeat_n(per_shot, chosen.len()));
         hooks.after_shot(solver, unshot_fraction);
         Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
+    }
+
+    /// Row `k` of a batch (shooter `patch`), just made in `self.ff`: its
+    /// sums noted and its transfers packed for their owners.
+    fn send_row(
+        &self,
+        solver: &Solver,
+        source: &GpuFormFactors,
+        (patch, k): (u32, usize),
+        (outgoing, rows, sums): BatchOut<'_>,
+    ) {
+        let s = row_sums(solver, patch, &self.ff, source.last_blocked());
+        sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
+        pack_row(
+            solver,
+            (k, self.comm.rank()),
+            &self.ff,
+            outgoing,
+            &mut rows[k],
+        );
     }
 
     /// A batch's second round: the groups of its split shots (`groups[k]`
@@ -502,9 +521,9 @@ impl<'m> ShotLoop<'m> {
         };
         source.timings.exchange += t.elapsed();
         let columns = |k: usize| {
-            chosen.get(k).map_or(0, |c| {
-                solver.mesh().patches[c.patch as usize].elements.len()
-            })
+            chosen
+                .get(k)
+                .map_or(0, |c| self.mesh.patches[c.patch as usize].elements.len())
         };
         let mut parts: Vec<Vec<(usize, GroupPart)>> = vec![Vec::new(); chosen.len()];
         for words in &incoming {
@@ -526,9 +545,12 @@ impl<'m> ShotLoop<'m> {
             mine.sort_by_key(|p| p.0);
             let in_order: Vec<&GroupPart> = mine.iter().map(|p| &p.1).collect();
             source.finish_row(c.patch, region, &in_order, &mut self.ff)?;
-            let s = row_sums(solver, c.patch, &self.ff, source.last_blocked());
-            sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
-            pack_row(solver, (k, rank), &self.ff, outgoing, &mut rows[k]);
+            self.send_row(
+                solver,
+                source,
+                (c.patch, k),
+                (&mut *outgoing, &mut *rows, &mut *sums),
+            );
             let cpu_seconds = crate::parallel::process_cpu_seconds() - cpu;
             self.stats.rows_cpu_seconds += cpu_seconds;
             if let Some(r) = record_of.get(k).and_then(|&i| self.stats.rows.get_mut(i)) {
