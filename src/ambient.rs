@@ -71,14 +71,41 @@ pub struct Transport {
     landings: Vec<(u32, f64)>,
     /// Per group, the share of its light that met back faces.
     back: Vec<f64>,
-    /// Group g's elements are `elements[element_offsets[g]..element_offsets[g + 1]]`.
-    element_offsets: Vec<usize>,
-    /// The groups' elements, group by group.
-    elements: Vec<u32>,
-    /// Group g's patches are `patches[patch_offsets[g]..patch_offsets[g + 1]]`.
-    patch_offsets: Vec<usize>,
-    /// The groups' patches, group by group, in increasing order.
+    /// The groups' patches.
+    members: Members,
+}
+
+/// Each group's patches: group g's are `patches[offsets[g]..offsets[g + 1]]`,
+/// in increasing order.
+#[derive(Clone, Debug, Default)]
+struct Members {
+    offsets: Vec<usize>,
     patches: Vec<u32>,
+}
+
+impl Members {
+    /// From each patch's group (`count` groups), by a counting sort.
+    fn of(group_of: &[u32], count: usize) -> Self {
+        let mut offsets = vec![0; count + 1];
+        for &g in group_of {
+            offsets[g as usize + 1] += 1;
+        }
+        for g in 0..count {
+            offsets[g + 1] += offsets[g];
+        }
+        let mut next = offsets.clone();
+        let mut patches = vec![0; group_of.len()];
+        for (p, &g) in group_of.iter().enumerate() {
+            patches[next[g as usize]] = p as u32;
+            next[g as usize] += 1;
+        }
+        Self { offsets, patches }
+    }
+
+    /// Group `g`'s patches, in increasing order.
+    fn of_group(&self, g: usize) -> &[u32] {
+        &self.patches[self.offsets[g]..self.offsets[g + 1]]
+    }
 }
 
 /// What one group's rays found: how many it cast, how many landed on the
@@ -95,12 +122,26 @@ pub struct GroupRays {
     pub hits: Vec<(u32, u32)>,
     /// Rays that met back faces.
     pub back: u32,
+    /// The group's area, m^2, and its elements' reflectances times their
+    /// areas, summed per channel (in element order, where it was cast).
+    pub area: f64,
+    /// See `area`.
+    pub reflected: [f64; 3],
 }
 
 impl GroupRays {
     /// Appends this group's counts to `out` as words.
     pub fn pack(&self, out: &mut Vec<u32>) {
         out.extend([self.group, self.rays, self.back, self.hits.len() as u32]);
+        for x in [
+            self.area,
+            self.reflected[0],
+            self.reflected[1],
+            self.reflected[2],
+        ] {
+            let bits = x.to_bits();
+            out.extend([bits as u32, (bits >> 32) as u32]);
+        }
         for &(g, n) in &self.hits {
             out.extend([g, n]);
         }
@@ -112,14 +153,20 @@ impl GroupRays {
         let mut out = Vec::new();
         while let [group, rays, back, n, rest @ ..] = words {
             let n = *n as usize;
-            let pairs = rest.get(..2 * n)?;
+            let sums = rest.get(..8)?;
+            let pairs = rest.get(8..8 + 2 * n)?;
+            let f = |k: usize| {
+                f64::from_bits(u64::from(sums[2 * k]) | u64::from(sums[2 * k + 1]) << 32)
+            };
             out.push(GroupRays {
                 group: *group,
                 rays: *rays,
                 back: *back,
                 hits: pairs.chunks_exact(2).map(|p| (p[0], p[1])).collect(),
+                area: f(0),
+                reflected: [f(1), f(2), f(3)],
             });
-            words = &rest[2 * n..];
+            words = &rest[8 + 2 * n..];
         }
         words.is_empty().then_some(out)
     }
@@ -130,9 +177,7 @@ impl GroupRays {
 pub struct Plan<'m> {
     mesh: &'m Mesh,
     group_of: Vec<u32>,
-    /// Per group, its elements and their cumulative areas (to pick points
-    /// in proportion to area).
-    members: Vec<Vec<(u32, f64)>>,
+    members: Members,
     /// Per group, the rays it casts.
     rays: Vec<u32>,
 }
@@ -161,18 +206,42 @@ impl Plan<'_> {
 
     /// The number of groups.
     pub fn groups(&self) -> usize {
-        self.members.len()
+        self.rays.len()
     }
 
-    /// Group `g`'s rays.
+    /// Group `g`'s rays, area and reflectance. Only the rank that casts a
+    /// group reads its elements: on N ranks each reads 1/N of the mesh's.
     pub fn cast(&self, g: usize) -> GroupRays {
-        landings_of(
+        // Its elements in increasing order, each with the group's area up to
+        // and including it (to pick points in proportion to area).
+        let mut ids: Vec<u32> = self
+            .members
+            .of_group(g)
+            .iter()
+            .flat_map(|&p| self.mesh.patches[p as usize].elements.clone())
+            .collect();
+        ids.sort_unstable();
+        let (mut area, mut reflected) = (0.0, [0.0; 3]);
+        let members: Vec<(u32, f64)> = ids
+            .into_iter()
+            .map(|j| {
+                let e = &self.mesh.elements[j as usize];
+                area += e.area;
+                for (r, rho) in reflected.iter_mut().zip(e.reflectance) {
+                    *r += rho * e.area;
+                }
+                (j, area)
+            })
+            .collect();
+        let mut out = landings_of(
             self.mesh,
             &self.group_of,
-            &self.members[g],
+            &members,
             g as u64,
             self.rays[g] as usize,
-        )
+        );
+        (out.area, out.reflected) = (area, reflected);
+        out
     }
 
     /// The rays of each of `groups`, on every core, in that order.
@@ -212,22 +281,7 @@ impl Transport {
         let start = std::time::Instant::now();
         let group_of = groups(mesh);
         let count = group_of.iter().map(|&g| g as usize + 1).max().unwrap_or(0);
-        let mut area = vec![0.0; count];
-        let mut reflectance = vec![[0.0; 3]; count];
-        let mut members: Vec<Vec<(u32, f64)>> = vec![Vec::new(); count];
-        for (j, e) in mesh.elements.iter().enumerate() {
-            let g = group_of[e.patch as usize] as usize;
-            area[g] += e.area;
-            for (r, rho) in reflectance[g].iter_mut().zip(e.reflectance) {
-                *r += rho * e.area;
-            }
-            members[g].push((j as u32, area[g]));
-        }
-        for (r, &a) in reflectance.iter_mut().zip(&area) {
-            if a > 0.0 {
-                *r = r.map(|x| x / a);
-            }
-        }
+        let members = Members::of(&group_of, count);
         let rays = Plan::rays_of(mesh, &group_of, count, budget);
         let plan = Plan {
             mesh,
@@ -246,18 +300,20 @@ impl Transport {
         offsets.push(0);
         let mut landings = Vec::new();
         let mut back = Vec::with_capacity(count);
+        let mut area = Vec::with_capacity(count);
+        let mut reflectance = Vec::with_capacity(count);
         for row in rows {
             let n = f64::from(row.rays.max(1));
             landings.extend(row.hits.iter().map(|&(g, k)| (g, f64::from(k) / n)));
             offsets.push(landings.len());
             back.push(f64::from(row.back) / n);
-        }
-        let mut element_offsets = Vec::with_capacity(count + 1);
-        element_offsets.push(0);
-        let mut elements = Vec::with_capacity(mesh.elements.len());
-        for m in &members {
-            elements.extend(m.iter().map(|&(j, _)| j));
-            element_offsets.push(elements.len());
+            let a = row.area;
+            area.push(a);
+            reflectance.push(if a > 0.0 {
+                row.reflected.map(|x| x / a)
+            } else {
+                row.reflected
+            });
         }
         log::info!(
             "ambient term: {count} groups, {} rays, {} landings, {:.3} s",
@@ -265,16 +321,6 @@ impl Transport {
             landings.len(),
             start.elapsed().as_secs_f64()
         );
-        let mut by_group: Vec<Vec<u32>> = vec![Vec::new(); count];
-        for (i, &g) in group_of.iter().enumerate() {
-            by_group[g as usize].push(i as u32);
-        }
-        let mut patch_offsets = vec![0];
-        let mut patches = Vec::with_capacity(group_of.len());
-        for b in by_group {
-            patches.extend(b);
-            patch_offsets.push(patches.len());
-        }
         Self {
             group_of,
             area,
@@ -282,10 +328,7 @@ impl Transport {
             offsets,
             landings,
             back,
-            element_offsets,
-            elements,
-            patch_offsets,
-            patches,
+            members,
         }
     }
 
@@ -309,14 +352,9 @@ impl Transport {
         self.back[g]
     }
 
-    /// Group `g`'s elements, in increasing order.
-    pub fn elements_of(&self, g: usize) -> &[u32] {
-        &self.elements[self.element_offsets[g]..self.element_offsets[g + 1]]
-    }
-
     /// Group `g`'s patches, in increasing order.
     pub fn patches_of(&self, g: usize) -> &[u32] {
-        &self.patches[self.patch_offsets[g]..self.patch_offsets[g + 1]]
+        self.members.of_group(g)
     }
 
     /// Group `g`'s area, m^2.
@@ -386,26 +424,30 @@ fn groups(mesh: &Mesh) -> Vec<u32> {
             (lo.min(p.centre), hi.max(p.centre))
         });
     let size = (hi - lo).max(Vec3::splat(1e-6));
-    let facing = |p: &crate::mesh::Patch| {
-        let poly = &mesh.polygons[p.polygon as usize];
-        let a = poly.normal.abs();
-        let axis = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
-        let sign = (poly.normal[axis] < 0.0) as usize;
-        (axis * 2 + sign) as u8 + if poly.back_side { 6 } else { 0 }
-    };
+    // Per polygon once: every grid tried reads every patch's.
+    let facing: Vec<u8> = mesh
+        .polygons
+        .iter()
+        .map(|poly| {
+            let a = poly.normal.abs();
+            let axis = if a.x >= a.y && a.x >= a.z {
+                0
+            } else if a.y >= a.z {
+                1
+            } else {
+                2
+            };
+            let sign = (poly.normal[axis] < 0.0) as usize;
+            (axis * 2 + sign) as u8 + if poly.back_side { 6 } else { 0 }
+        })
+        .collect();
     // A patch's (cell, facing) as one index into a dense table: cells^3 x 12.
     let slot = |p: &crate::mesh::Patch, cells: u32| -> usize {
         let c = ((p.centre - lo) / size * cells as f32)
             .as_uvec3()
             .min(glam::UVec3::splat(cells - 1));
         let cell = (c.z as usize * cells as usize + c.y as usize) * cells as usize + c.x as usize;
-        cell * 12 + facing(p) as usize
+        cell * 12 + facing[p.polygon as usize] as usize
     };
     let mut cells = 64u32;
     loop {
@@ -746,11 +788,12 @@ mod tests {
         }
         // Words cut short are refused, not misread.
         let mut words = Vec::new();
+        let group_of = groups(&mesh);
         Plan {
             mesh: &mesh,
-            group_of: groups(&mesh),
-            members: vec![Vec::new(); 1],
-            rays: vec![4],
+            members: Members::of(&group_of, group_of.len()),
+            group_of,
+            rays: vec![4; 24],
         }
         .cast(0)
         .pack(&mut words);
@@ -759,9 +802,13 @@ mod tests {
             rays: 8,
             hits: vec![(1, 2), (5, 6)],
             back: 0,
+            area: 0.25,
+            reflected: [0.125, -1.5e-300, f64::MAX],
         };
         row.pack(&mut words);
-        assert_eq!(GroupRays::unpack_all(&words).map(|r| r.len()), Some(2));
+        let got = GroupRays::unpack_all(&words).expect("whole words");
+        assert_eq!(got.len(), 2);
+        assert_eq!(got[1], row, "every bit travels");
         assert_eq!(GroupRays::unpack_all(&words[..words.len() - 1]), None);
     }
 

@@ -777,10 +777,11 @@ impl GpuFormFactors<'_> {
             if area <= 0.0 {
                 continue;
             }
-            for &j in transport.elements_of(h) {
-                if ranks > 1 && parallel::patch_owner(self.receivers.patch(j), ranks) != rank {
-                    continue;
-                }
+            let own = transport
+                .patches_of(h)
+                .iter()
+                .filter(|&&p| ranks <= 1 || parallel::patch_owner(p, ranks) == rank);
+            for j in own.flat_map(|&p| mesh.patches[p as usize].elements.clone()) {
                 // A degenerate element takes nothing (the solver divides
                 // by its area). (The packed table: a transport row reaches
                 // thousands of elements, a record apiece was a cache miss.)
