@@ -244,6 +244,22 @@ impl Plan<'_> {
         out
     }
 
+    /// The groups rank `rank` of `ranks` casts: dealt by their rays (the
+    /// emitters' groups cast up to 64 times the others'), the dearest
+    /// first, each to the least loaded rank. The same on every rank.
+    pub fn dealt(&self, rank: usize, ranks: usize) -> Vec<usize> {
+        let ranks = ranks.max(1);
+        let costs: Vec<f64> = (0..ranks)
+            .flat_map(|_| self.rays.iter().map(|&r| f64::from(r)))
+            .collect();
+        crate::parallel::assign_rows(&costs, ranks)
+            .into_iter()
+            .enumerate()
+            .filter(|&(_, r)| r == rank)
+            .map(|(g, _)| g)
+            .collect()
+    }
+
     /// The rays of each of `groups`, on every core, in that order.
     pub fn cast_these(&self, groups: &[usize]) -> Vec<GroupRays> {
         let mut out = vec![GroupRays::default(); groups.len()];
@@ -773,9 +789,8 @@ mod tests {
             let split = Transport::built(&mesh, |plan| {
                 let mut gathered = Vec::new();
                 for rank in 0..ranks {
-                    let mine: Vec<usize> = (rank..plan.groups()).step_by(ranks).collect();
                     let mut words = Vec::new();
-                    for row in plan.cast_these(&mine) {
+                    for row in plan.cast_these(&plan.dealt(rank, ranks)) {
                         row.pack(&mut words);
                     }
                     gathered.extend(GroupRays::unpack_all(&words).expect("whole words"));

@@ -194,16 +194,15 @@ pub fn wants_transport(opts: &RenderOptions, mesh: &Mesh) -> bool {
 }
 
 /// Gives `mesh` its ambient transport (once), of `budget` rays
-/// ([`Transport::built_within`]), every rank of `comm` casting every N-th
-/// group's rays and all gathering the counts: the same bits as one rank
-/// casting them all.
+/// ([`Transport::built_within`]), every rank of `comm` casting the groups
+/// dealt to it ([`crate::ambient::Plan::dealt`]) and all gathering the
+/// counts: the same bits as one rank casting them all.
 pub(super) fn shared_transport(mesh: &Mesh, budget: usize, comm: &dyn Collectives) {
     mesh.ambient.get_or_init(|| {
         Transport::built_within(mesh, budget, |plan| {
             let (rank, ranks) = (comm.rank(), comm.size());
-            let mine: Vec<usize> = (rank..plan.groups()).step_by(ranks).collect();
             let mut words = Vec::new();
-            for row in plan.cast_these(&mine) {
+            for row in plan.cast_these(&plan.dealt(rank, ranks)) {
                 row.pack(&mut words);
             }
             let mut rows: Vec<GroupRays> = comm
