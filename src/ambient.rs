@@ -774,6 +774,46 @@ mod tests {
     }
 
     #[test]
+    fn the_groups_are_dealt_once_each_and_evened_by_their_rays() {
+        let mut mesh = cube(0.5, 16);
+        mesh.polygons[0].exitance = [1.0; 3];
+        let group_of = groups(&mesh);
+        let count = group_of.len();
+        let plan = Plan {
+            mesh: &mesh,
+            members: Members::of(&group_of, count),
+            rays: Plan::rays_of(&mesh, &group_of, count, RAY_BUDGET),
+            group_of,
+        };
+        let dearest = f64::from(plan.rays.iter().copied().max().unwrap_or(0));
+        for ranks in [1, 2, 5, 64] {
+            let mut seen = vec![0; count];
+            let mut loads = Vec::new();
+            for rank in 0..ranks {
+                let mine = plan.dealt(rank, ranks);
+                assert!(mine.windows(2).all(|w| w[0] < w[1]), "in group order");
+                for &g in &mine {
+                    seen[g] += 1;
+                }
+                loads.push(mine.iter().map(|&g| f64::from(plan.rays[g])).sum::<f64>());
+            }
+            assert!(
+                seen.iter().all(|&n| n == 1),
+                "{ranks} ranks: each group once"
+            );
+            let (most, least) = loads
+                .iter()
+                .fold((0.0f64, f64::INFINITY), |(a, b), &x| (a.max(x), b.min(x)));
+            // The emitting face's 256 groups cast 1024 rays each, the
+            // others 170: the loads differ by at most the dearest group.
+            assert!(
+                most - least <= dearest,
+                "{ranks} ranks: {most} against {least}"
+            );
+        }
+    }
+
+    #[test]
     fn the_same_shares_on_every_run() {
         let mesh = cube(0.5, 2);
         let (a, b) = (Transport::new(&mesh), Transport::new(&mesh));
