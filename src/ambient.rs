@@ -246,18 +246,28 @@ impl Plan<'_> {
 
     /// The groups rank `rank` of `ranks` casts: dealt by their rays (the
     /// emitters' groups cast up to 64 times the others'), the dearest
-    /// first, each to the least loaded rank. The same on every rank.
+    /// first (the lower group on ties), each to the least loaded rank (the
+    /// lower rank on ties). The same on every rank, and every rank deals
+    /// all the groups: a heap of the ranks' loads, O(G log G + G log N),
+    /// not `parallel::assign_rows`'s per-rank cost table.
     pub fn dealt(&self, rank: usize, ranks: usize) -> Vec<usize> {
-        let ranks = ranks.max(1);
-        let costs: Vec<f64> = (0..ranks)
-            .flat_map(|_| self.rays.iter().map(|&r| f64::from(r)))
-            .collect();
-        crate::parallel::assign_rows(&costs, ranks)
-            .into_iter()
-            .enumerate()
-            .filter(|&(_, r)| r == rank)
-            .map(|(g, _)| g)
-            .collect()
+        use std::cmp::Reverse;
+        let mut order: Vec<usize> = (0..self.groups()).collect();
+        order.sort_by_key(|&g| (Reverse(self.rays[g]), g));
+        let mut loads: std::collections::BinaryHeap<Reverse<(u64, usize)>> =
+            (0..ranks.max(1)).map(|r| Reverse((0, r))).collect();
+        let mut mine = Vec::new();
+        for g in order {
+            let Some(Reverse((load, r))) = loads.pop() else {
+                break;
+            };
+            if r == rank {
+                mine.push(g);
+            }
+            loads.push(Reverse((load + u64::from(self.rays[g]), r)));
+        }
+        mine.sort_unstable();
+        mine
     }
 
     /// The rays of each of `groups`, on every core, in that order.
