@@ -14,17 +14,113 @@ pub struct MpiComm {
     _universe: mpi::environment::Universe,
     world: SimpleCommunicator,
     traffic: Cell<Traffic>,
+    /// The shared ticket counter (on more than one rank).
+    tickets: Option<TicketWindow>,
+    /// The ticket counter of a world of one rank.
+    local_tickets: Cell<u64>,
+    /// The first ticket of the next pool (see `Collectives::open_pool`).
+    next_pool: Cell<u64>,
+}
+
+/// One u64 on rank 0 that every rank adds to atomically (MPI-3 one-sided:
+/// `MPI_Fetch_and_op` under a passive `MPI_Win_lock_all` epoch held for the
+/// whole run), so a rank takes a ticket without rank 0 taking part.
+struct TicketWindow {
+    win: mpi::ffi::MPI_Win,
+}
+
+impl TicketWindow {
+    /// Collective over `world`: rank 0 holds the counter, at 0.
+    fn new(world: &SimpleCommunicator) -> Option<Self> {
+        use mpi::raw::AsRaw;
+        let bytes = if world.rank() == 0 { 8 } else { 0 };
+        let mut base: *mut u64 = std::ptr::null_mut();
+        let mut win = std::mem::MaybeUninit::<mpi::ffi::MPI_Win>::uninit();
+        // SAFETY: MPI allocates `bytes` bytes (aligned for any type) and
+        // writes their address into `base` and the window's handle into `win`.
+        let rc = unsafe {
+            mpi::ffi::MPI_Win_allocate(
+                bytes,
+                8,
+                mpi::ffi::RSMPI_INFO_NULL,
+                world.as_raw(),
+                (&mut base as *mut *mut u64).cast(),
+                win.as_mut_ptr(),
+            )
+        };
+        if rc != 0 {
+            return None;
+        }
+        // SAFETY: MPI_Win_allocate succeeded, so `win` is initialised.
+        let win = unsafe { win.assume_init() };
+        if world.rank() == 0 && !base.is_null() {
+            // SAFETY: rank 0's window is 8 bytes at `base`, which no rank
+            // reaches before the barrier below.
+            unsafe { base.write(0) };
+        }
+        world.barrier();
+        // SAFETY: `win` is a valid window; the epoch ends in `Drop`.
+        unsafe { mpi::ffi::MPI_Win_lock_all(0, win) };
+        Some(Self { win })
+    }
+
+    /// The counter's value before this call's add of 1.
+    fn take(&self) -> u64 {
+        let one: u64 = 1;
+        let mut before: u64 = 0;
+        // SAFETY: both buffers are one u64, the type given; the target is
+        // rank 0's displacement 0, inside its 8-byte window; the flush
+        // completes the operation before `before` is read.
+        unsafe {
+            mpi::ffi::MPI_Fetch_and_op(
+                (&one as *const u64).cast(),
+                (&mut before as *mut u64).cast(),
+                mpi::ffi::RSMPI_UINT64_T,
+                0,
+                0,
+                mpi::ffi::RSMPI_SUM,
+                self.win,
+            );
+            mpi::ffi::MPI_Win_flush(0, self.win);
+        }
+        before
+    }
+}
+
+impl Drop for MpiComm {
+    // The window is freed (collectively) before the universe finalises MPI.
+    fn drop(&mut self) {
+        if let Some(t) = self.tickets.take() {
+            let mut win = t.win;
+            // SAFETY: the epoch opened in `TicketWindow::new` is closed and
+            // the window freed once, by every rank (as MPI_Finalize is).
+            unsafe {
+                mpi::ffi::MPI_Win_unlock_all(win);
+                mpi::ffi::MPI_Win_free(&mut win);
+            }
+        }
+    }
 }
 
 impl MpiComm {
-    /// Initialises MPI; `None` if it was already initialised or cannot start.
+    /// Initialises MPI; `None` if it was already initialised or cannot start
+    /// (or, on more than one rank, cannot open the ticket window).
     pub fn init() -> Option<Self> {
         let universe = mpi::initialize()?;
         let world = universe.world();
+        // A world of ranks without a shared counter cannot share work: no world.
+        let tickets = if world.size() > 1 {
+            Some(TicketWindow::new(&world)?)
+        } else {
+            None
+        };
         Some(Self {
             _universe: universe,
             world,
             traffic: Cell::new(Traffic::default()),
+            tickets,
+            local_tickets: Cell::new(0),
+            next_pool: Cell::new(0),
         })
     }
 
@@ -297,6 +393,26 @@ impl Collectives for MpiComm {
         } else {
             Err(Vec::new())
         }
+    }
+
+    fn take_ticket(&self) -> u64 {
+        match &self.tickets {
+            Some(t) => {
+                let _call = self.call();
+                t.take()
+            }
+            None => {
+                let t = self.local_tickets.get();
+                self.local_tickets.set(t + 1);
+                t
+            }
+        }
+    }
+
+    fn open_pool(&self, len: usize) -> u64 {
+        let first = self.next_pool.get();
+        self.next_pool.set(first + (len + self.size()) as u64);
+        first
     }
 
     fn traffic(&self) -> Traffic {

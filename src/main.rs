@@ -780,7 +780,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let interrupt = handle_signals()?;
     launch::share_cores_between_ranks();
     let mpi = MpiComm::init();
-    let single = Single;
+    let single = Single::default();
     let comm: &dyn Collectives = match &mpi {
         Some(c) => c,
         None => &single,

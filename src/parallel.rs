@@ -4,6 +4,7 @@
 
 use std::any::Any;
 use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Barrier, Mutex};
 
 /// Bytes this rank sent and received in exchanges, summed over calls, and
@@ -99,6 +100,16 @@ pub trait Collectives {
     /// Whether every rank passed `ok`; when not, rank 0 gets the failing
     /// ranks' messages (`(rank, message)`), the others an empty list.
     fn all_ok(&self, ok: Result<(), String>) -> Result<(), Vec<(usize, String)>>;
+    /// The next ticket of a counter every rank shares (0, 1, 2, ... over
+    /// the run, each ticket to exactly one caller). Not a collective: a rank
+    /// takes one whenever it is free, without the others taking part (see
+    /// [`pool`]).
+    fn take_ticket(&self) -> u64;
+    /// The first ticket of a pool of `len` items (see [`pool`]): every
+    /// rank leaves a pool by taking exactly one ticket past its end, so
+    /// the next pool starts `len + size()` tickets on, known to all without
+    /// a word. Every rank opens the same pools in the same order.
+    fn open_pool(&self, len: usize) -> u64;
     /// Bytes exchanged so far by the form-factor exchanges.
     fn traffic(&self) -> Traffic;
     /// Ends every rank now (after an error that only this rank saw).
@@ -107,7 +118,17 @@ pub trait Collectives {
 
 /// One process: every collective is the identity, and nothing travels.
 #[derive(Default)]
-pub struct Single;
+pub struct Single {
+    tickets: Cell<u64>,
+}
+
+/// The first ticket of the next pool, advanced past a pool of `len` on
+/// `ranks` ranks.
+fn advance(next: &Cell<u64>, len: usize, ranks: usize) -> u64 {
+    let first = next.get();
+    next.set(first + (len + ranks) as u64);
+    first
+}
 
 impl Collectives for Single {
     fn rank(&self) -> usize {
@@ -134,6 +155,13 @@ impl Collectives for Single {
     }
     fn all_ok(&self, ok: Result<(), String>) -> Result<(), Vec<(usize, String)>> {
         ok.map_err(|m| vec![(0, m)])
+    }
+    fn take_ticket(&self) -> u64 {
+        advance(&self.tickets, 0, 1)
+    }
+    fn open_pool(&self, _len: usize) -> u64 {
+        // One rank takes a pool's items without tickets.
+        self.tickets.get()
     }
     fn traffic(&self) -> Traffic {
         Traffic::default()
@@ -199,6 +227,128 @@ pub fn assign_rows(costs: &[f64], ranks: usize) -> Vec<usize> {
     drawer
 }
 
+/// How a batch's work items are dealt: some to a fixed rank, the rest to
+/// a [`pool`] that ranks take from as they come free, so a rank
+/// whose core runs slower this second takes fewer and none waits long for
+/// the others at the batch's exchange. Only time depends on who draws what.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Deal {
+    /// Per item, the rank that draws it, or `None` for the pool.
+    pub fixed: Vec<Option<usize>>,
+    /// The pooled items, in the order ranks take them (the costliest first,
+    /// so what is left at the end is small; the later item first on ties).
+    pub pool: Vec<usize>,
+}
+
+impl Deal {
+    /// `costs` as for [`assign_rows`]. An item that costs some rank less
+    /// (a row it has cached) is fixed, as [`assign_rows`] deals it, with
+    /// the costliest `ranks` of the others, one a rank: every rank starts
+    /// with work, and the pool keeps the cheaper rest. On one rank
+    /// everything is fixed there.
+    pub fn new(costs: &[f64], ranks: usize) -> Self {
+        let ranks = ranks.max(1);
+        let k = costs.len() / ranks;
+        if ranks == 1 {
+            return Self {
+                fixed: vec![Some(0); k],
+                pool: Vec::new(),
+            };
+        }
+        let cost = |rank: usize, item: usize| costs[rank * k + item];
+        let alike = |item: usize| (1..ranks).all(|r| cost(r, item) == cost(0, item));
+        let mut pool: Vec<usize> = (0..k).filter(|&i| alike(i)).collect();
+        // Among rows weighed alike the later (weaker) shooters go first:
+        // the strongest, the emitters, are the likeliest to split, and a
+        // split row's first round is short, which suits a pool's end.
+        pool.sort_by(|&a, &b| cost(0, b).total_cmp(&cost(0, a)).then(b.cmp(&a)));
+        let head: Vec<usize> = pool.drain(..ranks.min(pool.len())).collect();
+        let mut fixed_items: Vec<usize> = (0..k).filter(|&i| !alike(i)).chain(head).collect();
+        fixed_items.sort_unstable();
+        let sub: Vec<f64> = (0..ranks)
+            .flat_map(|r| fixed_items.iter().map(move |&i| cost(r, i)))
+            .collect();
+        let mut fixed = vec![None; k];
+        for (&item, rank) in fixed_items.iter().zip(assign_rows(&sub, ranks)) {
+            fixed[item] = Some(rank);
+        }
+        Self { fixed, pool }
+    }
+
+    /// Each rank's sum of `seconds` (per item) when the pool goes, item by
+    /// item, to the rank with the least so far (the lower on ties): what
+    /// ranks taking a [`pool`]'s items as they come free do, at those seconds.
+    pub fn loads(&self, seconds: &[f64], ranks: usize) -> Vec<f64> {
+        let mut load = vec![0.0; ranks.max(1)];
+        for (item, rank) in self.fixed.iter().enumerate() {
+            if let Some(r) = rank {
+                load[*r] += seconds[item];
+            }
+        }
+        for &item in &self.pool {
+            let least = (0..load.len())
+                .min_by(|&a, &b| load[a].total_cmp(&load[b]).then(a.cmp(&b)))
+                .unwrap_or(0);
+            load[least] += seconds[item];
+        }
+        load
+    }
+}
+
+/// A pool of `len` items for this rank to take from, as it comes free:
+/// every rank opens the same pools in the same order, each between two
+/// collectives, and iterates its [`Claims`] to the end.
+pub fn pool(comm: &dyn Collectives, len: usize) -> Claims<'_> {
+    let first = if comm.size() > 1 && len > 0 {
+        comm.open_pool(len)
+    } else {
+        0
+    };
+    Claims {
+        comm,
+        first,
+        len,
+        taken: 0,
+    }
+}
+
+/// The items of one pool this rank takes, in the order it takes them.
+pub struct Claims<'c> {
+    comm: &'c dyn Collectives,
+    first: u64,
+    len: usize,
+    taken: usize,
+}
+
+impl Iterator for Claims<'_> {
+    type Item = usize;
+
+    fn next(&mut self) -> Option<usize> {
+        if self.len == 0 {
+            return None;
+        }
+        if self.comm.size() == 1 {
+            // One rank takes every item, in order, without tickets.
+            let i = self.taken;
+            self.taken += 1;
+            return (i < self.len).then_some(i);
+        }
+        if self.taken > self.len {
+            return None;
+        }
+        let ticket = self.comm.take_ticket();
+        let i = ticket.wrapping_sub(self.first) as usize;
+        debug_assert!(ticket >= self.first, "ranks opened different pools");
+        if i < self.len {
+            Some(i)
+        } else {
+            // This rank's one ticket past the end: it leaves the pool.
+            self.taken = self.len + 1;
+            None
+        }
+    }
+}
+
 /// Patches a rank owns in a row (see [`patch_owner`]).
 pub const OWNED_RUN: usize = 8;
 
@@ -245,6 +395,7 @@ pub struct ThreadComm {
     rank: usize,
     shared: Arc<Meeting>,
     traffic: Cell<Traffic>,
+    next_pool: Cell<u64>,
 }
 
 /// What each rank put down for the collective under way.
@@ -254,6 +405,7 @@ struct Meeting {
     size: usize,
     slots: Mutex<Slots>,
     barrier: Barrier,
+    tickets: AtomicU64,
 }
 
 impl ThreadComm {
@@ -264,6 +416,7 @@ impl ThreadComm {
             size: ranks,
             slots: Mutex::new((0..ranks).map(|_| None).collect()),
             barrier: Barrier::new(ranks),
+            tickets: AtomicU64::new(0),
         });
         std::thread::scope(|s| {
             let handles: Vec<_> = (0..ranks)
@@ -272,6 +425,7 @@ impl ThreadComm {
                         rank,
                         shared: shared.clone(),
                         traffic: Cell::default(),
+                        next_pool: Cell::default(),
                     };
                     let f = &f;
                     s.spawn(move || f(&comm))
@@ -389,6 +543,12 @@ impl Collectives for ThreadComm {
             (false, _) => Err(Vec::new()),
         }
     }
+    fn take_ticket(&self) -> u64 {
+        self.shared.tickets.fetch_add(1, Ordering::Relaxed)
+    }
+    fn open_pool(&self, len: usize) -> u64 {
+        advance(&self.next_pool, len, self.size())
+    }
     fn traffic(&self) -> Traffic {
         self.traffic.get()
     }
@@ -444,6 +604,61 @@ mod tests {
         assert!((load(0) - load(1)).abs() <= 1.0, "{drawer:?}");
         // One rank draws everything.
         assert_eq!(assign_rows(&[1.0, 0.5], 1), vec![0, 0]);
+    }
+
+    #[test]
+    fn a_deal_fixes_cached_rows_and_one_dear_row_a_rank_and_pools_the_rest() {
+        // Two ranks, six rows: row 1 cached on rank 1.
+        let costs = [
+            3.0, 2.0, 1.0, 5.0, 4.0, 0.5, // rank 0
+            3.0, 0.02, 1.0, 5.0, 4.0, 0.5, // rank 1
+        ];
+        let deal = Deal::new(&costs, 2);
+        assert_eq!(deal.fixed[1], Some(1), "the cached row on its cache's rank");
+        // The two dearest alike rows (3 and 4) start the ranks, one each.
+        let (a, b) = (deal.fixed[3], deal.fixed[4]);
+        assert!(a.is_some() && b.is_some() && a != b, "{deal:?}");
+        // The rest pooled, dearest first.
+        assert_eq!(deal.pool, vec![0, 2, 5]);
+        for item in 0..6 {
+            assert_ne!(deal.fixed[item].is_some(), deal.pool.contains(&item));
+        }
+        // Taken as ranks come free: the row of 3 s goes to the rank with
+        // 4 s, and so on.
+        let seconds = [3.0, 0.02, 1.0, 5.0, 4.0, 0.5];
+        let loads = deal.loads(&seconds, 2);
+        assert!((loads.iter().sum::<f64>() - 13.52).abs() < 1e-12);
+        assert!((loads[0] - loads[1]).abs() <= 1.0, "{loads:?}");
+        // One rank: everything fixed there; fewer rows than ranks: no pool.
+        assert_eq!(Deal::new(&[1.0, 2.0], 1).fixed, vec![Some(0), Some(0)]);
+        let few = Deal::new(&[1.0, 2.0, 1.0, 2.0, 1.0, 2.0], 3);
+        assert!(few.pool.is_empty() && few.fixed.iter().all(Option::is_some));
+    }
+
+    #[test]
+    fn every_pooled_item_is_taken_by_exactly_one_rank() {
+        // Three ranks open pools of 7, 0, 1 and 40 items, a collective
+        // between each (as a batch's exchanges are), and take as they come.
+        let lens = [7usize, 0, 1, 40];
+        let taken = ThreadComm::run(3, |c| {
+            let mut mine = Vec::new();
+            for &len in &lens {
+                let got: Vec<usize> = pool(c, len).collect();
+                mine.push(got);
+                c.all_gather_f64(&[0.0]);
+            }
+            mine
+        });
+        for (p, &len) in lens.iter().enumerate() {
+            let mut all: Vec<usize> = taken.iter().flat_map(|r| r[p].clone()).collect();
+            all.sort_unstable();
+            assert_eq!(all, (0..len).collect::<Vec<_>>(), "pool {p}");
+        }
+        // One rank takes every item in order.
+        assert_eq!(
+            pool(&Single::default(), 3).collect::<Vec<_>>(),
+            vec![0, 1, 2]
+        );
     }
 
     #[test]

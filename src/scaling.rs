@@ -483,7 +483,8 @@ pub struct Model {
 /// A batched run's rows replayed on any number of ranks: every batch's
 /// rows with the weights the render dealt them by and the CPU seconds they
 /// took on one rank, dealt again as the render deals them
-/// ([`crate::parallel::assign_rows`]). The slowest rank's rows set a
+/// ([`crate::parallel::Deal`]: one of the dearest rows a rank, the rest
+/// taken by whichever rank comes free first). The slowest rank's rows set a
 /// batch's time, so the imbalance is the rows' own, not a fitted law. A
 /// rank's CPU seconds outside its rows follow `rest_a + rest_b / N` (on
 /// this machine beyond its 2 cores, times the rows' growth there).
@@ -535,13 +536,8 @@ impl Replay {
         for batch in &self.batches {
             // Every rank weighs a row alike here (no row caches).
             let weights: Vec<f64> = (0..n).flat_map(|_| batch.iter().map(|r| r.0)).collect();
-            let mut load = vec![0.0; n];
-            for (row, rank) in crate::parallel::assign_rows(&weights, n)
-                .into_iter()
-                .enumerate()
-            {
-                load[rank] += batch[row].1;
-            }
+            let seconds: Vec<f64> = batch.iter().map(|r| r.1).collect();
+            let load = crate::parallel::Deal::new(&weights, n).loads(&seconds, n);
             most += load.iter().copied().fold(0.0, f64::max);
             least += load.iter().copied().fold(f64::INFINITY, f64::min);
         }

@@ -45,7 +45,7 @@ pub fn render(
     load_time: Duration,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Rendered, RenderError> {
-    let single = Single;
+    let single = Single::default();
     // With one rank this process is rank 0, which always gets the result.
     render_on(gpu, scene, opts, &single, load_time, progress)?
         .ok_or_else(|| RenderError::Settings("no result on rank 0".into()))
@@ -224,11 +224,8 @@ pub fn render_on(
     let t = Instant::now();
     // A batched solve draws whole hemispheres on every rank: its source is
     // one process's.
-    let source_comm: &dyn Collectives = if opts.batch > 1 {
-        &crate::parallel::Single
-    } else {
-        comm
-    };
+    let one = Single::default();
+    let source_comm: &dyn Collectives = if opts.batch > 1 { &one } else { comm };
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, source_comm, scene.extent())?;
     source.set_transport_ranks(comm.rank(), comm.size());
     timings.setup = t.elapsed().as_secs_f64();

@@ -7,7 +7,7 @@
 use super::options::RenderError;
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
-use crate::parallel::{patch_owner, Collectives};
+use crate::parallel::{patch_owner, pool, Collectives, Deal};
 use crate::solver::{
     Candidate, FormFactorSource, NetUnshot, Shot, ShotRegion, Solver, StopRule, Transfer,
     UNSHOT_ONE,
@@ -226,11 +226,12 @@ impl<'m> ShotLoop<'m> {
 
     /// The loop shooting `batch` shooters a step (at least 1): the
     /// strongest `batch` patches are chosen at once, the ranks compute
-    /// their rows in turn (shot k on rank k mod ranks, each a whole
-    /// hemisphere with a source of one process: see
-    /// [`ShotLoop::step`]), and every rank lands every row on its own
-    /// elements, shot by shot in the batch's order. The numbers depend on
-    /// `batch`, never on the rank count.
+    /// their rows (each a whole hemisphere with a source of one process; a
+    /// cached row on its cache's rank, one dear row a rank, the rest taken
+    /// by whichever rank comes free first: [`crate::parallel::Deal`]), and
+    /// every rank lands every row on its own elements, shot by shot in the
+    /// batch's order. The numbers depend on `batch`, never on the rank
+    /// count or on who drew what.
     pub fn batched(mut self, batch: usize) -> Self {
         self.batch = batch.max(1);
         self
@@ -339,32 +340,36 @@ impl<'m> ShotLoop<'m> {
             .iter()
             .map(|c| self.region(solver, c, ambient))
             .collect();
-        // Which rank draws each row: the one it costs least (its cache),
-        // else the least loaded so far. Only time depends on it.
+        // Which rank draws each row: a cached row its cache's rank, one of
+        // the dearest rows each rank, the rest whichever rank comes free
+        // first (a pool). Only time depends on it.
         let costs: Vec<f64> = chosen
             .iter()
             .zip(&regions)
             .map(|(c, r)| source.row_cost(c.patch, r))
             .collect();
-        let (drawer, costs) = if ranks > 1 {
-            let all = self.comm.all_gather_f64(&costs);
-            (crate::parallel::assign_rows(&all, ranks), all)
+        let costs = if ranks > 1 {
+            self.comm.all_gather_f64(&costs)
         } else {
-            (vec![0; chosen.len()], costs)
+            costs
         };
+        let deal = Deal::new(&costs, ranks);
         // This rank's rows, each sent in pieces to the owners of its elements.
         let mut outgoing = vec![Vec::new(); ranks];
         let mut rows = vec![Vec::new(); chosen.len()];
         let mut sums = vec![0.0; chosen.len() * ROW_SUMS];
         let batch_start = solver.shots();
         let recorded = batch_start < MAX_ROW_RECORDS;
-        // Per row: its record's place in `stats.rows`, and its split shot's groups.
+        // Per row: its record's place in `stats.rows`, its split shot's
+        // groups, and whether this rank drew it.
         let mut record_of = vec![usize::MAX; chosen.len()];
         let mut groups = vec![0u32; chosen.len()];
-        for (k, (c, region)) in chosen.iter().zip(&regions).enumerate() {
-            if drawer[k] != rank {
-                continue;
-            }
+        let mut drew = vec![false; chosen.len()];
+        let mine = (0..chosen.len()).filter(|&k| deal.fixed[k] == Some(rank));
+        let pooled = pool(self.comm, deal.pool.len()).map(|i| deal.pool[i]);
+        for k in mine.chain(pooled) {
+            let (c, region) = (&chosen[k], &regions[k]);
+            drew[k] = true;
             let cpu = crate::parallel::process_cpu_seconds();
             match source.start_row(c.patch, region, &mut self.ff)? {
                 Started::Row => {
@@ -388,7 +393,7 @@ impl<'m> ShotLoop<'m> {
         }
         self.split_round(
             (source, solver),
-            (&chosen, &regions, &drawer),
+            (&chosen, &regions, &drew),
             (groups, &record_of),
             (&mut outgoing, &mut rows, &mut sums),
         )?;
@@ -454,28 +459,46 @@ impl<'m> ShotLoop<'m> {
     }
 
     /// A batch's second round: the groups of its split shots (`groups[k]`
-    /// of row k, started by its drawer), dealt over every rank as work of
-    /// their own, sent to the rows' drawers, who assemble the rows (in
-    /// group order: the bits of a shot drawn whole) and pack them as the
-    /// first round's.
+    /// of row k, started by its drawer, the rank with `drew[k]`), dealt
+    /// over every rank as work of their own, sent to the rows' drawers, who
+    /// assemble the rows (in group order: the bits of a shot drawn whole)
+    /// and pack them as the first round's.
     fn split_round<'s>(
         &mut self,
         (source, solver): (&mut GpuFormFactors, &mut Solver<'s>),
-        (chosen, regions, drawer): (&[Candidate], &[ShotRegion], &[usize]),
+        (chosen, regions, drew): (&[Candidate], &[ShotRegion], &[bool]),
         (groups, record_of): (Vec<u32>, &[usize]),
         (outgoing, rows, sums): BatchOut<'_>,
     ) -> Result<(), RenderError> {
         let (rank, ranks) = (self.comm.rank(), self.comm.size());
-        let groups = if ranks > 1 {
-            let mut all = vec![0u32; groups.len()];
-            for part in self.comm.all_gather_u32(&groups, None) {
-                for (a, g) in all.iter_mut().zip(part) {
-                    *a += g;
+        let (groups, drawer) = if ranks > 1 {
+            // A row's drawer tells its groups plus one, the others 0: which
+            // rank drew a pooled row is learnt here.
+            let marks: Vec<u32> = groups
+                .iter()
+                .zip(drew)
+                .map(|(&g, &d)| if d { g + 1 } else { 0 })
+                .collect();
+            let lengths = vec![marks.len(); ranks];
+            let mut all = vec![0u32; marks.len()];
+            let mut drawer = vec![0usize; marks.len()];
+            for (r, part) in self
+                .comm
+                .all_gather_u32(&marks, Some(&lengths))
+                .into_iter()
+                .enumerate()
+            {
+                for (k, m) in part.into_iter().enumerate() {
+                    if m > 0 {
+                        all[k] = m - 1;
+                        drawer[k] = r;
+                    }
                 }
             }
-            all
+            (all, drawer)
         } else {
-            groups
+            let n = groups.len();
+            (groups, vec![0; n])
         };
         let units: Vec<(usize, usize)> = groups
             .iter()
@@ -492,12 +515,12 @@ impl<'m> ShotLoop<'m> {
             .map(|&(k, _)| source.group_cost(chosen[k].patch, &regions[k]))
             .collect();
         let all_weights: Vec<f64> = (0..ranks).flat_map(|_| weights.iter().copied()).collect();
-        let taker = crate::parallel::assign_rows(&all_weights, ranks);
+        let deal = Deal::new(&all_weights, ranks);
         let mut parts_out = vec![Vec::new(); ranks];
-        for (u, &(k, g)) in units.iter().enumerate() {
-            if taker[u] != rank {
-                continue;
-            }
+        let mine = (0..units.len()).filter(|&u| deal.fixed[u] == Some(rank));
+        let pooled = pool(self.comm, deal.pool.len()).map(|i| deal.pool[i]);
+        for u in mine.chain(pooled) {
+            let (k, g) = units[u];
             let cpu = crate::parallel::process_cpu_seconds();
             let part = source.group_part(chosen[k].patch, &regions[k], g)?;
             part.pack(k, g, &mut parts_out[drawer[k]]);

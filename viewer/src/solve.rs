@@ -183,7 +183,7 @@ fn solve(
     wake: &impl Fn(),
 ) -> Result<Option<Settings>, String> {
     let opts = &settings.options;
-    let single = Single;
+    let single = Single::default();
     let refined = refined_mesh_shown(gpu, scene, opts, &single, &mut |_| {}, &mut {
         let mut shower = PassShower::new(shared, opts.ambient, wake);
         move |pass, solver: &Solver| shower.show(pass, solver)
