@@ -206,6 +206,12 @@ pub struct SolveArgs {
     /// "Ranks"). The results are identical, only the time changes.
     #[arg(long, value_enum, default_value = "auto")]
     deal_bounds: radiosity::render::DealBounds,
+    /// How the ranks of a batched solve (`--batch`) deal a batch's rows:
+    /// pool (each rank starts on one of the dearest, then takes the rest
+    /// as it comes free) or fixed (every row dealt before any is drawn).
+    /// The results are identical, only the time changes.
+    #[arg(long, value_enum, default_value = "pool")]
+    deal_rows: radiosity::settings::DealRows,
     /// The memory each rank aims to stay within, GB: the form-factor row
     /// cache takes only what the scene, the mesh and the drawing leave of it
     /// (at most 1 GiB a rank). It changes no number, only the time.
@@ -276,6 +282,7 @@ impl SolveArgs {
             raster_pieces: self.raster_pieces,
             occlusion_cull: !self.no_occlusion_cull,
             deal_bounds: self.deal_bounds,
+            deal_rows: self.deal_rows,
             projection: self.projection,
             tessellation_tolerance: self.tessellation_tolerance,
             cache_rows: !self.no_cache,

@@ -244,14 +244,14 @@ impl Deal {
     /// `costs` as for [`assign_rows`]. An item that costs some rank less
     /// (a row it has cached) is fixed, as [`assign_rows`] deals it, with
     /// the costliest `ranks` of the others, one a rank: every rank starts
-    /// with work, and the pool keeps the cheaper rest. On one rank
-    /// everything is fixed there.
-    pub fn new(costs: &[f64], ranks: usize) -> Self {
+    /// with work, and the pool keeps the cheaper rest. On one rank, or
+    /// not `pooled`, everything is fixed as [`assign_rows`] deals it.
+    pub fn new(costs: &[f64], ranks: usize, pooled: bool) -> Self {
         let ranks = ranks.max(1);
         let k = costs.len() / ranks;
-        if ranks == 1 {
+        if ranks == 1 || !pooled {
             return Self {
-                fixed: vec![Some(0); k],
+                fixed: assign_rows(costs, ranks).into_iter().map(Some).collect(),
                 pool: Vec::new(),
             };
         }
@@ -613,7 +613,7 @@ mod tests {
             3.0, 2.0, 1.0, 5.0, 4.0, 0.5, // rank 0
             3.0, 0.02, 1.0, 5.0, 4.0, 0.5, // rank 1
         ];
-        let deal = Deal::new(&costs, 2);
+        let deal = Deal::new(&costs, 2, true);
         assert_eq!(deal.fixed[1], Some(1), "the cached row on its cache's rank");
         // The two dearest alike rows (3 and 4) start the ranks, one each.
         let (a, b) = (deal.fixed[3], deal.fixed[4]);
@@ -630,9 +630,17 @@ mod tests {
         assert!((loads.iter().sum::<f64>() - 13.52).abs() < 1e-12);
         assert!((loads[0] - loads[1]).abs() <= 1.0, "{loads:?}");
         // One rank: everything fixed there; fewer rows than ranks: no pool.
-        assert_eq!(Deal::new(&[1.0, 2.0], 1).fixed, vec![Some(0), Some(0)]);
-        let few = Deal::new(&[1.0, 2.0, 1.0, 2.0, 1.0, 2.0], 3);
+        assert_eq!(
+            Deal::new(&[1.0, 2.0], 1, true).fixed,
+            vec![Some(0), Some(0)]
+        );
+        let few = Deal::new(&[1.0, 2.0, 1.0, 2.0, 1.0, 2.0], 3, true);
         assert!(few.pool.is_empty() && few.fixed.iter().all(Option::is_some));
+        // Not pooled: assign_rows's deal, every row fixed.
+        let fixed = Deal::new(&costs, 2, false);
+        assert!(fixed.pool.is_empty());
+        let drawer: Vec<usize> = fixed.fixed.iter().map(|r| r.unwrap_or(9)).collect();
+        assert_eq!(drawer, assign_rows(&costs, 2));
     }
 
     #[test]

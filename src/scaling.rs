@@ -108,6 +108,9 @@ pub struct Run {
     /// after the rows), its weight in the assignment, its CPU seconds, the
     /// rank that drew it).
     pub rows: Vec<(u64, f64, f64, usize)>,
+    /// Batched runs: whether the rows were pooled (`--deal-rows pool`;
+    /// reports before the pool dealt every row fixed).
+    pub pooled: bool,
 }
 
 impl Run {
@@ -180,6 +183,7 @@ impl Run {
                         .collect()
                 })
                 .unwrap_or_default(),
+            pooled: v["settings"]["deal_rows"].as_str() == Some("pool"),
         };
         for r in per_rank {
             let mut ph = [0.0; 6];
@@ -529,15 +533,16 @@ impl Replay {
     }
 
     /// The most and the least row CPU seconds a shot a rank draws on `n`
-    /// ranks, batch by batch, at one rank's speed.
-    pub fn loads(&self, n: usize) -> (f64, f64) {
+    /// ranks, batch by batch, at one rank's speed, the rows `pooled` as the
+    /// render pools them by default or all dealt before any is drawn.
+    pub fn loads(&self, n: usize, pooled: bool) -> (f64, f64) {
         let n = n.max(1);
         let (mut most, mut least) = (0.0, 0.0);
         for batch in &self.batches {
             // Every rank weighs a row alike here (no row caches).
             let weights: Vec<f64> = (0..n).flat_map(|_| batch.iter().map(|r| r.0)).collect();
             let seconds: Vec<f64> = batch.iter().map(|r| r.1).collect();
-            let load = crate::parallel::Deal::new(&weights, n).loads(&seconds, n);
+            let load = crate::parallel::Deal::new(&weights, n, pooled).loads(&seconds, n);
             most += load.iter().copied().fold(0.0, f64::max);
             least += load.iter().copied().fold(f64::INFINITY, f64::min);
         }
@@ -612,7 +617,7 @@ impl Model {
         if n <= 1.0 {
             self.serial
         } else if let Some(r) = &self.replay {
-            r.rest(n) + r.contention(n, false) * r.loads(n as usize).0
+            r.rest(n) + r.contention(n, false) * r.loads(n as usize, true).0
         } else {
             let m = self.busy(n);
             self.replicated + self.divided / m * (1.0 + self.imbalance(m))
@@ -625,7 +630,7 @@ impl Model {
             return 1.0;
         }
         if let Some(r) = &self.replay {
-            let (most, least) = r.loads(n as usize);
+            let (most, least) = r.loads(n as usize, true);
             let c = r.contention(n, false);
             return (r.rest(n) + c * least) / (r.rest(n) + c * most);
         }
@@ -1136,11 +1141,13 @@ impl Calibration {
             if let (Some(replay), false) = (&m.replay, r.rows_cpu.is_empty()) {
                 if r.ranks > 1 {
                     // The replay's deal against the run's own: the slowest
-                    // rank's rows (the run dealt by its own row caches).
+                    // rank's rows (the run dealt by its own row caches), as
+                    // the run dealt them (oversubscribed runs fix every row:
+                    // who comes free first there is the scheduler's choice).
                     out.push(what(
                         SLOWEST_ROWS,
                         r.slowest_rows(),
-                        replay.contention(n, true) * replay.loads(r.ranks).0,
+                        replay.contention(n, true) * replay.loads(r.ranks, r.pooled).0,
                     ));
                 }
             }
@@ -1340,15 +1347,18 @@ mod tests {
         let r = Replay::from_rows(&rows, 4.0);
         assert_eq!(r.batches.len(), 1);
         assert!((r.rows() - 7.0 / 4.0).abs() < 1e-12);
-        assert_eq!(r.loads(1), (7.0 / 4.0, 7.0 / 4.0));
-        // Two ranks: rows 0 and 2 to rank 0 (ties to the lower rank).
-        assert_eq!(r.loads(2), (5.0 / 4.0, 2.0 / 4.0));
+        assert_eq!(r.loads(1, true), (7.0 / 4.0, 7.0 / 4.0));
+        // Two ranks, fixed: rows 0 and 2 to rank 0 (ties to the lower rank).
+        assert_eq!(r.loads(2, false), (5.0 / 4.0, 2.0 / 4.0));
+        // Pooled: rows 3 and 2 start the ranks, then row 1 goes to rank 0
+        // and the dear row 0 to rank 1, whichever is free first.
+        assert_eq!(r.loads(2, true), (5.0 / 4.0, 2.0 / 4.0));
         // More ranks than rows: the dearest row alone sets the time.
-        assert_eq!(r.loads(8), (4.0 / 4.0, 0.0));
+        assert_eq!(r.loads(8, true), (4.0 / 4.0, 0.0));
         // A second batch starts at another shot.
         let two = Replay::from_rows(&[(0, 1.0, 1.0, 0), (5, 0.5, 2.0, 0)], 2.0);
         assert_eq!(two.batches.len(), 2);
-        assert_eq!(two.loads(2).0, 3.0 / 2.0);
+        assert_eq!(two.loads(2, true).0, 3.0 / 2.0);
     }
 
     #[test]

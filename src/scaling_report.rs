@@ -325,8 +325,8 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
             r.rest_b * 1e3,
             r.contention2,
             r.contention_power,
-            r.loads(16).0 * 1e3,
-            r.loads(64).0 * 1e3,
+            r.loads(16, true).0 * 1e3,
+            r.loads(64, true).0 * 1e3,
             m.speedup(64.0, &CLUSTER)
         )?;
     }

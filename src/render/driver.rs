@@ -174,7 +174,9 @@ fn final_solve<'m>(
     let ambient = t.elapsed().as_secs_f64();
     // Its gather is not a form-factor exchange: the report's bytes leave it out.
     let ambient_traffic = comm.traffic().since(before);
-    let mut shots = ShotLoop::new(mesh, comm, opts.stop, 0.0).batched(opts.batch);
+    let mut shots = ShotLoop::new(mesh, comm, opts.stop, 0.0)
+        .batched(opts.batch)
+        .dealing_rows(opts.deal_rows);
     while let Step::Shot(_) = shots.step(source, solver, &mut hooks)? {}
     let stats = shots.stats;
     let trace = hooks.trace;
@@ -577,6 +579,7 @@ pub fn build_report(
             raster_pieces: opts.raster_pieces,
             occlusion_cull: opts.occlusion_cull,
             deal_bounds: opts.deal_bounds,
+            deal_rows: opts.deal_rows,
             projection: opts.projection,
             tessellation_tolerance: (opts.projection == Projection::Tessellated)
                 .then_some(opts.tessellation_tolerance),

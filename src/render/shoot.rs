@@ -199,6 +199,8 @@ pub struct ShotLoop<'m> {
     /// Shots a step (see [`ShotLoop::batched`]); 1 is progressive
     /// refinement's one shooter at a time.
     batch: usize,
+    /// Whether a batch's rows and groups are pooled ([`Deal`]).
+    pooled: bool,
     /// What the loop measured so far.
     pub stats: LoopStats,
 }
@@ -217,6 +219,7 @@ impl<'m> ShotLoop<'m> {
             last_power: None,
             ff: Vec::new(),
             batch: 1,
+            pooled: true,
             stats: LoopStats {
                 patch_power: vec![0.0; mesh.patches.len()],
                 ..LoopStats::default()
@@ -234,6 +237,12 @@ impl<'m> ShotLoop<'m> {
     /// count or on who drew what.
     pub fn batched(mut self, batch: usize) -> Self {
         self.batch = batch.max(1);
+        self
+    }
+
+    /// The loop dealing a batch's rows as `deal` says (pooled by default).
+    pub fn dealing_rows(mut self, deal: crate::settings::DealRows) -> Self {
+        self.pooled = deal == crate::settings::DealRows::Pool;
         self
     }
 
@@ -353,7 +362,7 @@ impl<'m> ShotLoop<'m> {
         } else {
             costs
         };
-        let deal = Deal::new(&costs, ranks);
+        let deal = Deal::new(&costs, ranks, self.pooled);
         // This rank's rows, each sent in pieces to the owners of its elements.
         let mut outgoing = vec![Vec::new(); ranks];
         let mut rows = vec![Vec::new(); chosen.len()];
@@ -515,7 +524,7 @@ impl<'m> ShotLoop<'m> {
             .map(|&(k, _)| source.group_cost(chosen[k].patch, &regions[k]))
             .collect();
         let all_weights: Vec<f64> = (0..ranks).flat_map(|_| weights.iter().copied()).collect();
-        let deal = Deal::new(&all_weights, ranks);
+        let deal = Deal::new(&all_weights, ranks, self.pooled);
         let mut parts_out = vec![Vec::new(); ranks];
         let mine = (0..units.len()).filter(|&u| deal.fixed[u] == Some(rank));
         let pooled = pool(self.comm, deal.pool.len()).map(|i| deal.pool[i]);
