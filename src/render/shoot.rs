@@ -83,11 +83,7 @@ pub struct LoopStats {
 
 /// What a batch's rounds fill: per rank the row pieces to send, per row
 /// this rank's own transfers, and per row its sums.
-type BatchOut<'a> = (
-    &'a mut [Vec<(u32, u64)>],
-    &'a mut [Vec<Transfer>],
-    &'a mut [f64],
-);
+type BatchOut<'a> = (&'a mut [Vec<u32>], &'a mut [Vec<Transfer>], &'a mut [f64]);
 
 /// Batched shots whose rows are recorded ([`LoopStats::rows`]).
 pub const MAX_ROW_RECORDS: u64 = 10_000;
@@ -408,7 +404,7 @@ impl<'m> ShotLoop<'m> {
         )?;
         let t = Instant::now();
         let cpu = crate::parallel::CpuSpan::start(self.comm);
-        let incoming = self.comm.all_to_all_pairs(&outgoing);
+        let incoming = self.comm.all_to_all_u32(&outgoing);
         // Each shot's sums come from one rank; the others add exact zeros.
         let all_sums = self.comm.all_gather_f64(&sums);
         source.timings.exchange += t.elapsed();
@@ -840,25 +836,38 @@ fn row_sums(solver: &Solver, shooter: u32, ff: &[Transfer], blocked: f64) -> [f6
     [landed as f64, delivered as f64, blocked, sum]
 }
 
-/// Marks a row's start in a batch's pairs (then the shot's index and its
-/// transfer count).
-const ROW_MARK: u32 = u32::MAX;
+/// Words a transfer takes in a batch's exchange: its element, then the
+/// form factor's and each channel's radiosity's f64 bits, two words each.
+const TRANSFER_WORDS: usize = 9;
+
+/// Appends `x`'s bits as two words, low first.
+fn push_bits(out: &mut Vec<u32>, x: f64) {
+    let b = x.to_bits();
+    out.push(b as u32);
+    out.push((b >> 32) as u32);
+}
+
+/// The f64 whose bits [`push_bits`] wrote at `w[0..2]`.
+fn from_words(w: &[u32]) -> f64 {
+    f64::from_bits(u64::from(w[0]) | u64::from(w[1]) << 32)
+}
 
 /// Splits shot `k`'s row, computed on rank `rank`, between its elements'
 /// owners: this rank's transfers to `own`, the others' appended to their
-/// pairs as a mark, then four pairs a transfer (element with the form
-/// factor's bits, then with each channel's radiosity's bits).
+/// words as the shot's index and its transfer count, then
+/// [`TRANSFER_WORDS`] words a transfer (36 bytes: the element once, not
+/// once per value).
 fn pack_row(
     solver: &Solver,
     (k, rank): (usize, usize),
     ff: &[Transfer],
-    outgoing: &mut [Vec<(u32, u64)>],
+    outgoing: &mut [Vec<u32>],
     own: &mut Vec<Transfer>,
 ) {
     let starts: Vec<usize> = outgoing.iter().map(Vec::len).collect();
     for (r, out) in outgoing.iter_mut().enumerate() {
         if r != rank {
-            out.push((ROW_MARK, 0));
+            out.extend([k as u32, 0]);
         }
     }
     for t in ff {
@@ -868,34 +877,38 @@ fn pack_row(
             continue;
         }
         let out = &mut outgoing[r];
-        out.push((t.element, t.form_factor.to_bits()));
-        out.extend(t.radiosity.map(|r| (t.element, r.to_bits())));
+        out.push(t.element);
+        push_bits(out, t.form_factor);
+        for c in t.radiosity {
+            push_bits(out, c);
+        }
     }
     for (r, (out, start)) in outgoing.iter_mut().zip(starts).enumerate() {
         if r != rank {
-            let count = (out.len() - start - 1) / 4;
-            out[start].1 = (k as u64) << 32 | count as u64;
+            out[start + 1] = ((out.len() - start - 2) / TRANSFER_WORDS) as u32;
         }
     }
 }
 
 /// Adds the rows [`pack_row`] sent this rank to `rows`, by shot (each in
-/// its row's order).
-fn unpack_rows(pairs: &[(u32, u64)], rows: &mut [Vec<Transfer>]) {
-    let mut at = 0;
-    while at < pairs.len() {
-        let (mark, head) = pairs[at];
-        debug_assert_eq!(mark, ROW_MARK);
-        let (k, count) = ((head >> 32) as usize, (head & 0xffff_ffff) as usize);
-        at += 1;
-        for t in pairs[at..at + 4 * count].chunks_exact(4) {
-            rows[k].push(Transfer {
-                element: t[0].0,
-                form_factor: f64::from_bits(t[0].1),
-                radiosity: [1, 2, 3].map(|c| f64::from_bits(t[c].1)),
-            });
+/// its row's order), from every rank's words.
+fn unpack_rows(incoming: &[Vec<u32>], rows: &mut [Vec<Transfer>]) {
+    for words in incoming {
+        let mut at = 0;
+        while let [k, count, ..] = words[at..] {
+            let (k, count) = (k as usize, count as usize);
+            at += 2;
+            let Some(body) = words.get(at..at + TRANSFER_WORDS * count) else {
+                break;
+            };
+            let Some(row) = rows.get_mut(k) else { break };
+            row.extend(body.chunks_exact(TRANSFER_WORDS).map(|t| Transfer {
+                element: t[0],
+                form_factor: from_words(&t[1..3]),
+                radiosity: [3, 5, 7].map(|c| from_words(&t[c..c + 2])),
+            }));
+            at += TRANSFER_WORDS * count;
         }
-        at += 4 * count;
     }
 }
 
