@@ -401,18 +401,12 @@ impl Collectives for MpiComm {
                 let _call = self.call();
                 t.take()
             }
-            None => {
-                let t = self.local_tickets.get();
-                self.local_tickets.set(t + 1);
-                t
-            }
+            None => crate::parallel::advance(&self.local_tickets, 0, 1),
         }
     }
 
     fn open_pool(&self, len: usize) -> u64 {
-        let first = self.next_pool.get();
-        self.next_pool.set(first + (len + self.size()) as u64);
-        first
+        crate::parallel::advance(&self.next_pool, len, self.size())
     }
 
     fn traffic(&self) -> Traffic {

@@ -123,8 +123,9 @@ pub struct Single {
 }
 
 /// The first ticket of the next pool, advanced past a pool of `len` on
-/// `ranks` ranks.
-fn advance(next: &Cell<u64>, len: usize, ranks: usize) -> u64 {
+/// `ranks` ranks (every `Collectives`' `open_pool`; with `len` 0 and one
+/// rank, a plain counter).
+pub(crate) fn advance(next: &Cell<u64>, len: usize, ranks: usize) -> u64 {
     let first = next.get();
     next.set(first + (len + ranks) as u64);
     first
@@ -273,6 +274,14 @@ impl Deal {
             fixed[item] = Some(rank);
         }
         Self { fixed, pool }
+    }
+
+    /// The items this rank draws, in order: its fixed ones, then the
+    /// pool's as it comes free ([`pool`]; every rank must drain it).
+    pub fn taken<'a>(&'a self, comm: &'a dyn Collectives) -> impl Iterator<Item = usize> + 'a {
+        let rank = comm.rank();
+        let mine = (0..self.fixed.len()).filter(move |&i| self.fixed[i] == Some(rank));
+        mine.chain(pool(comm, self.pool.len()).map(move |i| self.pool[i]))
     }
 
     /// Each rank's sum of `seconds` (per item) when the pool goes, item by

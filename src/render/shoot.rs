@@ -7,7 +7,7 @@
 use super::options::RenderError;
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
-use crate::parallel::{patch_owner, pool, Collectives, Deal};
+use crate::parallel::{patch_owner, Collectives, Deal};
 use crate::solver::{
     Candidate, FormFactorSource, NetUnshot, Shot, ShotRegion, Solver, StopRule, Transfer,
     UNSHOT_ONE,
@@ -370,9 +370,7 @@ impl<'m> ShotLoop<'m> {
         let mut record_of = vec![usize::MAX; chosen.len()];
         let mut groups = vec![0u32; chosen.len()];
         let mut drew = vec![false; chosen.len()];
-        let mine = (0..chosen.len()).filter(|&k| deal.fixed[k] == Some(rank));
-        let pooled = pool(self.comm, deal.pool.len()).map(|i| deal.pool[i]);
-        for k in mine.chain(pooled) {
+        for k in deal.taken(self.comm) {
             let (c, region) = (&chosen[k], &regions[k]);
             drew[k] = true;
             let cpu = crate::parallel::process_cpu_seconds();
@@ -522,9 +520,7 @@ impl<'m> ShotLoop<'m> {
         let all_weights: Vec<f64> = (0..ranks).flat_map(|_| weights.iter().copied()).collect();
         let deal = Deal::new(&all_weights, ranks, self.pooled);
         let mut parts_out = vec![Vec::new(); ranks];
-        let mine = (0..units.len()).filter(|&u| deal.fixed[u] == Some(rank));
-        let pooled = pool(self.comm, deal.pool.len()).map(|i| deal.pool[i]);
-        for u in mine.chain(pooled) {
+        for u in deal.taken(self.comm) {
             let (k, g) = units[u];
             let cpu = crate::parallel::process_cpu_seconds();
             let part = source.group_part(chosen[k].patch, &regions[k], g)?;
