@@ -358,42 +358,76 @@ impl Iterator for Claims<'_> {
     }
 }
 
-/// Patches a rank owns in a row (see [`patch_owner`]).
-pub const OWNED_RUN: usize = 8;
+/// Patches a rank owns in a row, at least and at most (see [`Owners`]).
+pub const OWNED_RUN: [usize; 2] = [8, 256];
 
-/// The rank that owns patch `patch` among `ranks` ranks: runs of
-/// [`OWNED_RUN`] patches dealt in turn (an element belongs to its patch's
-/// owner). The one place this rule lives, with [`owned_patches`],
-/// [`owned_count`], [`owned_at`] and [`owned_index`].
-pub fn patch_owner(patch: u32, ranks: usize) -> usize {
-    (patch as usize / OWNED_RUN) % ranks.max(1)
+/// Runs each rank gets at least, where the patches allow runs longer than
+/// the shortest: enough that the runs even out what lands where.
+const RUNS_PER_RANK: usize = 64;
+
+/// Which rank owns which patch (an element belongs to its patch's owner):
+/// runs of patches dealt in turn. The runs are as long as the patches
+/// allow up to [`OWNED_RUN`]'s most, with [`RUNS_PER_RANK`] runs a rank or
+/// more: a rank's elements then fill whole pages of the solver's arrays,
+/// which a shot's landing reaches at random (in a big scene each element
+/// it touched was a TLB miss, so two ranks each landing half the transfers
+/// took 0.64 of one rank's time; with runs of 256, 0.51). The one place
+/// this rule lives. Deterministic in the patch and rank counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Owners {
+    run: usize,
+    ranks: usize,
 }
 
-/// The patches rank `rank` of `ranks` owns, in increasing order, out of `patches`.
-pub fn owned_patches(rank: usize, ranks: usize, patches: usize) -> impl Iterator<Item = usize> {
-    (rank * OWNED_RUN..patches)
-        .step_by(ranks.max(1) * OWNED_RUN)
-        .flat_map(move |s| s..(s + OWNED_RUN).min(patches))
-}
+impl Owners {
+    /// The owners of `patches` patches over `ranks` ranks.
+    pub fn new(patches: usize, ranks: usize) -> Self {
+        let ranks = ranks.max(1);
+        let [least, most] = OWNED_RUN;
+        let mut run = most;
+        while run > least && patches < ranks * run * RUNS_PER_RANK {
+            run /= 2;
+        }
+        Self { run, ranks }
+    }
 
-/// How many of `patches` patches rank `rank` of `ranks` owns.
-pub fn owned_count(rank: usize, ranks: usize, patches: usize) -> usize {
-    let period = ranks.max(1) * OWNED_RUN;
-    let full = patches / period * OWNED_RUN;
-    let rest = (patches % period)
-        .saturating_sub(rank * OWNED_RUN)
-        .min(OWNED_RUN);
-    full + rest
-}
+    /// Patches a rank owns in a row.
+    pub fn run(&self) -> usize {
+        self.run
+    }
 
-/// The `k`-th patch (from 0) rank `rank` of `ranks` owns.
-pub fn owned_at(rank: usize, ranks: usize, k: usize) -> usize {
-    (k / OWNED_RUN * ranks.max(1) + rank) * OWNED_RUN + k % OWNED_RUN
-}
+    /// The rank that owns patch `patch`.
+    pub fn of(&self, patch: u32) -> usize {
+        (patch as usize / self.run) % self.ranks
+    }
 
-/// Where patch `patch` comes among its owner's patches ([`owned_at`]'s inverse).
-pub fn owned_index(patch: usize, ranks: usize) -> usize {
-    patch / (ranks.max(1) * OWNED_RUN) * OWNED_RUN + patch % OWNED_RUN
+    /// The patches rank `rank` owns, in increasing order, out of `patches`.
+    pub fn patches(&self, rank: usize, patches: usize) -> impl Iterator<Item = usize> {
+        let run = self.run;
+        (rank * run..patches)
+            .step_by(self.ranks * run)
+            .flat_map(move |s| s..(s + run).min(patches))
+    }
+
+    /// How many of `patches` patches rank `rank` owns.
+    pub fn count(&self, rank: usize, patches: usize) -> usize {
+        let period = self.ranks * self.run;
+        let full = patches / period * self.run;
+        let rest = (patches % period)
+            .saturating_sub(rank * self.run)
+            .min(self.run);
+        full + rest
+    }
+
+    /// The `k`-th patch (from 0) rank `rank` owns.
+    pub fn at(&self, rank: usize, k: usize) -> usize {
+        (k / self.run * self.ranks + rank) * self.run + k % self.run
+    }
+
+    /// Where patch `patch` comes among its owner's patches ([`Owners::at`]'s inverse).
+    pub fn index(&self, patch: usize) -> usize {
+        patch / (self.ranks * self.run) * self.run + patch % self.run
+    }
 }
 
 /// Ranks as threads of one process, for tests of what ranks exchange
@@ -726,25 +760,32 @@ mod tests {
 
     #[test]
     fn patch_ownership_is_runs_dealt_in_turn() {
-        let run = OWNED_RUN as u32;
-        assert_eq!(patch_owner(0, 3), 0);
-        assert_eq!(patch_owner(run, 3), 1);
-        assert_eq!(patch_owner(3 * run + 1, 3), 0);
-        assert_eq!(patch_owner(7, 1), 0);
+        let small = Owners::new(100, 3);
+        assert_eq!(small.run(), OWNED_RUN[0]);
+        let run = small.run() as u32;
+        assert_eq!(small.of(0), 0);
+        assert_eq!(small.of(run), 1);
+        assert_eq!(small.of(3 * run + 1), 0);
+        assert_eq!(Owners::new(100, 1).of(7), 0);
+        // Runs grow with the patches, as long as each rank keeps its runs.
+        assert_eq!(Owners::new(2 * 256 * RUNS_PER_RANK, 2).run(), OWNED_RUN[1]);
+        assert_eq!(Owners::new(2 * 256 * RUNS_PER_RANK - 1, 2).run(), 128);
+        assert_eq!(Owners::new(usize::MAX / 1024, 4096).run(), OWNED_RUN[1]);
         for ranks in 1..6 {
-            for patches in [0, 1, 7, 20, 100, 257] {
+            for patches in [0, 1, 7, 20, 100, 257, 40_000, 70_001] {
+                let owners = Owners::new(patches, ranks);
                 let mut all = Vec::new();
                 for r in 0..ranks {
-                    let own: Vec<usize> = owned_patches(r, ranks, patches).collect();
+                    let own: Vec<usize> = owners.patches(r, patches).collect();
                     assert_eq!(
                         own.len(),
-                        owned_count(r, ranks, patches),
+                        owners.count(r, patches),
                         "{r}/{ranks} of {patches}"
                     );
                     for (k, &p) in own.iter().enumerate() {
-                        assert_eq!(patch_owner(p as u32, ranks), r);
-                        assert_eq!(owned_at(r, ranks, k), p);
-                        assert_eq!(owned_index(p, ranks), k);
+                        assert_eq!(owners.of(p as u32), r);
+                        assert_eq!(owners.at(r, k), p);
+                        assert_eq!(owners.index(p), k);
                     }
                     assert!(own.windows(2).all(|w| w[0] < w[1]), "in increasing order");
                     all.extend(own);

@@ -6,7 +6,7 @@
 
 use super::tiers::TierCells;
 use crate::hemisphere::FormFactorAccumulator;
-use crate::parallel::{patch_owner, Collectives, Exchange};
+use crate::parallel::{Collectives, Exchange, Owners};
 use crate::settings::FormFactorMethod;
 use std::time::{Duration, Instant};
 
@@ -27,15 +27,14 @@ pub struct Exchanger<'c> {
 
 impl<'c> Exchanger<'c> {
     /// The exchanger of this rank of `comm`, for elements of the patches
-    /// `element_patches` (one entry per element).
+    /// `element_patches` (one entry per element) of `owners`' patches.
     pub fn new(
         comm: &'c dyn Collectives,
-        kind: Exchange,
-        method: FormFactorMethod,
+        (kind, method): (Exchange, FormFactorMethod),
+        owners: Owners,
         element_patches: impl Iterator<Item = u32>,
     ) -> Self {
-        let n = comm.size();
-        let element_rank: Vec<u32> = element_patches.map(|p| patch_owner(p, n) as u32).collect();
+        let element_rank: Vec<u32> = element_patches.map(|p| owners.of(p) as u32).collect();
         let owned = element_rank
             .iter()
             .map(|&r| r as usize == comm.rank())
@@ -221,14 +220,14 @@ mod tests {
             } else {
                 Vec::new()
             };
-            let mut ex = Exchanger::new(comm, kind, method, (0..ELEMENTS).map(|e| e / 2));
+            let owners = Owners::new(ELEMENTS.div_ceil(2) as usize, ranks);
+            let mut ex = Exchanger::new(comm, (kind, method), owners, (0..ELEMENTS).map(|e| e / 2));
             let mut acc = FormFactorAccumulator::new(ELEMENTS as usize);
             ex.exchange(&mut acc, &mut cells, &items, share.into_iter());
             let mut out = Vec::new();
             acc.drain_fixed(&mut out);
             assert!(
-                out.iter()
-                    .all(|&(e, _)| patch_owner(e / 2, ranks) == comm.rank()),
+                out.iter().all(|&(e, _)| owners.of(e / 2) == comm.rank()),
                 "{kind:?}: a rank kept sums of elements it does not own"
             );
             out

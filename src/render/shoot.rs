@@ -7,7 +7,7 @@
 use super::options::RenderError;
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
-use crate::parallel::{patch_owner, Collectives, Deal};
+use crate::parallel::{Collectives, Deal, Owners};
 use crate::solver::{
     Candidate, FormFactorSource, NetUnshot, Shot, ShotRegion, Solver, StopRule, Transfer,
     UNSHOT_ONE,
@@ -670,7 +670,7 @@ impl<'m> ShotLoop<'m> {
             return solver.candidate_region(best, ambient);
         }
         let (rank, ranks) = (self.comm.rank(), self.comm.size());
-        let owner = patch_owner(best.patch, ranks);
+        let owner = Owners::new(self.mesh.patches.len(), ranks).of(best.patch);
         let m = self.mesh.patches[best.patch as usize].elements.len();
         let mut mine = vec![0.0; 3 * m + 3];
         if rank == owner {

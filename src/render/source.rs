@@ -223,7 +223,12 @@ impl<'a> GpuFormFactors<'a> {
             transport_ranks: (comm.rank(), comm.size()),
             last_tier: 0,
             method: opts.form_factor,
-            exchanger: Exchanger::new(comm, opts.exchange, opts.form_factor, patches),
+            exchanger: Exchanger::new(
+                comm,
+                (opts.exchange, opts.form_factor),
+                parallel::Owners::new(mesh.patches.len(), comm.size()),
+                patches,
+            ),
             acc: FormFactorAccumulator::new(mesh.elements.len()),
             items: Vec::new(),
             pairs: Vec::new(),
@@ -770,6 +775,7 @@ impl GpuFormFactors<'_> {
         let transport = mesh.ambient_transport();
         let g = transport.group_of(shooter);
         let (rank, ranks) = self.transport_ranks;
+        let owners = parallel::Owners::new(mesh.patches.len(), ranks);
         out.clear();
         for &(h, share) in transport.row(g) {
             let h = h as usize;
@@ -780,7 +786,7 @@ impl GpuFormFactors<'_> {
             let own = transport
                 .patches_of(h)
                 .iter()
-                .filter(|&&p| ranks <= 1 || parallel::patch_owner(p, ranks) == rank);
+                .filter(|&&p| ranks <= 1 || owners.of(p) == rank);
             for j in own.flat_map(|&p| mesh.patches[p as usize].elements.clone()) {
                 // A degenerate element takes nothing (the solver divides
                 // by its area). (The packed table: a transport row reaches

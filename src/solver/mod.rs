@@ -15,7 +15,7 @@
 //! knows nothing of GPUs or ranks: form factors arrive as sparse [`Transfer`]s.
 
 use crate::mesh::Mesh;
-use crate::parallel::{owned_patches, patch_owner};
+use crate::parallel::Owners;
 
 mod state;
 mod vote;
@@ -192,7 +192,7 @@ pub type NetUnshot = [i64; 3];
 pub const UNSHOT_ONE: f64 = (1u64 << 40) as f64;
 
 /// Radiosity state over a mesh, or over one rank's share of it: patches
-/// belong to ranks as [`patch_owner`] deals them, and an element to its
+/// belong to ranks as [`Owners`] deals them, and an element to its
 /// patch's rank.
 pub struct Solver<'m> {
     mesh: &'m Mesh,
@@ -232,6 +232,8 @@ pub struct Solver<'m> {
     patch_area: Vec<f64>,
     /// Per element, what a shot's update reads of it (see [`Receiving`]).
     receiving: Vec<Receiving>,
+    /// Which rank owns which patch (`ranks` of them).
+    owners: Owners,
     /// The vote for the next shooter, kept up to date (see [`vote`]); a
     /// lock only because [`Solver::local_vote`] reads through `&self`.
     vote: std::sync::Mutex<vote::Vote>,
@@ -328,6 +330,7 @@ impl<'m> Solver<'m> {
             mesh,
             rank,
             ranks: ranks.max(1),
+            owners: Owners::new(mesh.patches.len(), ranks),
             element_unshot: radiosity.clone(),
             radiosity,
             unshot,
@@ -419,12 +422,12 @@ impl<'m> Solver<'m> {
 
     /// Whether this rank owns `patch`.
     pub fn owns(&self, patch: u32) -> bool {
-        patch_owner(patch, self.ranks) == self.rank
+        self.owners.of(patch) == self.rank
     }
 
     /// The rank that updates element `element` (its patch's owner).
     pub fn element_rank(&self, element: u32) -> usize {
-        patch_owner(self.receiving[element as usize].patch, self.ranks)
+        self.owners.of(self.receiving[element as usize].patch)
     }
 
     /// Whether this rank updates element `element` (its patch's owner).
@@ -435,7 +438,7 @@ impl<'m> Solver<'m> {
     }
 
     fn own_patches(&self) -> impl Iterator<Item = usize> {
-        owned_patches(self.rank, self.ranks, self.mesh.patches.len())
+        self.owners.patches(self.rank, self.mesh.patches.len())
     }
 
     /// This rank's unshot power (of |dB|) over the emitted power, in
@@ -456,7 +459,7 @@ impl<'m> Solver<'m> {
     /// scan of the patches (what every shot's vote needs).
     pub fn local_vote(&self) -> (u64, Option<Candidate>) {
         let patches = self.mesh.patches.len();
-        let leaves = crate::parallel::owned_count(self.rank, self.ranks, patches);
+        let leaves = self.owners.count(self.rank, patches);
         let key = (self.rank, self.ranks, self.overshoot, patches);
         // Leaf k is the rank's k-th own patch, in increasing order, so the
         // first of equal powers wins (the lowest index, as
@@ -466,30 +469,28 @@ impl<'m> Solver<'m> {
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())
                 .refresh(key, leaves, |k| {
-                    let w = self.patch_power(crate::parallel::owned_at(self.rank, self.ranks, k));
+                    let w = self.patch_power(self.owners.at(self.rank, k));
                     (w, self.to_fixed(w))
                 });
         (
             fixed,
-            best.map(|(k, w)| {
-                self.patch_candidate(crate::parallel::owned_at(self.rank, self.ranks, k), w)
-            }),
+            best.map(|(k, w)| self.patch_candidate(self.owners.at(self.rank, k), w)),
         )
     }
 
     /// Notes that patch `patch`'s residual changed, if it is this rank's
     /// (for the vote; a free function so a loop can hold the vote while it
     /// writes the other fields).
-    fn touch(vote: &mut vote::Vote, rank: usize, ranks: usize, patch: usize) {
-        if patch_owner(patch as u32, ranks) == rank {
-            vote.touch(crate::parallel::owned_index(patch, ranks));
+    fn touch(vote: &mut vote::Vote, rank: usize, owners: Owners, patch: usize) {
+        if owners.of(patch as u32) == rank {
+            vote.touch(owners.index(patch));
         }
     }
 
     /// [`Solver::touch`] on this solver's vote.
     fn touch_patch(&mut self, patch: usize) {
-        let (rank, ranks) = (self.rank, self.ranks);
-        Self::touch(self.vote_mut(), rank, ranks, patch);
+        let (rank, owners) = (self.rank, self.owners);
+        Self::touch(self.vote_mut(), rank, owners, patch);
     }
 
     /// The vote, for writing (no lock: `&mut self`).
@@ -596,9 +597,7 @@ impl<'m> Solver<'m> {
         let _ = self.local_vote();
         let top = self.vote.lock().unwrap_or_else(|e| e.into_inner()).top(k);
         top.into_iter()
-            .map(|(leaf, w)| {
-                self.patch_candidate(crate::parallel::owned_at(self.rank, self.ranks, leaf), w)
-            })
+            .map(|(leaf, w)| self.patch_candidate(self.owners.at(self.rank, leaf), w))
             .collect()
     }
 
@@ -785,20 +784,30 @@ impl<'m> Solver<'m> {
     ) -> Shot {
         let area = self.mesh.patches[shooter.patch as usize].area;
         let mut form_factor_sum = 0.0;
-        let (rank, ranks) = (self.rank, self.ranks);
+        let (rank, owners) = (self.rank, self.owners);
         let vote = self.vote.get_mut().unwrap_or_else(|e| e.into_inner());
         // Only an emitter's first shot carries direct light: the others
         // leave `direct` alone (adding d * 0 changed no bit, and the loop
         // is bound by its memory traffic).
         let direct = direct_share != [0.0; 3];
-        for t in ff {
+        for (i, t) in ff.iter().enumerate() {
+            if let Some(ahead) = ff.get(i + PREFETCH_AHEAD) {
+                let j = ahead.element as usize;
+                prefetch(self.receiving.as_ptr().wrapping_add(j));
+                prefetch(self.radiosity.as_ptr().wrapping_add(j));
+                prefetch(self.element_unshot.as_ptr().wrapping_add(j));
+                if direct {
+                    prefetch(self.direct.as_ptr().wrapping_add(j));
+                }
+            }
+
             form_factor_sum += t.form_factor;
             let j = t.element as usize;
             let el = self.receiving[j];
-            if patch_owner(el.patch, ranks) != rank {
+            if owners.of(el.patch) != rank {
                 continue;
             }
-            Self::touch(vote, rank, ranks, el.patch as usize);
+            Self::touch(vote, rank, owners, el.patch as usize);
             let scale = area / el.area;
             let d = [0, 1, 2].map(|c| el.reflectance[c] * t.radiosity[c] * scale);
             if direct {
@@ -1046,6 +1055,22 @@ impl<'m> Solver<'m> {
         }
         Some((transport, transport.irradiance(&unshot)))
     }
+}
+
+/// How many transfers ahead [`Solver::land`] asks for the records it will
+/// read: a row's transfers reach scattered elements, and each record is a
+/// cache miss the loop's few instructions cannot hide.
+const PREFETCH_AHEAD: usize = 8;
+
+/// Asks the cache for the line holding `p` (a hint: no effect on results).
+#[inline(always)]
+fn prefetch<T>(p: *const T) {
+    // SAFETY: a prefetch only hints the cache; it reads nothing and
+    // cannot fault, whatever the address.
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast())
+    };
 }
 
 #[cfg(test)]

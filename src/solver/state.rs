@@ -3,7 +3,7 @@
 //! checkpoint and restored (the same bits on any rank count).
 
 use super::Solver;
-use crate::parallel::owned_patches;
+use crate::parallel::Owners;
 
 /// A solver's whole state between shots (see [`Solver::state`]).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -58,7 +58,8 @@ impl Solver<'_> {
         let ranks = radiosity.len();
         for (r, (b, u)) in radiosity.iter().zip(unshot).enumerate() {
             let (mut bi, mut ui) = (b.chunks_exact(3), u.chunks_exact(3));
-            for i in owned_patches(r, ranks, self.mesh.patches.len()) {
+            for i in Owners::new(self.mesh.patches.len(), ranks).patches(r, self.mesh.patches.len())
+            {
                 if let Some(x) = ui.next() {
                     self.unshot[i] = [x[0], x[1], x[2]];
                 }
@@ -71,6 +72,7 @@ impl Solver<'_> {
         }
         self.rank = 0;
         self.ranks = 1;
+        self.owners = Owners::new(self.mesh.patches.len(), 1);
     }
 
     /// This rank's elements' unshot radiosity, in [`Solver::local_state`]'s
@@ -116,7 +118,8 @@ impl Solver<'_> {
         let ranks = parts.len();
         for (r, part) in parts.iter().enumerate() {
             let mut it = part.chunks_exact(3);
-            for i in owned_patches(r, ranks, self.mesh.patches.len()) {
+            for i in Owners::new(self.mesh.patches.len(), ranks).patches(r, self.mesh.patches.len())
+            {
                 for j in self.mesh.patches[i].elements.clone() {
                     if let Some(x) = it.next() {
                         values[j as usize] = [x[0], x[1], x[2]];

@@ -34,7 +34,8 @@ pub(super) struct FarPatch {
 impl FarPatch {
     /// Rank `rank`'s patches of `ranks`, in increasing order.
     pub(super) fn owned(mesh: &Mesh, rank: usize, ranks: usize) -> Vec<Self> {
-        parallel::owned_patches(rank, ranks, mesh.patches.len())
+        parallel::Owners::new(mesh.patches.len(), ranks)
+            .patches(rank, mesh.patches.len())
             .map(|k| {
                 let p = &mesh.patches[k];
                 Self {
