@@ -7,7 +7,7 @@
 use super::options::RenderError;
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
-use crate::parallel::{Collectives, Deal, Owners};
+use crate::parallel::{Collectives, Deal};
 use crate::solver::{
     Candidate, FormFactorSource, NetUnshot, Shot, ShotRegion, Solver, StopRule, Transfer,
     UNSHOT_ONE,
@@ -669,8 +669,8 @@ impl<'m> ShotLoop<'m> {
         if !best.weighted {
             return solver.candidate_region(best, ambient);
         }
-        let (rank, ranks) = (self.comm.rank(), self.comm.size());
-        let owner = Owners::new(self.mesh.patches.len(), ranks).of(best.patch);
+        let rank = self.comm.rank();
+        let owner = solver.patch_rank(best.patch);
         let m = self.mesh.patches[best.patch as usize].elements.len();
         let mut mine = vec![0.0; 3 * m + 3];
         if rank == owner {

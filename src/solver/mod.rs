@@ -420,9 +420,14 @@ impl<'m> Solver<'m> {
         self.emitted_power
     }
 
+    /// The rank that owns `patch`.
+    pub fn patch_rank(&self, patch: u32) -> usize {
+        self.owners.of(patch)
+    }
+
     /// Whether this rank owns `patch`.
     pub fn owns(&self, patch: u32) -> bool {
-        self.owners.of(patch) == self.rank
+        self.patch_rank(patch) == self.rank
     }
 
     /// The rank that updates element `element` (its patch's owner).
