@@ -299,6 +299,11 @@ pub struct Timings {
     /// Of `sum_form_factors`: the shadow rays to receivers smaller than a
     /// hemisphere cell that no cell covered (summed over shots).
     pub far_receivers: f64,
+    /// The far receivers' centre rays cast on a thread of their own while
+    /// the hemisphere was drawn (summed over shots; thread time, beside
+    /// the drawing's wall time, not in `sum_form_factors`).
+    #[serde(default)]
+    pub far_receivers_ahead: f64,
     /// Distributing radiosity (summed over shots).
     pub update: f64,
     /// Of `solve`: estimating the ambient term's transport, once, at its

@@ -359,6 +359,14 @@ impl HemisphereRasterizer {
         self.cull_occluded = on;
     }
 
+    /// The most threads the next shots' bounds use (by default every
+    /// core, up to 8). One, while another thread does other work of the
+    /// shot: on one core the bounds walk the polygons nearest first and
+    /// skip what they already hide (the same rectangles either way).
+    pub fn set_bounds_threads(&mut self, threads: usize) {
+        self.proxies.max_threads = threads;
+    }
+
     /// Which solids `shooter` is outside of (their back faces need no drawing).
     fn find_outside(&mut self, shooter: &ShooterFrame) {
         let cull = self.cull_solids;

@@ -125,6 +125,11 @@ pub(super) struct Proxies {
     /// nearest first ([`Proxies::visit_near_first`]); `None`: on one
     /// thread only. Tests set it to compare both walks.
     pub(super) near_first: Option<bool>,
+    /// The most threads a shot's bounds use (see
+    /// [`HemisphereRasterizer::set_bounds_threads`]).
+    ///
+    /// [`HemisphereRasterizer::set_bounds_threads`]: super::hemisphere::HemisphereRasterizer::set_bounds_threads
+    pub(super) max_threads: usize,
 }
 
 /// Polygons per block of [`Proxies::blocks`]. Consecutive polygons are
@@ -221,6 +226,7 @@ impl Proxies {
             polygons,
             blocks,
             near_first: None,
+            max_threads: usize::MAX,
         }
     }
 
@@ -271,7 +277,7 @@ impl Proxies {
         let threads = if self.corners.len() < PARALLEL_PROXIES {
             1
         } else {
-            crate::parallel::cores().min(8)
+            crate::parallel::cores().min(8).min(self.max_threads).max(1)
         };
         // Polygon `at`, in view: its rectangles into `out`, counted in `done`.
         let draw = |at: usize, poly: &PolygonProxies, out: &mut Drawn, done: &mut Collected| {

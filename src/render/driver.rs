@@ -500,6 +500,7 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.exchange = t.exchange.as_secs_f64();
     timings.sum_form_factors = t.sum.as_secs_f64();
     timings.far_receivers = t.far.as_secs_f64();
+    timings.far_receivers_ahead = t.far_ahead.as_secs_f64();
     let mut shot_times = stats.shot_times.clone();
     shot_times.sort();
     timings.median_shot_ms = shot_times

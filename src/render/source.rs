@@ -40,6 +40,9 @@ pub struct PhaseTimes {
     /// Of `sum`: the far receivers' shadow rays (see
     /// `GpuFormFactors::add_far_receivers`).
     pub far: Duration,
+    /// The far receivers' centre rays cast on another thread while the
+    /// hemisphere was drawn (`GpuFormFactors::far_ahead`; not in `sum`).
+    pub far_ahead: Duration,
     /// Rectangles in view (bounded, before the occlusion cull).
     pub rects: u64,
     /// Of those, rectangles the occlusion cull left undrawn.
@@ -82,6 +85,8 @@ impl PhaseTimes {
 struct Tier {
     raster: HemisphereRasterizer,
     cells: TierCells,
+    /// How its whole hemispheres find their far receivers.
+    far_way: far::FarWay,
 }
 
 impl Tier {
@@ -105,6 +110,7 @@ impl Tier {
         Ok(Self {
             raster,
             cells: TierCells::new(res, layout, ranks, opts.form_factor),
+            far_way: far::FarWay::default(),
         })
     }
 }
@@ -332,14 +338,14 @@ impl<'a> GpuFormFactors<'a> {
                 self.draw(&frame, own)?;
                 let v = self.view_of(tier, t, own, cut);
                 self.view = [0, 1, 2].map(|i| self.view[i] + v[i]);
-                let Tier { raster, cells } = &self.tiers[tier];
+                let Tier { raster, cells, .. } = &self.tiers[tier];
                 Exchanger::add_own(&mut self.acc, cells, &self.items, raster.coverage_pairs());
             }
         } else {
             let own = self.tiers[tier].cells.grid_position(self.comm.rank());
             self.draw(&frame, own)?;
             self.view = self.view_of(tier, 0, own, cut);
-            let Tier { raster, cells } = &mut self.tiers[tier];
+            let Tier { raster, cells, .. } = &mut self.tiers[tier];
             exchange =
                 self.exchanger
                     .exchange(&mut self.acc, cells, &self.items, raster.coverage_pairs());
@@ -439,9 +445,9 @@ impl<'a> GpuFormFactors<'a> {
         centre: glam::Vec3,
         tier: usize,
     ) -> Result<(Row, Duration), RenderError> {
-        let exchange = self.hemisphere(shooter, centre, tier, f32::INFINITY)?;
         match self.method {
             FormFactorMethod::Hemisphere => {
+                let exchange = self.hemisphere(shooter, centre, tier, f32::INFINITY)?;
                 self.timings.receivers += self.pairs.len() as u64;
                 let (sums, more) = self.sum_over_ranks(vec![self.view[1]]);
                 let row = Row {
@@ -453,17 +459,20 @@ impl<'a> GpuFormFactors<'a> {
                 };
                 Ok((row, exchange + more))
             }
-            FormFactorMethod::Hybrid => {
-                let (row, more) = self.hybrid_row(shooter, tier)?;
-                Ok((row, exchange + more))
-            }
+            FormFactorMethod::Hybrid => self.hybrid_row(shooter, centre, tier),
         }
     }
 
-    /// The hybrid row from the hemisphere just drawn, redrawn split into
-    /// groups of the shooter's elements where visibility varies across it.
-    fn hybrid_row(&mut self, shooter: u32, tier: usize) -> Result<(Row, Duration), RenderError> {
-        let (first, mut exchange) = self.hybrid_first(shooter, tier)?;
+    /// The hybrid row of the hemisphere of `shooter` at `centre`, redrawn
+    /// split into groups of the shooter's elements where visibility varies
+    /// across it.
+    fn hybrid_row(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+    ) -> Result<(Row, Duration), RenderError> {
+        let (first, mut exchange) = self.hybrid_first(shooter, centre, tier)?;
         let mut split = match first {
             First::Whole(row) => return Ok((row, exchange)),
             First::Split(split) => split,
@@ -479,7 +488,8 @@ impl<'a> GpuFormFactors<'a> {
         Ok((row, exchange + spent))
     }
 
-    /// The hybrid row of the hemisphere just drawn, or, where a near
+    /// The hybrid row of the hemisphere of `shooter` at `centre` (drawn
+    /// here), or, where a near
     /// receiver is partly hidden from the shooter's centre (visibility
     /// varies across the shooter), the start of a split shot: that row
     /// without its near receivers, which each group of the shooter's
@@ -487,16 +497,16 @@ impl<'a> GpuFormFactors<'a> {
     fn hybrid_first(
         &mut self,
         shooter: u32,
+        centre: glam::Vec3,
         tier: usize,
     ) -> Result<(First, Duration), RenderError> {
+        let drawn = self.whole_with_far(shooter, centre, tier)?;
         let m = self.mesh.patches[shooter as usize].elements.len();
         let columns = if m <= formfactor::MAX_SHOOTER_COLUMNS {
             m
         } else {
             1
         };
-        let centre = self.last_centre;
-        self.add_far_receivers(shooter, centre, tier, f32::INFINITY, |_| true);
         self.timings.receivers += self.visible_receivers();
         let mut row =
             formfactor::hybrid_row(self.mesh, &self.receivers, shooter, &self.pairs, 0..columns);
@@ -506,7 +516,8 @@ impl<'a> GpuFormFactors<'a> {
         let v = self.view;
         let mut parts = vec![row.near_hidden, row.total, v[0], v[1], v[2]];
         parts.extend(row.column_totals());
-        let (sums, exchange) = self.sum_over_ranks(parts);
+        let (sums, more) = self.sum_over_ranks(parts);
+        let exchange = drawn + more;
         // The refinement passes measure with one hemisphere a shot, as
         // coarse as the shot (the emitters' shots split as in the solve).
         let split = self.split && !(self.choice.measuring && tier > 0);
@@ -549,7 +560,7 @@ impl<'a> GpuFormFactors<'a> {
         let exchange = self.hemisphere(shooter, *at, tier, reach)?;
         // Its own far receivers, near ones only (few rays).
         let within = reach + self.max_patch_radius;
-        self.add_far_receivers(shooter, *at, tier, within, &is_near);
+        self.add_far_receivers((shooter, *at), tier, (within, &is_near), None);
         self.timings.receivers += self.visible_receivers();
         let mut part = formfactor::hybrid_row(
             self.mesh,

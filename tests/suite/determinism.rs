@@ -392,3 +392,58 @@ fn the_contact_split_is_the_same_on_one_core_and_on_every_core() {
     assert!(triangles > 5000, "{triangles} triangles");
     assert!(one == all, "the scene differs with the core count");
 }
+
+#[test]
+fn far_receivers_scanned_beside_the_bounds_give_the_same_bits() {
+    // With a second core, a big mesh's far receivers may be scanned on a
+    // thread of their own while the bounds keep to one core (the way each
+    // hemisphere takes is chosen by measured time, so both are taken in a
+    // solve); pinned to one core, never. Both ways must give the same
+    // solution, bit for bit.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    assert!(cores >= 2, "this test needs two cores, found {cores}");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bin = env!("CARGO_BIN_EXE_radiosity");
+    let render = |name: &str, one_core: bool| -> serde_json::Value {
+        let report = dir.path().join(name);
+        let mut cmd = if one_core {
+            let mut c = std::process::Command::new("taskset");
+            c.args(["-c", "0", bin]);
+            c
+        } else {
+            std::process::Command::new(bin)
+        };
+        // cubes-16: 50 088 patches, far above the scan's 16 384.
+        let status = cmd
+            .args([
+                "render",
+                "cubes-16",
+                "--max-shots",
+                "40",
+                "--threshold",
+                "0",
+            ])
+            .args(["--width", "0", "--refine-shading", "0", "--out-dir"])
+            .arg(dir.path())
+            .arg("--report")
+            .arg(&report)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .status()
+            .expect("runs (taskset is util-linux's)");
+        assert!(status.success(), "{name}: the render failed");
+        serde_json::from_slice(&std::fs::read(&report).expect("report written")).expect("json")
+    };
+    let (one, all) = (render("one.json", true), render("all.json", false));
+    let ahead = all["timings"]["far_receivers_ahead"]
+        .as_f64()
+        .expect("timing");
+    assert!(ahead > 0.0, "no hemisphere scanned its far receivers ahead");
+    assert_eq!(one["timings"]["far_receivers_ahead"].as_f64(), Some(0.0));
+    for key in ["surfaces", "energy", "unshot_fraction", "counts"] {
+        assert!(
+            one[key] == all[key],
+            "{key} differs with the far receivers scanned ahead"
+        );
+    }
+}

@@ -19,6 +19,11 @@ pub const FAR_CELLS: f32 = 4.0;
 const PARALLEL_FAR: usize = 16_384;
 const FAR_RUN: usize = 4096;
 
+/// Clear far receivers of at least this many patches get their element
+/// rays on every core, in runs of [`CLEAR_RUN`].
+const PARALLEL_CLEAR: usize = 1024;
+const CLEAR_RUN: usize = 256;
+
 /// One of this rank's patches as the far receivers' scan reads it: every
 /// shot tests every patch, and reading these from the patches, polygons
 /// and elements was a cache miss apiece (most of the scan's time in big
@@ -49,7 +54,274 @@ impl FarPatch {
     }
 }
 
+/// What a far receivers' scan needs of the shot: where it stands, which
+/// patches it looks at and the largest cell.
+#[derive(Clone, Copy)]
+pub(super) struct FarShot {
+    shooter: u32,
+    centre: glam::Vec3,
+    /// The shooter's normal.
+    normal: glam::Vec3,
+    /// Where rays start: the centre moved off the shooter's plane.
+    origin: glam::Vec3,
+    /// Only patches whose centres lie within this of `centre` are looked at.
+    within: f32,
+    /// The solid angle of the largest hemisphere cell (at the horizon).
+    cell: f32,
+}
+
+impl FarShot {
+    /// The scan of the shot of `shooter` from `centre` with cells of `res`.
+    pub(super) fn new(
+        mesh: &Mesh,
+        shooter: u32,
+        centre: glam::Vec3,
+        res: crate::hemisphere::Resolution,
+        within: f32,
+    ) -> Self {
+        // The largest cells are at the horizon: dtheta times dphi.
+        let cell = (2.0 * std::f32::consts::PI / res.cols as f32)
+            * (std::f32::consts::FRAC_PI_2 / res.rows as f32);
+        let sp = &mesh.patches[shooter as usize];
+        let normal = mesh.polygons[sp.polygon as usize].normal;
+        Self {
+            shooter,
+            centre,
+            normal,
+            origin: centre + normal * mesh.ray_offset,
+            within,
+            cell,
+        }
+    }
+}
+
+/// A far receiver whose centre the shooter's ray reached.
+#[derive(Clone, Copy)]
+pub(super) struct Clear {
+    patch: u32,
+    /// Whether it subtends at most one cell (its elements then take its
+    /// centre's verdict; larger ones cast a ray to each element).
+    one_cell: bool,
+}
+
+/// The far receivers of `part` whose centre rays are clear, in order:
+/// patches in front of the shooter, facing it, that subtend less than
+/// [`FAR_CELLS`] of the largest cells, hold an element `keep` accepts and
+/// that `seen` (where given) does not mark.
+fn centre_rays(
+    mesh: &Mesh,
+    part: &[FarPatch],
+    shot: &FarShot,
+    seen: Option<&[bool]>,
+    keep: &(impl Fn(u32) -> bool + Sync),
+) -> Vec<Clear> {
+    let sp = &mesh.patches[shot.shooter as usize];
+    let n = shot.normal;
+    let mut clear = Vec::new();
+    // Most candidates in a cluttered scene are hidden, by the same
+    // occluder as the patch before them (see `Bvh::occluded_hinted`).
+    let mut hint = None;
+    for fp in part {
+        let k = fp.patch as usize;
+        if k == shot.shooter as usize || seen.is_some_and(|s| s[k]) {
+            continue;
+        }
+        let d = fp.centre - shot.centre;
+        let dist2 = d.length_squared();
+        if dist2 > shot.within * shot.within {
+            continue;
+        }
+        let rn = fp.normal;
+        let cos_r = -rn.dot(d);
+        if n.dot(d) <= 0.0 || cos_r <= 0.0 {
+            continue;
+        }
+        let solid_angle = fp.area * cos_r / (dist2 * dist2.sqrt());
+        let p = &mesh.patches[k];
+        if solid_angle > FAR_CELLS * shot.cell || !p.elements.clone().any(keep) {
+            continue;
+        }
+        // One ray to the patch's centre first: most such patches are
+        // hidden, and a patch this small hidden at its centre is taken
+        // as hidden whole.
+        let to = p.centre + rn * mesh.ray_offset - shot.origin;
+        if !mesh.occluders.occluded_hinted(
+            shot.origin,
+            to,
+            0.0,
+            1.0,
+            [sp.polygon, p.polygon],
+            &mut hint,
+        ) {
+            clear.push(Clear {
+                patch: fp.patch,
+                one_cell: solid_angle <= shot.cell,
+            });
+        }
+    }
+    clear
+}
+
+/// [`centre_rays`] over `far` on every core, in runs of [`FAR_RUN`]
+/// patches joined in order (the hint only saves time, so the verdicts are
+/// the same however it is split), or on this thread alone below
+/// [`PARALLEL_FAR`] patches.
+fn centre_rays_everywhere(
+    mesh: &Mesh,
+    far: &[FarPatch],
+    shot: &FarShot,
+    seen: Option<&[bool]>,
+    keep: &(impl Fn(u32) -> bool + Sync),
+) -> Vec<Clear> {
+    if far.len() < PARALLEL_FAR {
+        return centre_rays(mesh, far, shot, seen, keep);
+    }
+    let runs: Vec<&[FarPatch]> = far.chunks(FAR_RUN).collect();
+    let mut parts = vec![Vec::new(); runs.len()];
+    crate::sampling::in_parallel(&mut parts, |k, part| {
+        *part = centre_rays(mesh, runs[k], shot, seen, keep);
+    });
+    parts.concat()
+}
+
+/// Whether a whole hemisphere's far receivers can be scanned on a thread
+/// of their own while the hemisphere is drawn (see
+/// [`GpuFormFactors::far_ahead`]): over [`PARALLEL_FAR`] patches, with a
+/// second core to run on.
+fn can_scan_ahead(far: &[FarPatch]) -> bool {
+    far.len() >= PARALLEL_FAR && parallel::cores() >= 2
+}
+
+/// Which way a tier's whole hemispheres find their far receivers: after
+/// drawing, on every core, or beside the bounds, which then keep to one
+/// core ([`GpuFormFactors::far_ahead`]). Neither wins everywhere: in a
+/// room of 4096 cubes the bounds on one core (nearest first, skipping
+/// what they already hide) are as fast as on two, and the scan beside
+/// them is free; in a classroom they are 1.6 times slower on one, more
+/// than the scan saves. So each way's time is measured as the solve goes
+/// (the bounds and the far receivers, against the rasteriser's time for
+/// the same hemispheres, which neither way changes: shooters differ a
+/// hundredfold in what they see), as running means, and the cheaper way
+/// taken, the other tried again every [`TRY_OTHER`]-th hemisphere. Only
+/// time is at stake: both ways give the same rectangles and verdicts.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct FarWay {
+    /// Running means of seconds per hemisphere, inline and ahead: the
+    /// bounds and far receivers, and the rasteriser (0: not yet tried).
+    mean: [[f64; 2]; 2],
+    hemispheres: u64,
+}
+
+/// Hemispheres between tries of the way not taken (see [`FarWay`]).
+const TRY_OTHER: u64 = 16;
+
+/// The running means' weight of the newest hemisphere (see [`FarWay`]).
+const NEWEST: f64 = 0.125;
+
+impl FarWay {
+    /// Whether the next hemisphere scans ahead.
+    fn ahead(&mut self) -> bool {
+        self.hemispheres += 1;
+        let [[inline, inline_raster], [ahead, ahead_raster]] = self.mean;
+        let better = if ahead_raster == 0.0 {
+            true
+        } else if inline_raster == 0.0 {
+            false
+        } else {
+            ahead * inline_raster < inline * ahead_raster
+        };
+        better != (self.hemispheres % TRY_OTHER == 0)
+    }
+
+    /// Takes a hemisphere drawn `ahead` or not: `spent` seconds in the
+    /// bounds and far receivers, `raster` in the rasteriser.
+    fn took(&mut self, ahead: bool, spent: f64, raster: f64) {
+        let mean = &mut self.mean[usize::from(ahead)];
+        if mean[1] == 0.0 {
+            *mean = [spent, raster.max(f64::MIN_POSITIVE)];
+        } else {
+            mean[0] += NEWEST * (spent - mean[0]);
+            mean[1] += NEWEST * (raster - mean[1]);
+        }
+    }
+}
+
 impl GpuFormFactors<'_> {
+    /// The whole hemisphere of `shooter` at `centre` drawn (see
+    /// [`Self::hemisphere`]), and its far receivers found
+    /// ([`Self::add_far_receivers`]). Where the tier's [`FarWay`] says,
+    /// another thread casts the far receivers' centre rays while the
+    /// bounds are found on one core (whether the cells see a patch is not
+    /// known yet, so the patches they will see get rays too: a tenth more
+    /// in a cluttered room). Returns the exchange's time.
+    pub(super) fn whole_with_far(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+    ) -> Result<std::time::Duration, crate::render::RenderError> {
+        let before = (
+            self.timings.bounds + self.timings.far,
+            self.timings.rasterise,
+        );
+        let scan = can_scan_ahead(&self.far_patches);
+        let ahead = scan && self.tiers[tier].far_way.ahead();
+        let (exchange, clear) = if ahead {
+            self.far_ahead(shooter, centre, tier)?
+        } else {
+            (self.hemisphere(shooter, centre, tier, f32::INFINITY)?, None)
+        };
+        let everything = |_| true;
+        self.add_far_receivers((shooter, centre), tier, (f32::INFINITY, everything), clear);
+        if scan {
+            let spent = self.timings.bounds + self.timings.far - before.0;
+            let raster = self.timings.rasterise - before.1;
+            let way = &mut self.tiers[tier].far_way;
+            way.took(ahead, spent.as_secs_f64(), raster.as_secs_f64());
+        }
+        Ok(exchange)
+    }
+
+    /// The whole hemisphere drawn with its bounds on one core while
+    /// another casts the far receivers' centre rays; the exchange's time
+    /// and the clear patches.
+    fn far_ahead(
+        &mut self,
+        shooter: u32,
+        centre: glam::Vec3,
+        tier: usize,
+    ) -> Result<(std::time::Duration, Option<Vec<Clear>>), crate::render::RenderError> {
+        let mesh = self.mesh;
+        let shot = FarShot::new(
+            mesh,
+            shooter,
+            centre,
+            self.tiers[tier].cells.resolution,
+            f32::INFINITY,
+        );
+        let far = std::mem::take(&mut self.far_patches);
+        let patches = &far;
+        self.tiers[tier].raster.set_bounds_threads(1);
+        let (drawn, ((clear, spent), waited)) = std::thread::scope(|s| {
+            let scan = s.spawn(move || {
+                let start = Instant::now();
+                let clear = centre_rays(mesh, patches, &shot, None, &|_| true);
+                (clear, start.elapsed())
+            });
+            let drawn = self.hemisphere(shooter, centre, tier, f32::INFINITY);
+            let waiting = Instant::now();
+            // A panic in the scan is a bug; carry it on here.
+            let done = scan.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+            (drawn, (done, waiting.elapsed()))
+        });
+        // Waiting for the scan counts as the far receivers' time.
+        self.timings.far += waited;
+        self.tiers[tier].raster.set_bounds_threads(usize::MAX);
+        self.far_patches = far;
+        self.timings.far_ahead += spent;
+        Ok((drawn?, Some(clear)))
+    }
+
     /// Receivers too small to cover a hemisphere cell from the shooter (the
     /// far end of a corridor): cell centres miss most of them, and a hybrid
     /// row, which takes visibility from the cells, gave them nothing (the
@@ -61,87 +333,62 @@ impl GpuFormFactors<'_> {
     /// the patch subtends more than one cell, one to each element (a patch
     /// under a cell takes its centre's answer). Only elements `keep` accepts
     /// of patches whose centres lie `within` of `centre` (a split group's
-    /// near receivers) are looked at. Deterministic and per
+    /// near receivers) are looked at. `ahead`: the centre rays already cast
+    /// for this shot, cells unseen or not ([`Self::far_ahead`]; with
+    /// `within` infinite and `keep` taking all). Deterministic and per
     /// rank, so the row is the same on any rank count.
     pub(super) fn add_far_receivers(
         &mut self,
-        shooter: u32,
-        centre: glam::Vec3,
+        (shooter, centre): (u32, glam::Vec3),
         tier: usize,
-        within: f32,
-        keep: impl Fn(u32) -> bool + Sync,
+        (within, keep): (f32, impl Fn(u32) -> bool + Sync),
+        ahead: Option<Vec<Clear>>,
     ) {
         let start = Instant::now();
         let mesh = self.mesh;
-        let res = self.tiers[tier].cells.resolution;
-        // The largest cells are at the horizon: dtheta times dphi.
-        let cell = (2.0 * std::f32::consts::PI / res.cols as f32)
-            * (std::f32::consts::FRAC_PI_2 / res.rows as f32);
-        let sp = &mesh.patches[shooter as usize];
-        let n = mesh.polygons[sp.polygon as usize].normal;
-        let origin = centre + n * mesh.ray_offset;
+        let shot = FarShot::new(
+            mesh,
+            shooter,
+            centre,
+            self.tiers[tier].cells.resolution,
+            within,
+        );
         self.mark_seen();
         let before = self.pairs.len();
         let seen = &self.seen;
-        // The elements the rays see, in patch order, from a run of patches.
-        let scan = |part: &[FarPatch]| -> Vec<u32> {
-            let mut found = Vec::new();
-            // Most candidates in a cluttered scene are hidden, by the same
-            // occluder as the patch before them (see `Bvh::occluded_hinted`).
-            let mut hint = None;
-            for fp in part {
-                let k = fp.patch as usize;
-                if k == shooter as usize || seen[k] {
-                    continue;
-                }
-                let d = fp.centre - centre;
-                let dist2 = d.length_squared();
-                if dist2 > within * within {
-                    continue;
-                }
-                let rn = fp.normal;
-                let cos_r = -rn.dot(d);
-                if n.dot(d) <= 0.0 || cos_r <= 0.0 {
-                    continue;
-                }
-                let solid_angle = fp.area * cos_r / (dist2 * dist2.sqrt());
-                let p = &mesh.patches[k];
-                if solid_angle > FAR_CELLS * cell || !p.elements.clone().any(&keep) {
-                    continue;
-                }
-                // One ray to the patch's centre first: most such patches are
-                // hidden, and a patch this small hidden at its centre is taken
-                // as hidden whole.
-                let to = p.centre + rn * mesh.ray_offset - origin;
-                let skip = [sp.polygon, p.polygon];
-                if mesh
-                    .occluders
-                    .occluded_hinted(origin, to, 0.0, 1.0, skip, &mut hint)
-                {
-                    continue;
-                }
-                let one_cell = solid_angle <= cell;
-                for j in p.elements.clone() {
-                    let e = &mesh.elements[j as usize];
-                    let to = e.centre + rn * mesh.ray_offset - origin;
-                    if keep(j)
-                        && n.dot(to) > 0.0
-                        && (one_cell || !mesh.occluders.occluded(origin, to, 0.0, 1.0, skip))
-                    {
-                        found.push(j);
-                    }
-                }
-            }
-            found
+        let clear = match ahead {
+            Some(clear) => clear,
+            None => centre_rays_everywhere(mesh, &self.far_patches, &shot, Some(seen), &keep),
         };
-        // Runs of patches on every core, joined in order (the hint only
-        // saves time, so the verdicts are the same however it is split).
-        let found: Vec<u32> = if self.far_patches.len() < PARALLEL_FAR {
-            scan(&self.far_patches)
+        // The elements the rays see, in patch order: a patch under a cell
+        // takes its centre's verdict, a larger one a ray to each element.
+        let sp = &mesh.patches[shooter as usize];
+        let elements = |c: &Clear| -> Vec<u32> {
+            let p = &mesh.patches[c.patch as usize];
+            if seen[c.patch as usize] {
+                return Vec::new();
+            }
+            let rn = mesh.polygons[p.polygon as usize].normal;
+            let skip = [sp.polygon, p.polygon];
+            p.elements
+                .clone()
+                .filter(|&j| {
+                    let e = &mesh.elements[j as usize];
+                    let to = e.centre + rn * mesh.ray_offset - shot.origin;
+                    keep(j)
+                        && shot.normal.dot(to) > 0.0
+                        && (c.one_cell || !mesh.occluders.occluded(shot.origin, to, 0.0, 1.0, skip))
+                })
+                .collect()
+        };
+        let found: Vec<u32> = if clear.len() < PARALLEL_CLEAR {
+            clear.iter().flat_map(elements).collect()
         } else {
-            let runs: Vec<&[FarPatch]> = self.far_patches.chunks(FAR_RUN).collect();
+            let runs: Vec<&[Clear]> = clear.chunks(CLEAR_RUN).collect();
             let mut parts = vec![Vec::new(); runs.len()];
-            crate::sampling::in_parallel(&mut parts, |k, part| *part = scan(runs[k]));
+            crate::sampling::in_parallel(&mut parts, |k, part| {
+                *part = runs[k].iter().flat_map(elements).collect();
+            });
             parts.concat()
         };
         for j in found {
@@ -189,5 +436,36 @@ impl GpuFormFactors<'_> {
                 self.seen[self.receivers.patch(j) as usize] = true;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{FarWay, TRY_OTHER};
+
+    #[test]
+    fn the_cheaper_way_for_its_drawing_is_taken_and_the_other_tried_again() {
+        let mut way = FarWay::default();
+        // Both ways are tried first.
+        assert!(way.ahead());
+        way.took(true, 2.0, 10.0);
+        assert!(!way.ahead());
+        way.took(false, 3.0, 30.0);
+        // Inline cost 0.1 of its drawing, ahead 0.2: inline, but for every
+        // TRY_OTHER-th hemisphere. Times are weighed against the drawing,
+        // not taken raw (ahead's 2 s is less than inline's 3 s).
+        let mut tried = 0;
+        for _ in 0..4 * TRY_OTHER {
+            if way.ahead() {
+                tried += 1;
+            }
+        }
+        assert_eq!(tried, 4);
+        // Ahead grows cheaper: it is taken from then on.
+        for _ in 0..40 {
+            way.took(true, 0.5, 10.0);
+        }
+        let taken = (0..TRY_OTHER).filter(|_| way.ahead()).count() as u64;
+        assert_eq!(taken, TRY_OTHER - 1);
     }
 }

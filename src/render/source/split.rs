@@ -164,9 +164,7 @@ impl GpuFormFactors<'_> {
         };
         let before = self.timings.drawing();
         let (row, exchange) = if self.method == crate::settings::FormFactorMethod::Hybrid {
-            let mut exchange = self.hemisphere(shooter, region.centre, tier, f32::INFINITY)?;
-            let (first, more) = self.hybrid_first(shooter, tier)?;
-            exchange += more;
+            let (first, exchange) = self.hybrid_first(shooter, region.centre, tier)?;
             match first {
                 First::Whole(row) => (row, exchange),
                 First::Split(split) => {
