@@ -362,17 +362,9 @@ fn the_contact_split_is_the_same_on_one_core_and_on_every_core() {
     // the scene as loaded (the classroom's desks and chairs stand on its
     // floor) is the same, bit for bit, pinned to one core.
     let dir = tempfile::tempdir().expect("temp dir");
-    let bin = env!("CARGO_BIN_EXE_radiosity");
     let export = |name: &str, one_core: bool| {
         let out = dir.path().join(name);
-        let mut cmd = if one_core {
-            let mut c = std::process::Command::new("taskset");
-            c.args(["-c", "0", bin]);
-            c
-        } else {
-            std::process::Command::new(bin)
-        };
-        let status = cmd
+        let status = radiosity_on(one_core)
             .args(["scene", "classroom-c1", "--nodes"])
             .arg(&out)
             .stdout(std::process::Stdio::null())
@@ -403,18 +395,10 @@ fn far_receivers_scanned_beside_the_bounds_give_the_same_bits() {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     assert!(cores >= 2, "this test needs two cores, found {cores}");
     let dir = tempfile::tempdir().expect("temp dir");
-    let bin = env!("CARGO_BIN_EXE_radiosity");
     let render = |name: &str, one_core: bool| -> serde_json::Value {
         let report = dir.path().join(name);
-        let mut cmd = if one_core {
-            let mut c = std::process::Command::new("taskset");
-            c.args(["-c", "0", bin]);
-            c
-        } else {
-            std::process::Command::new(bin)
-        };
         // cubes-16: 50 088 patches, far above the scan's 16 384.
-        let status = cmd
+        let status = radiosity_on(one_core)
             .args([
                 "render",
                 "cubes-16",
@@ -445,5 +429,18 @@ fn far_receivers_scanned_beside_the_bounds_give_the_same_bits() {
             one[key] == all[key],
             "{key} differs with the far receivers scanned ahead"
         );
+    }
+}
+
+/// The `radiosity` binary, pinned to core 0 (`taskset`, util-linux's)
+/// when `one_core`, else free to use every core.
+fn radiosity_on(one_core: bool) -> std::process::Command {
+    let bin = env!("CARGO_BIN_EXE_radiosity");
+    if one_core {
+        let mut c = std::process::Command::new("taskset");
+        c.args(["-c", "0", bin]);
+        c
+    } else {
+        std::process::Command::new(bin)
     }
 }
