@@ -162,25 +162,17 @@ fn centre_rays(
     clear
 }
 
-/// [`centre_rays`] over `far` on every core, in runs of [`FAR_RUN`]
-/// patches joined in order (the hint only saves time, so the verdicts are
-/// the same however it is split), or on this thread alone below
-/// [`PARALLEL_FAR`] patches.
-fn centre_rays_everywhere(
-    mesh: &Mesh,
-    far: &[FarPatch],
-    shot: &FarShot,
-    seen: Option<&[bool]>,
-    keep: &(impl Fn(u32) -> bool + Sync),
-) -> Vec<Clear> {
+/// `scan` over `far` on every core, in runs of [`FAR_RUN`] patches joined
+/// in order (a ray's hint only saves time, so the verdicts are the same
+/// however it is split), or on this thread alone below [`PARALLEL_FAR`]
+/// patches.
+fn on_every_core(far: &[FarPatch], scan: impl Fn(&[FarPatch]) -> Vec<Clear> + Sync) -> Vec<Clear> {
     if far.len() < PARALLEL_FAR {
-        return centre_rays(mesh, far, shot, seen, keep);
+        return scan(far);
     }
     let runs: Vec<&[FarPatch]> = far.chunks(FAR_RUN).collect();
     let mut parts = vec![Vec::new(); runs.len()];
-    crate::sampling::in_parallel(&mut parts, |k, part| {
-        *part = centre_rays(mesh, runs[k], shot, seen, keep);
-    });
+    crate::sampling::in_parallel(&mut parts, |k, part| *part = scan(runs[k]));
     parts.concat()
 }
 
@@ -282,6 +274,13 @@ impl GpuFormFactors<'_> {
         Ok(exchange)
     }
 
+    /// The far receivers' scan of the shot of `shooter` from `centre` in
+    /// tier `tier`, patches within `within` of it.
+    fn far_shot(&self, shooter: u32, centre: glam::Vec3, tier: usize, within: f32) -> FarShot {
+        let res = self.tiers[tier].cells.resolution;
+        FarShot::new(self.mesh, shooter, centre, res, within)
+    }
+
     /// The whole hemisphere drawn with its bounds on one core while
     /// another casts the far receivers' centre rays; the exchange's time
     /// and the clear patches.
@@ -292,13 +291,7 @@ impl GpuFormFactors<'_> {
         tier: usize,
     ) -> Result<(std::time::Duration, Option<Vec<Clear>>), crate::render::RenderError> {
         let mesh = self.mesh;
-        let shot = FarShot::new(
-            mesh,
-            shooter,
-            centre,
-            self.tiers[tier].cells.resolution,
-            f32::INFINITY,
-        );
+        let shot = self.far_shot(shooter, centre, tier, f32::INFINITY);
         let far = std::mem::take(&mut self.far_patches);
         let patches = &far;
         self.tiers[tier].raster.set_bounds_threads(1);
@@ -346,19 +339,15 @@ impl GpuFormFactors<'_> {
     ) {
         let start = Instant::now();
         let mesh = self.mesh;
-        let shot = FarShot::new(
-            mesh,
-            shooter,
-            centre,
-            self.tiers[tier].cells.resolution,
-            within,
-        );
+        let shot = self.far_shot(shooter, centre, tier, within);
         self.mark_seen();
         let before = self.pairs.len();
         let seen = &self.seen;
         let clear = match ahead {
             Some(clear) => clear,
-            None => centre_rays_everywhere(mesh, &self.far_patches, &shot, Some(seen), &keep),
+            None => on_every_core(&self.far_patches, |part| {
+                centre_rays(mesh, part, &shot, Some(seen), &keep)
+            }),
         };
         // The elements the rays see, in patch order: a patch under a cell
         // takes its centre's verdict, a larger one a ray to each element.
