@@ -181,6 +181,8 @@ impl TileLayout {
 pub struct FormFactorAccumulator {
     fixed: Vec<u64>,
     touched: Vec<u32>,
+    /// Room for sorting `touched` (see [`radix_sort`]).
+    scratch: Vec<u32>,
     /// Whether a sum overflowed (it is then left saturated, never wrapped).
     overflow: bool,
 }
@@ -191,6 +193,7 @@ impl FormFactorAccumulator {
         Self {
             fixed: vec![0; elements],
             touched: Vec::new(),
+            scratch: Vec::new(),
             overflow: false,
         }
     }
@@ -242,7 +245,7 @@ impl FormFactorAccumulator {
     /// Drains the accumulated fixed-point sums as (element, sum) pairs sorted by element.
     pub fn drain_fixed(&mut self, out: &mut Vec<(u32, u64)>) {
         out.clear();
-        self.touched.sort_unstable();
+        radix_sort(&mut self.touched, &mut self.scratch, self.fixed.len());
         for &id in &self.touched {
             out.push((id, std::mem::take(&mut self.fixed[id as usize])));
         }
@@ -268,6 +271,42 @@ impl FormFactorAccumulator {
                 }
             }
         }
+    }
+}
+
+/// Sorts `keys`, all below `bound`, by their digits of 11 bits, lowest
+/// first (`scratch` is room for a copy): integers, so the order is the one
+/// `sort_unstable` gives, in a few passes over the keys instead of a
+/// comparison sort's log n (a cluttered room's shot touches 50 000
+/// elements of 276 000; the sort was a third of draining them).
+fn radix_sort(keys: &mut Vec<u32>, scratch: &mut Vec<u32>, bound: usize) {
+    const BITS: u32 = 11;
+    if keys.len() < 256 {
+        keys.sort_unstable();
+        return;
+    }
+    let width = usize::BITS - bound.max(1).leading_zeros();
+    scratch.clear();
+    scratch.resize(keys.len(), 0);
+    let mut shift = 0;
+    while shift < width {
+        let mut start = [0usize; 1 << BITS];
+        for &k in keys.iter() {
+            start[((k >> shift) & ((1 << BITS) - 1)) as usize] += 1;
+        }
+        let mut sum = 0;
+        for s in start.iter_mut() {
+            let n = *s;
+            *s = sum;
+            sum += n;
+        }
+        for &k in keys.iter() {
+            let digit = ((k >> shift) & ((1 << BITS) - 1)) as usize;
+            scratch[start[digit]] = k;
+            start[digit] += 1;
+        }
+        std::mem::swap(keys, scratch);
+        shift += BITS;
     }
 }
 
@@ -786,6 +825,33 @@ pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect>
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_radix_sort_is_the_comparison_sort() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut scratch = Vec::new();
+        for (n, bound) in [
+            (0, 1),
+            (100, 7),
+            (300, 1),
+            (5000, 3000),
+            (60_000, 276_300),
+            (70_000, 1 << 31),
+        ] {
+            let mut keys: Vec<u32> = (0..n)
+                .map(|_| {
+                    s ^= s << 13;
+                    s ^= s >> 7;
+                    s ^= s << 17;
+                    (s % bound as u64) as u32
+                })
+                .collect();
+            let mut expected = keys.clone();
+            expected.sort_unstable();
+            super::radix_sort(&mut keys, &mut scratch, bound);
+            assert_eq!(keys, expected, "{n} keys below {bound}");
+        }
+    }
+
     #[test]
     fn an_overflowing_sum_is_reported_not_wrapped() {
         let mut acc = super::FormFactorAccumulator::new(2);
