@@ -15,12 +15,12 @@ use std::time::Instant;
 pub const FAR_CELLS: f32 = 4.0;
 
 /// Far receivers' scans of at least this many patches use every core, in
-/// runs of [`FAR_RUN`] patches.
+/// runs of [`FAR_RUN`] patches (see `on_every_core`).
 const PARALLEL_FAR: usize = 16_384;
 const FAR_RUN: usize = 4096;
 
 /// Clear far receivers of at least this many patches get their element
-/// rays on every core, in runs of [`CLEAR_RUN`].
+/// rays on every core, in runs of [`CLEAR_RUN`] (see `on_every_core`).
 const PARALLEL_CLEAR: usize = 1024;
 const CLEAR_RUN: usize = 256;
 
@@ -57,7 +57,7 @@ impl FarPatch {
 /// What a far receivers' scan needs of the shot: where it stands, which
 /// patches it looks at and the largest cell.
 #[derive(Clone, Copy)]
-pub(super) struct FarShot {
+struct FarShot {
     shooter: u32,
     centre: glam::Vec3,
     /// The shooter's normal.
@@ -72,7 +72,7 @@ pub(super) struct FarShot {
 
 impl FarShot {
     /// The scan of the shot of `shooter` from `centre` with cells of `res`.
-    pub(super) fn new(
+    fn new(
         mesh: &Mesh,
         shooter: u32,
         centre: glam::Vec3,
@@ -162,15 +162,18 @@ fn centre_rays(
     clear
 }
 
-/// `scan` over `far` on every core, in runs of [`FAR_RUN`] patches joined
-/// in order (a ray's hint only saves time, so the verdicts are the same
-/// however it is split), or on this thread alone below [`PARALLEL_FAR`]
-/// patches.
-fn on_every_core(far: &[FarPatch], scan: impl Fn(&[FarPatch]) -> Vec<Clear> + Sync) -> Vec<Clear> {
-    if far.len() < PARALLEL_FAR {
-        return scan(far);
+/// `scan` over `items` on every core, in runs of `run` items joined in
+/// order (a ray's hint only saves time, so the verdicts are the same
+/// however it is split), or on this thread alone below `parallel` items.
+fn on_every_core<T: Sync, U: Clone + Send>(
+    items: &[T],
+    (parallel, run): (usize, usize),
+    scan: impl Fn(&[T]) -> Vec<U> + Sync,
+) -> Vec<U> {
+    if items.len() < parallel {
+        return scan(items);
     }
-    let runs: Vec<&[FarPatch]> = far.chunks(FAR_RUN).collect();
+    let runs: Vec<&[T]> = items.chunks(run).collect();
     let mut parts = vec![Vec::new(); runs.len()];
     crate::sampling::in_parallel(&mut parts, |k, part| *part = scan(runs[k]));
     parts.concat()
@@ -345,41 +348,30 @@ impl GpuFormFactors<'_> {
         let seen = &self.seen;
         let clear = match ahead {
             Some(clear) => clear,
-            None => on_every_core(&self.far_patches, |part| {
+            None => on_every_core(&self.far_patches, (PARALLEL_FAR, FAR_RUN), |part| {
                 centre_rays(mesh, part, &shot, Some(seen), &keep)
             }),
         };
         // The elements the rays see, in patch order: a patch under a cell
         // takes its centre's verdict, a larger one a ray to each element.
         let sp = &mesh.patches[shooter as usize];
-        let elements = |c: &Clear| -> Vec<u32> {
-            let p = &mesh.patches[c.patch as usize];
-            if seen[c.patch as usize] {
-                return Vec::new();
-            }
-            let rn = mesh.polygons[p.polygon as usize].normal;
-            let skip = [sp.polygon, p.polygon];
-            p.elements
-                .clone()
-                .filter(|&j| {
+        let elements = |run: &[Clear]| -> Vec<u32> {
+            let mut found = Vec::new();
+            for c in run.iter().filter(|c| !seen[c.patch as usize]) {
+                let p = &mesh.patches[c.patch as usize];
+                let rn = mesh.polygons[p.polygon as usize].normal;
+                let skip = [sp.polygon, p.polygon];
+                found.extend(p.elements.clone().filter(|&j| {
                     let e = &mesh.elements[j as usize];
                     let to = e.centre + rn * mesh.ray_offset - shot.origin;
                     keep(j)
                         && shot.normal.dot(to) > 0.0
                         && (c.one_cell || !mesh.occluders.occluded(shot.origin, to, 0.0, 1.0, skip))
-                })
-                .collect()
+                }));
+            }
+            found
         };
-        let found: Vec<u32> = if clear.len() < PARALLEL_CLEAR {
-            clear.iter().flat_map(elements).collect()
-        } else {
-            let runs: Vec<&[Clear]> = clear.chunks(CLEAR_RUN).collect();
-            let mut parts = vec![Vec::new(); runs.len()];
-            crate::sampling::in_parallel(&mut parts, |k, part| {
-                *part = runs[k].iter().flat_map(elements).collect();
-            });
-            parts.concat()
-        };
+        let found = on_every_core(&clear, (PARALLEL_CLEAR, CLEAR_RUN), elements);
         for j in found {
             self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
             self.rayed[self.receivers.patch(j) as usize] = true;
