@@ -189,8 +189,6 @@ pub struct GpuFormFactors<'a> {
     sorted: Vec<Transfer>,
     /// The largest distance from a patch's centre to its corners.
     max_patch_radius: f32,
-    /// Where the last unsplit hemisphere stood.
-    last_centre: glam::Vec3,
     /// Whether this run's ranks deal the polygons' bounds (the same on every rank).
     deal: bool,
 }
@@ -263,7 +261,6 @@ impl<'a> GpuFormFactors<'a> {
             pending: Vec::new(),
             sort_keys: Vec::new(),
             sorted: Vec::new(),
-            last_centre: glam::Vec3::ZERO,
             deal: opts.deal_bounds.deals(n, mesh.polygons.len()),
         })
     }
@@ -323,7 +320,6 @@ impl<'a> GpuFormFactors<'a> {
             .within(reach)
             .keeping_near(keep);
         self.last_tier = tier;
-        self.last_centre = centre;
         let layout = self.tiers[tier].cells.layout;
         let mut exchange = Duration::ZERO;
         self.view = [0; 3];
