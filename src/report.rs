@@ -150,6 +150,9 @@ pub struct Settings {
     pub projection: crate::settings::Projection,
     /// The tessellated projection's tolerance in cells (null with `exact`).
     pub tessellation_tolerance: Option<f32>,
+    /// Where the hemispheres' cells were drawn: `device` or `cpu` (`auto`
+    /// resolved for the adapter).
+    pub rasteriser: crate::settings::Rasteriser,
     /// Image size.
     pub image_size: [u32; 2],
     /// Smooth or flat.

@@ -74,6 +74,36 @@ impl Projection {
     }
 }
 
+/// Where the exact projection's hemisphere cells are drawn
+/// (`--rasteriser`): by the wgpu device, or by the renderer on the CPU
+/// (`gpu::HemisphereRasterizer::set_software`: the same test per cell).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Rasteriser {
+    /// On the CPU where the adapter is itself a CPU rasteriser (lavapipe,
+    /// which draws a shot's cells several times slower: README
+    /// "Performance"), on the device otherwise.
+    #[default]
+    Auto,
+    /// Always by the wgpu device.
+    Device,
+    /// Always on the CPU (the tessellated projection still draws on the
+    /// device: it needs fixed-function rasterisation).
+    Cpu,
+}
+
+impl Rasteriser {
+    /// Where hemispheres are drawn on an adapter that is (`adapter_is_cpu`)
+    /// or is not a CPU rasteriser: `Device` or `Cpu`, never `Auto`.
+    pub fn resolve(self, adapter_is_cpu: bool) -> Self {
+        match self {
+            Self::Auto if adapter_is_cpu => Self::Cpu,
+            Self::Auto => Self::Device,
+            other => other,
+        }
+    }
+}
+
 /// Whether the ranks of a run deal the polygons' bounds between them
 /// (`--deal-bounds`; the same bits either way, only the time changes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]

@@ -135,6 +135,9 @@ pub struct HemisphereRasterizer {
     /// element order (empty unless counting).
     coverage: Vec<(u32, u64)>,
     elements: usize,
+    /// The exact projection drawn on the CPU instead of the device, when
+    /// chosen (see [`HemisphereRasterizer::set_software`]).
+    software: Option<super::software::Software>,
 }
 
 impl HemisphereRasterizer {
@@ -233,6 +236,7 @@ impl HemisphereRasterizer {
             ownership: None,
             coverage: Vec::new(),
             elements: mesh.elements.len(),
+            software: None,
         })
     }
 
@@ -365,6 +369,27 @@ impl HemisphereRasterizer {
     /// skip what they already hide (the same rectangles either way).
     pub fn set_bounds_threads(&mut self, threads: usize) {
         self.proxies.max_threads = threads;
+    }
+
+    /// Whether the exact projection's cells are drawn on the CPU
+    /// (`super::software`) rather than by the device: where the device is
+    /// itself a CPU rasteriser (lavapipe), the same test costs a fraction
+    /// there. The tessellated projection is always the device's, and so
+    /// is a mesh with an element grid of 2^20 or more along an edge.
+    pub fn set_software(&mut self, on: bool) {
+        // (No real mesh has a grid too long for the CPU's arithmetic.)
+        let fits = self
+            .proxies
+            .quads
+            .iter()
+            .all(|q| super::software::fits(q.grid));
+        self.software =
+            (on && fits).then(|| super::software::Software::new(self.res, self.elements));
+    }
+
+    /// Whether shots draw on the CPU ([`HemisphereRasterizer::set_software`]).
+    pub fn software(&self) -> bool {
+        self.software.is_some()
     }
 
     /// Which solids `shooter` is outside of (their back faces need no drawing).
@@ -707,6 +732,28 @@ impl HemisphereRasterizer {
             }
         }
         let bounds = start.elapsed();
+        if let (Some(soft), None) = (self.software.as_mut(), &self.tess) {
+            let threads = crate::parallel::cores().min(8);
+            let coverage = self.count_coverage.then_some(&mut self.coverage);
+            soft.draw(
+                &self.instances,
+                self.far,
+                layout,
+                own,
+                threads,
+                items,
+                coverage,
+            );
+            return Ok(RasterStats {
+                bounds,
+                rects: collected.rects as u32,
+                bounded: collected.bounded as u32,
+                occluded: collected.culled.map_or(0, |c| c.rects as u32),
+                skipped: collected.skipped as u32,
+                rasterise: start.elapsed() - bounds,
+                readback: Duration::ZERO,
+            });
+        }
         self.upload(device, queue, layout, own, lattice)?;
         let submission = self.submit(device, queue);
         let waited = self.read_items(device, submission.clone(), layout, own, lattice, items)?;

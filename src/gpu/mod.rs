@@ -6,6 +6,7 @@
 
 mod hemisphere;
 mod proxies;
+mod software;
 pub use proxies::{Agree, Scatter};
 mod target;
 mod view;
@@ -100,6 +101,11 @@ impl Gpu {
             queue,
             info,
         })
+    }
+
+    /// Whether the adapter is a CPU rasteriser (lavapipe, llvmpipe, WARP).
+    pub fn is_cpu(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
     }
 
     /// "name (backend, driver)" for reports and logs.

@@ -14,14 +14,14 @@ use std::ops::Range;
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 pub(super) struct Instance {
-    rect: [f32; 4],
-    edges: [[f32; 3]; 4],
-    plane: [f32; 4],
-    item: [u32; 2],
-    origin: [f32; 4],
-    axis: [f32; 4],
-    bilinear: [f32; 4],
-    grid: [u32; 4],
+    pub(super) rect: [f32; 4],
+    pub(super) edges: [[f32; 3]; 4],
+    pub(super) plane: [f32; 4],
+    pub(super) item: [u32; 2],
+    pub(super) origin: [f32; 4],
+    pub(super) axis: [f32; 4],
+    pub(super) bilinear: [f32; 4],
+    pub(super) grid: [u32; 4],
 }
 
 /// A dealt rectangle on the wire: the proxy and its cell rectangle (or a

@@ -30,8 +30,8 @@ pub mod write;
 pub use driver::{build_report, render, render_on, single_process, Rendered};
 pub use hooks::Progress;
 pub use options::{
-    CheckpointPlan, DealBounds, FormFactorMethod, Projection, RenderError, RenderOptions,
-    AUTO_TRANSPORT_BELOW, DEFAULT_COARSE_BELOW, DEFAULT_RASTER_PIECES,
+    CheckpointPlan, DealBounds, FormFactorMethod, Projection, Rasteriser, RenderError,
+    RenderOptions, AUTO_TRANSPORT_BELOW, DEFAULT_COARSE_BELOW, DEFAULT_RASTER_PIECES,
     DEFAULT_TESSELLATION_TOLERANCE,
 };
 pub use passes::{refined_mesh, refined_mesh_shown};

@@ -8,8 +8,9 @@ use crate::mesh::MeshSettings;
 use crate::parallel::Exchange;
 use crate::scene::{Scene, Subdivision};
 pub use crate::settings::{
-    DealBounds, FormFactorMethod, Projection, AUTO_TRANSPORT_BELOW, DEFAULT_COARSE_BELOW,
-    DEFAULT_MEMORY_BUDGET, DEFAULT_RASTER_PIECES, DEFAULT_TESSELLATION_TOLERANCE,
+    DealBounds, FormFactorMethod, Projection, Rasteriser, AUTO_TRANSPORT_BELOW,
+    DEFAULT_COARSE_BELOW, DEFAULT_MEMORY_BUDGET, DEFAULT_RASTER_PIECES,
+    DEFAULT_TESSELLATION_TOLERANCE,
 };
 use crate::solver::StopRule;
 use std::sync::atomic::AtomicBool;
@@ -32,6 +33,9 @@ pub struct RenderOptions {
     /// The tessellated projection's tolerance (cells between an edge's
     /// curved image and its chords).
     pub tessellation_tolerance: f32,
+    /// Where the exact projection's cells are drawn: by the device or on
+    /// the CPU.
+    pub rasteriser: Rasteriser,
     /// What the hemisphere rasteriser draws: quad polygons as at most N x N
     /// pieces (the element is found per fragment), or every element (0).
     pub raster_pieces: u32,
@@ -132,6 +136,7 @@ impl Default for RenderOptions {
             deal_rows: crate::settings::DealRows::Pool,
             projection: Projection::Exact,
             tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
+            rasteriser: Rasteriser::Auto,
             layout: None,
             tile: None,
             exchange: Exchange::Hemispheres,

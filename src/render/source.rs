@@ -12,7 +12,7 @@ use crate::gpu::{self, Gpu, GpuError, HemisphereRasterizer};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, EMPTY, FIXED_ONE};
 use crate::mesh::{Mesh, ShooterFrame};
 use crate::parallel::{self, Collectives};
-use crate::settings::{FormFactorMethod, Projection};
+use crate::settings::{FormFactorMethod, Projection, Rasteriser};
 use crate::solver::{FormFactorSource, ShotRegion, Transfer};
 use std::time::{Duration, Instant};
 
@@ -107,6 +107,7 @@ impl Tier {
         }
         raster.set_count_coverage(opts.form_factor == FormFactorMethod::Hybrid);
         raster.set_cull_occluded(opts.occlusion_cull);
+        raster.set_software(opts.rasteriser.resolve(gpu.is_cpu()) == Rasteriser::Cpu);
         Ok(Self {
             raster,
             cells: TierCells::new(res, layout, ranks, opts.form_factor),

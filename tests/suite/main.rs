@@ -17,6 +17,7 @@ mod lights;
 mod mpi;
 mod overshoot;
 mod projections;
+mod rasterisers;
 mod real_files;
 mod reference;
 mod refine;

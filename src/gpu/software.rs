@@ -1,0 +1,521 @@
+//! The exact projection's fragments drawn on the CPU: what
+//! `shaders/hemisphere.wgsl`'s `fs` does for each cell of each rectangle,
+//! with the depth test after it, in the order the rectangles come.
+//!
+//! Where the adapter is itself a CPU rasteriser (lavapipe), a shot's
+//! rectangles are small (a cluttered room draws about 2 000 of them and
+//! 200 000 fragments a shot), and lavapipe's pipeline (binning, 4 x 4
+//! blocks of lanes mostly idle, the fragment depth written from the
+//! shader so no early test, one atomic per lane, the submission, clears
+//! and copies) costs several times the arithmetic. Here a fragment is a
+//! few dozen instructions, rows are dealt between threads, and the
+//! coverage counts need no atomics: each thread counts its own cells.
+//!
+//! Drawn here or on the device, a cell gets the same test in f32; the
+//! driver may round a few products or the division differently, so a
+//! ray grazing an edge or a tie in depth can go the other way (a
+//! handful of cells in a million, tested). Every rank of a run draws
+//! the same way, so results stay the same on any rank count.
+
+use super::proxies::Instance;
+use crate::hemisphere::{Resolution, TileLayout, BLOCKED, EMPTY};
+use std::ops::Range;
+
+/// The shader's angular tolerance of the edge tests (`EDGE_TOL`).
+const EDGE_TOL: f32 = 1.0e-6;
+
+/// The CPU's drawing state, kept from shot to shot.
+pub(super) struct Software {
+    res: Resolution,
+    /// Per row (sin phi, cos phi), then per column (cos theta, sin theta):
+    /// the shader's table (`hemisphere::direction_table`).
+    rows: Vec<[f32; 2]>,
+    cols: Vec<[f32; 2]>,
+    depth: Vec<f32>,
+    /// Per thread, its cells' coverage counts.
+    counts: Vec<Counts>,
+    /// The drawn rectangles' element ranges (first, count).
+    ranges: Vec<(u32, u32)>,
+    elements: usize,
+}
+
+/// One thread's coverage counts, per element (zero between shots).
+type Counts = Vec<u32>;
+
+/// Which cells a rank draws: per axis, its cells in order.
+struct Owned {
+    cols: Vec<u32>,
+    rows: Vec<u32>,
+}
+
+impl Owned {
+    fn new(res: Resolution, layout: &TileLayout, own: (u32, u32)) -> Self {
+        let (tw, th) = (layout.tile_w.max(1), layout.tile_h.max(1));
+        let (px, py) = (layout.px.max(1), layout.py.max(1));
+        Self {
+            cols: (0..res.cols).filter(|t| (t / tw) % px == own.0).collect(),
+            rows: (0..res.rows).filter(|p| (p / th) % py == own.1).collect(),
+        }
+    }
+
+    /// The positions in `cells` of the cells whose centres `[lo, hi)`
+    /// holds (the rasteriser's rule: a centre on the near edge is in,
+    /// one on the far edge out).
+    fn span(cells: &[u32], lo: f32, hi: f32) -> Range<usize> {
+        let first = cells.partition_point(|&c| (c as f32 + 0.5) < lo);
+        let end = cells.partition_point(|&c| (c as f32 + 0.5) < hi);
+        first..end.max(first)
+    }
+}
+
+/// A rectangle's fragment test, prepared once.
+struct Prepared {
+    edges: [[f32; 3]; 4],
+    plane: [f32; 4],
+    back: bool,
+    first: u32,
+    lookup: Option<GridLookup>,
+}
+
+/// The shader's `grid_element_of`, with its per-rectangle parts made once.
+struct GridLookup {
+    origin: [f32; 3],
+    x: [f32; 3],
+    y: [f32; 3],
+    ex: f32,
+    f: [f32; 2],
+    g: [f32; 2],
+    n: [u32; 2],
+    per: [u32; 2],
+    /// 1 / per per axis, rounded (see [`div_by`]).
+    per_inv: [f32; 2],
+    patches_u: u32,
+}
+
+/// Elements along an axis below which [`div_by`] is exact.
+const DIV_BY_EXACT: u32 = 1 << 20;
+
+/// Whether an element grid (elements along u and v, ...) is short enough
+/// to be drawn here (see [`div_by`]); a mesh with a longer one is drawn
+/// by the device.
+pub(super) fn fits(grid: [u32; 4]) -> bool {
+    grid[0] < DIV_BY_EXACT && grid[1] < DIV_BY_EXACT
+}
+
+/// a / d for a below [`DIV_BY_EXACT`], given r = 1 / d rounded: the
+/// shader's `div_by` (its note says why the floor is the quotient), which
+/// compilers can run lane by lane, unlike an integer divide.
+#[inline(always)]
+fn div_by(a: i32, r: f32) -> i32 {
+    let q = (a as f32 + 0.5) * r;
+    // SAFETY: a is an element index in [0, 2^20) and r in (0, 1], so q is
+    // finite and in i32's range. (Positive, so the truncation is the
+    // floor. `as` would test for NaN and range lane by lane, and the lanes
+    // would no longer run side by side.)
+    unsafe { q.to_int_unchecked() }
+}
+
+fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn cross2(a: [f32; 2], b: [f32; 2]) -> f32 {
+    a[0] * b[1] - a[1] * b[0]
+}
+
+impl GridLookup {
+    fn new(inst: &Instance) -> Option<Self> {
+        if inst.grid[0] == 0 {
+            return None;
+        }
+        let normal = [inst.plane[0], inst.plane[1], inst.plane[2]];
+        let x = [inst.axis[0], inst.axis[1], inst.axis[2]];
+        let per = [inst.grid[2].max(1), inst.grid[3].max(1)];
+        Some(Self {
+            origin: [inst.origin[0], inst.origin[1], inst.origin[2]],
+            x,
+            y: cross(normal, x),
+            ex: inst.bilinear[0],
+            f: [inst.bilinear[1], inst.bilinear[2]],
+            g: [inst.bilinear[3], inst.origin[3]],
+            n: [inst.grid[0], inst.grid[1]],
+            per,
+            per_inv: per.map(|d| 1.0 / d as f32),
+            patches_u: inst.grid[0] / per[0],
+        })
+    }
+}
+
+impl Prepared {
+    fn new(inst: &Instance) -> Self {
+        Self {
+            edges: inst.edges,
+            plane: inst.plane,
+            back: inst.item[1] != 0,
+            first: inst.item[0],
+            lookup: GridLookup::new(inst),
+        }
+    }
+
+    /// The shader's `fs` for the cells of one row whose centre rays are
+    /// (x[l], y[l], z), lane by lane without branches so the compiler
+    /// tests them side by side: per lane the item, the depth and whether
+    /// the shader keeps the fragment.
+    #[inline(always)]
+    fn lanes(
+        &self,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        z: f32,
+        inv_far: f32,
+    ) -> ([u32; LANES], [f32; LANES], [bool; LANES]) {
+        let mut hit = [true; LANES];
+        for e in &self.edges {
+            for l in 0..LANES {
+                // (Never NaN: the directions and normals are finite.)
+                hit[l] &= x[l] * e[0] + y[l] * e[1] + z * e[2] >= -EDGE_TOL;
+            }
+        }
+        let [nx, ny, nz, w] = self.plane;
+        let mut t = [0.0; LANES];
+        for l in 0..LANES {
+            let cosine = x[l] * nx + y[l] * ny + z * nz;
+            t[l] = w / cosine;
+            // `&`, not `&&`: no branch, so the lanes stay side by side. (A
+            // NaN cosine makes t NaN, which fails the first test.)
+            hit[l] &= (t[l] > 0.0) & (cosine.abs() >= 1.0e-12);
+        }
+        let mut depth = [0.0; LANES];
+        let mut ids = [self.first; LANES];
+        if self.back {
+            for l in 0..LANES {
+                depth[l] = (t[l] * inv_far * (1.0 + 1.0e-5)).min(1.0);
+            }
+            ids = [BLOCKED; LANES];
+        } else {
+            for l in 0..LANES {
+                depth[l] = (t[l] * inv_far).min(1.0);
+            }
+            if let Some(g) = &self.lookup {
+                ids = g.elements(self.first, x, y, z, &t);
+            }
+        }
+        (ids, depth, hit)
+    }
+}
+
+impl GridLookup {
+    /// [`GridLookup::element`] at the hit points (x, y, z) t, lane by lane.
+    #[inline(always)]
+    fn elements(
+        &self,
+        first: u32,
+        x: &[f32; LANES],
+        y: &[f32; LANES],
+        z: f32,
+        t: &[f32; LANES],
+    ) -> [u32; LANES] {
+        let (e, f, g) = ([self.ex, 0.0], self.f, self.g);
+        let k2 = cross2(g, f);
+        let ef = cross2(e, f);
+        let (mut u, mut v) = ([0.0f32; LANES], [0.0f32; LANES]);
+        for l in 0..LANES {
+            let q = [
+                x[l] * t[l] - self.origin[0],
+                y[l] * t[l] - self.origin[1],
+                z * t[l] - self.origin[2],
+            ];
+            let h = [dot(q, self.x), dot(q, self.y)];
+            let k1 = ef + cross2(h, g);
+            let k0 = cross2(h, e);
+            let w = (k1 * k1 - 4.0 * k0 * k2).max(0.0).sqrt();
+            let near = (-k1 - w) / (2.0 * k2);
+            let other = (-k1 + w) / (2.0 * k2);
+            // As the shader tests it: a NaN root stays.
+            #[allow(clippy::manual_range_contains)]
+            let root = if (near < -0.01) | (near > 1.01) {
+                other
+            } else {
+                near
+            };
+            v[l] = if k2.abs() <= 1.0e-6 * k1.abs() {
+                -k0 / k1
+            } else {
+                root
+            };
+            u[l] = (h[0] - f[0] * v[l]) / (self.ex + g[0] * v[l]);
+        }
+        // Element counts fit in i32 (they index memory), so the
+        // arithmetic can be signed, which x86-64 converts lane-wise.
+        let [pu, pv] = self.per.map(|p| p as i32);
+        let patches_u = self.patches_u as i32;
+        let mut ids = [0; LANES];
+        for l in 0..LANES {
+            let iu = cell_index(u[l], self.n[0]);
+            let iv = cell_index(v[l], self.n[1]);
+            let (qu, qv) = (div_by(iu, self.per_inv[0]), div_by(iv, self.per_inv[1]));
+            let patch = qv * patches_u + qu;
+            ids[l] = first + (patch * pu * pv + (iv - qv * pv) * pu + (iu - qu * pu)) as u32;
+        }
+        ids
+    }
+}
+
+/// The shader's min(u32(max(u, 0) n), n - 1): the clamp taken in f32
+/// first (the same, for whole n - 1), so the conversion is in range.
+#[inline(always)]
+fn cell_index(u: f32, n: u32) -> i32 {
+    // (`max` takes a NaN to 0, `min` an infinity to n - 1.)
+    let x = (u.max(0.0) * n as f32).min((n - 1) as f32);
+    // SAFETY: x is finite, in [0, n - 1] with n < 2^20 (see `fits`).
+    unsafe { x.to_int_unchecked() }
+}
+
+/// Cells of a row tested side by side ([`Prepared::lanes`]).
+const LANES: usize = 8;
+
+/// One thread's rows: (row, its items, its depths).
+type Band<'a> = Vec<(u32, &'a mut [u32], &'a mut [f32])>;
+
+impl Software {
+    /// The drawing state for hemispheres of `res` over `elements` elements.
+    pub(super) fn new(res: Resolution, elements: usize) -> Self {
+        let table = crate::hemisphere::direction_table(res);
+        let (rows, cols) = table.split_at(res.rows as usize);
+        Self {
+            res,
+            rows: rows.to_vec(),
+            cols: cols.to_vec(),
+            depth: Vec::new(),
+            counts: Vec::new(),
+            ranges: Vec::new(),
+            elements,
+        }
+    }
+
+    /// Draws `instances` in order into `items` (row-major, rows x cols;
+    /// cells other ranks own stay [`EMPTY`]) as the device would, for
+    /// rank `own` of `layout`, on up to `threads` threads; with `coverage`,
+    /// fills it with every element's count of covered cells, hidden or
+    /// not, in element order.
+    // The shot's parts, each needed: see `HemisphereRasterizer::render`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn draw(
+        &mut self,
+        instances: &[Instance],
+        far: f32,
+        layout: &TileLayout,
+        own: (u32, u32),
+        threads: usize,
+        items: &mut Vec<u32>,
+        coverage: Option<&mut Vec<(u32, u64)>>,
+    ) {
+        let (rows, cols) = (self.res.rows as usize, self.res.cols as usize);
+        items.clear();
+        items.resize(rows * cols, EMPTY);
+        self.depth.clear();
+        self.depth.resize(rows * cols, 1.0);
+        let owned = Owned::new(self.res, layout, own);
+        let threads = threads.clamp(1, owned.rows.len().max(1));
+        let counting = coverage.is_some();
+        if counting {
+            self.counts.resize_with(threads, Counts::default);
+            for c in &mut self.counts[..threads] {
+                c.resize(self.elements, 0);
+            }
+        }
+        // Rows dealt in turn, so every thread gets cells near the pole and
+        // the horizon alike.
+        let mut bands: Vec<Band> = (0..threads).map(|_| Vec::new()).collect();
+        let mut row_cells: Vec<Option<(&mut [u32], &mut [f32])>> = items
+            .chunks_mut(cols)
+            .zip(self.depth.chunks_mut(cols))
+            .map(Some)
+            .collect();
+        for (k, &p) in owned.rows.iter().enumerate() {
+            if let Some((i, d)) = row_cells[p as usize].take() {
+                bands[k % threads].push((p, i, d));
+            }
+        }
+        let inv_far = 1.0 / far;
+        let prepared: Vec<Prepared> = instances.iter().map(Prepared::new).collect();
+        let spans: Vec<(Range<usize>, Range<usize>)> = instances
+            .iter()
+            .map(|inst| {
+                let [x0, x1, y0, y1] = inst.rect;
+                (
+                    Owned::span(&owned.cols, x0, x1),
+                    Owned::span(&owned.rows, y0, y1),
+                )
+            })
+            .collect();
+        let shot = Shot {
+            owned_cols: &owned.cols,
+            prepared: &prepared,
+            spans: &spans,
+            rows: &self.rows,
+            cols: &self.cols,
+            inv_far,
+        };
+        let run = |k: usize, band: &mut Band, counts: Option<&mut Counts>| {
+            draw_band((k, threads), band, &shot, counts)
+        };
+        let mut counts = self.counts.iter_mut().map(Some);
+        let mut work: Vec<(Band, Option<&mut Counts>)> = bands
+            .into_iter()
+            .map(|b| {
+                (
+                    b,
+                    if counting {
+                        counts.next().flatten()
+                    } else {
+                        None
+                    },
+                )
+            })
+            .collect();
+        if let Some((first, rest)) = work.split_first_mut() {
+            std::thread::scope(|s| {
+                for (k, (band, counts)) in rest.iter_mut().enumerate() {
+                    s.spawn(move || run(k + 1, band, counts.as_deref_mut()));
+                }
+                run(0, &mut first.0, first.1.as_deref_mut());
+            });
+        }
+        drop(work);
+        if let Some(out) = coverage {
+            self.gather(instances, threads, out);
+        }
+    }
+
+    /// The threads' counts, summed into `out` in element order, and reset.
+    /// Only the elements of the drawn rectangles can have counts: their
+    /// ranges, in order without repeats (a polygon's pieces, seam copies
+    /// and tile cuts share one), are read, so no thread keeps a list of
+    /// what it touched (a branch a fragment).
+    fn gather(&mut self, instances: &[Instance], threads: usize, out: &mut Vec<(u32, u64)>) {
+        out.clear();
+        self.ranges.clear();
+        self.ranges.extend(
+            instances
+                .iter()
+                .filter(|i| i.item[1] == 0)
+                .map(|i| (i.item[0], (i.grid[0] * i.grid[1]).max(1))),
+        );
+        self.ranges.sort_unstable();
+        self.ranges.dedup();
+        let counts = &mut self.counts[..threads];
+        for &(first, n) in &self.ranges {
+            for id in first as usize..(first + n) as usize {
+                let sum: u64 = counts
+                    .iter_mut()
+                    .map(|c| u64::from(std::mem::take(&mut c[id])))
+                    .sum();
+                if sum > 0 {
+                    out.push((id as u32, sum));
+                }
+            }
+        }
+    }
+}
+
+/// What every band of a shot reads.
+struct Shot<'a> {
+    /// The rank's columns, in order.
+    owned_cols: &'a [u32],
+    /// The rectangles, in drawing order, and the owned columns and rows
+    /// (positions in the owned lists) their cells' centres lie in.
+    prepared: &'a [Prepared],
+    spans: &'a [(Range<usize>, Range<usize>)],
+    /// The direction tables (see [`Software`]).
+    rows: &'a [[f32; 2]],
+    cols: &'a [[f32; 2]],
+    inv_far: f32,
+}
+
+/// Band `k` of `threads`' share of a shot: every rectangle, in order, in
+/// its rows (owned rows k, k + threads, ...). Where the CPU has AVX2 the
+/// same code is compiled for it too, and runs eight lanes an instruction
+/// instead of four: the same operations, so the same bits.
+fn draw_band(at: (usize, usize), band: &mut Band, shot: &Shot, counts: Option<&mut Counts>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, just tested.
+        unsafe { draw_band_avx2(at, band, shot, counts) };
+        return;
+    }
+    draw_band_lanes(at, band, shot, counts)
+}
+
+/// [`draw_band_lanes`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn draw_band_avx2(
+    at: (usize, usize),
+    band: &mut Band,
+    shot: &Shot,
+    counts: Option<&mut Counts>,
+) {
+    draw_band_lanes(at, band, shot, counts)
+}
+
+/// [`draw_band`], for whichever instructions it is compiled for.
+#[inline(always)]
+fn draw_band_lanes(
+    (k, threads): (usize, usize),
+    band: &mut Band,
+    shot: &Shot,
+    mut counts: Option<&mut Counts>,
+) {
+    let Shot {
+        owned_cols,
+        prepared,
+        spans,
+        rows,
+        cols,
+        inv_far,
+    } = *shot;
+    // The band's j-th row is owned row k + j threads: the first at or
+    // after owned row i is its ceil((i - k) / threads)-th.
+    let at = |i: usize| i.saturating_sub(k).div_ceil(threads);
+    for (prep, (xs, ys)) in prepared.iter().zip(spans) {
+        let (from, to) = (at(ys.start), at(ys.end).min(band.len()));
+        if from >= to {
+            continue;
+        }
+        for (p, row_items, row_depth) in &mut band[from..to] {
+            let [s, c] = rows[*p as usize];
+            for ts in owned_cols[xs.clone()].chunks(LANES) {
+                let (mut x, mut y) = ([0.0; LANES], [0.0; LANES]);
+                for (l, &t) in ts.iter().enumerate() {
+                    let [ct, st] = cols[t as usize];
+                    x[l] = s * ct;
+                    y[l] = s * st;
+                }
+                let (ids, depths, hit) = prep.lanes(&x, &y, c, inv_far);
+                // Without branches on the lanes' outcomes (they are
+                // unpredictable): a lane that missed adds 0 and keeps the cell.
+                if let (Some(counts), false) = (counts.as_deref_mut(), prep.back) {
+                    for l in 0..ts.len() {
+                        counts[ids[l] as usize] += u32::from(hit[l]);
+                    }
+                }
+                for (l, &t) in ts.iter().enumerate() {
+                    let cell = t as usize;
+                    let (depth, item) = (row_depth[cell], row_items[cell]);
+                    let wins = hit[l] & (depths[l] < depth);
+                    row_depth[cell] = if wins { depths[l] } else { depth };
+                    row_items[cell] = if wins { ids[l] } else { item };
+                }
+            }
+        }
+    }
+}
