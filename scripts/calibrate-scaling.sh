@@ -16,6 +16,7 @@
 # (neighbours on a shared machine only ever slow a run down).
 #
 #   SCENES="cubes-b1 classroom-c3" BIG="cubes-b3" scripts/calibrate-scaling.sh
+#   RASTERISER=cpu RUNS=/tmp/cal-cpu/runs scripts/calibrate-scaling.sh
 #
 # Writes docs/scaling/runs/<scene>-<resolution>-n<ranks>-<exchange>.json,
 # skipping runs already there (FORCE=1 redoes them), then fits the model
@@ -36,6 +37,11 @@ REPEAT=${REPEAT:-2}
 # The ranks deal the bounds at every rank count (the model fits the deal's
 # all-to-all as its own term; README "Ranks"); DEAL=auto or off to compare.
 DEAL=${DEAL:-on}
+# Who draws the hemispheres (`--rasteriser`): the committed runs in
+# docs/scaling/runs were made by the device (lavapipe), before the CPU
+# drawing existed; RASTERISER=cpu (or auto, the default a render takes on
+# lavapipe) for the current shot (README "Drawn on the CPU").
+RASTERISER=${RASTERISER:-device}
 runs=${RUNS:-docs/scaling/runs}
 mkdir -p "$runs"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 LP_NUM_THREADS=1
@@ -64,7 +70,8 @@ run() { # ranks scene resolution exchange [repeat] (exchange batches-K: --batch 
   # ranks come free").
   case "$ex" in batches-*) if [ "$n" -gt 2 ]; then exchange+=(--deal-rows fixed); fi ;; esac
   local args=(render "$scene" --resolution "$res" "${exchange[@]}" --max-shots "$SHOTS"
-    --threshold 0 --width 0 --refine-shading 0 --deal-bounds "$DEAL" --report "$out")
+    --threshold 0 --width 0 --refine-shading 0 --deal-bounds "$DEAL" --rasteriser "$RASTERISER"
+    --report "$out")
   if [ "$n" = 1 ]; then
     taskset -c 0 "$bin" "${args[@]}" >/dev/null 2>&1
   elif [ "$n" = 2 ]; then

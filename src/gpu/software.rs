@@ -213,7 +213,9 @@ impl Prepared {
 }
 
 impl GridLookup {
-    /// [`GridLookup::element`] at the hit points (x, y, z) t, lane by lane.
+    /// The shader's `inverse_bilinear` and `grid_element_of`: the element
+    /// of the grid at each hit point (x, y, z) t, lane by lane. (A lane
+    /// that missed still gets an element of the grid: u and v are clamped.)
     #[inline(always)]
     fn elements(
         &self,

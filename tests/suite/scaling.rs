@@ -1,5 +1,7 @@
 //! The performance model (docs/scaling.md) against the committed runs it was
-//! calibrated on (docs/scaling/runs, made by scripts/calibrate-scaling.sh):
+//! calibrated on (docs/scaling/runs, made by scripts/calibrate-scaling.sh
+//! with the hemispheres drawn by lavapipe, and docs/scaling/cpu/runs, drawn
+//! on the CPU):
 //! its predictions of the measured seconds, CPU seconds and bytes a shot
 //! at 1 to 16 ranks within 15 %. The runs are measurements, not outputs of
 //! this build: the test checks the model, not the renderer's speed.
@@ -7,8 +9,11 @@
 use radiosity::scaling::{read_runs, Calibration, AP1000, CLUSTER, SLOWEST_ROWS};
 use std::path::Path;
 
-fn calibration() -> Calibration {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scaling/runs");
+/// The two committed calibrations: the device's drawing, then the CPU's.
+const CALIBRATIONS: [&str; 2] = ["docs/scaling/runs", "docs/scaling/cpu/runs"];
+
+fn calibration(runs: &str) -> Calibration {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(runs);
     let runs = read_runs(&dir).expect("the committed calibration runs");
     assert!(runs.len() >= 20, "{} runs in {}", runs.len(), dir.display());
     Calibration::fit(runs).expect("every scene has its 1- and 2-rank runs")
@@ -16,7 +21,14 @@ fn calibration() -> Calibration {
 
 #[test]
 fn the_model_reproduces_its_calibration_within_15_percent() {
-    let cal = calibration();
+    for runs in CALIBRATIONS {
+        reproduces(runs);
+    }
+}
+
+/// The model fitted to `runs` predicts every one of them within 15 %.
+fn reproduces(runs: &str) {
+    let cal = calibration(runs);
     let checks = cal.validation();
     let timed: Vec<_> = checks.iter().filter(|c| c.is_cost()).collect();
     // 1- and 2-rank wall times, 4-16-rank CPU seconds, bytes.
@@ -35,12 +47,23 @@ fn the_model_reproduces_its_calibration_within_15_percent() {
         .filter(|c| c.relative_error().abs() > 0.15)
         .map(|c| c.row())
         .collect();
-    assert!(bad.is_empty(), "off by more than 15 %:\n{}", bad.join("\n"));
+    assert!(
+        bad.is_empty(),
+        "{runs}: off by more than 15 %:\n{}",
+        bad.join("\n")
+    );
 }
 
 #[test]
 fn the_model_keeps_the_papers_orderings() {
-    let cal = calibration();
+    for runs in CALIBRATIONS {
+        keeps_orderings(runs);
+    }
+}
+
+/// The model fitted to `runs` keeps the paper's orderings.
+fn keeps_orderings(runs: &str) {
+    let cal = calibration(runs);
     for scene in ["cubes-b1", "cubes-b3"] {
         let hem = cal.model(scene, [128, 512], "hemispheres").expect(scene);
         let ff = cal.model(scene, [128, 512], "form-factors").expect(scene);
