@@ -228,7 +228,9 @@ impl GridLookup {
         let (e, f, g) = ([self.ex, 0.0], self.f, self.g);
         let k2 = cross2(g, f);
         let ef = cross2(e, f);
-        let (mut u, mut v) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let mut h0 = [0.0f32; LANES];
+        let (mut k0, mut k1) = ([0.0f32; LANES], [0.0f32; LANES]);
+        let mut linear = [false; LANES];
         for l in 0..LANES {
             let q = [
                 x[l] * t[l] - self.origin[0],
@@ -236,24 +238,37 @@ impl GridLookup {
                 z * t[l] - self.origin[2],
             ];
             let h = [dot(q, self.x), dot(q, self.y)];
-            let k1 = ef + cross2(h, g);
-            let k0 = cross2(h, e);
-            let w = (k1 * k1 - 4.0 * k0 * k2).max(0.0).sqrt();
-            let near = (-k1 - w) / (2.0 * k2);
-            let other = (-k1 + w) / (2.0 * k2);
-            // As the shader tests it: a NaN root stays.
-            #[allow(clippy::manual_range_contains)]
-            let root = if (near < -0.01) | (near > 1.01) {
-                other
-            } else {
-                near
-            };
-            v[l] = if k2.abs() <= 1.0e-6 * k1.abs() {
-                -k0 / k1
-            } else {
-                root
-            };
-            u[l] = (h[0] - f[0] * v[l]) / (self.ex + g[0] * v[l]);
+            h0[l] = h[0];
+            k1[l] = ef + cross2(h, g);
+            k0[l] = cross2(h, e);
+            linear[l] = k2.abs() <= 1.0e-6 * k1[l].abs();
+        }
+        let mut v = [0.0f32; LANES];
+        for l in 0..LANES {
+            v[l] = -k0[l] / k1[l];
+        }
+        // A parallelogram's grid (most quads: k2 is then 0 but for
+        // rounding) takes the linear root in every lane; only then is the
+        // quadratic's square root and two divisions skipped, so every lane
+        // still gets the shader's choice.
+        if !linear.iter().all(|&b| b) {
+            for l in 0..LANES {
+                let w = (k1[l] * k1[l] - 4.0 * k0[l] * k2).max(0.0).sqrt();
+                let near = (-k1[l] - w) / (2.0 * k2);
+                let other = (-k1[l] + w) / (2.0 * k2);
+                // As the shader tests it: a NaN root stays.
+                #[allow(clippy::manual_range_contains)]
+                let root = if (near < -0.01) | (near > 1.01) {
+                    other
+                } else {
+                    near
+                };
+                v[l] = if linear[l] { v[l] } else { root };
+            }
+        }
+        let mut u = [0.0f32; LANES];
+        for l in 0..LANES {
+            u[l] = (h0[l] - f[0] * v[l]) / (self.ex + g[0] * v[l]);
         }
         // Element counts fit in i32 (they index memory), so the
         // arithmetic can be signed, which x86-64 converts lane-wise.
