@@ -584,7 +584,7 @@ pub fn build_report(
             projection: opts.projection,
             tessellation_tolerance: (opts.projection == Projection::Tessellated)
                 .then_some(opts.tessellation_tolerance),
-            rasteriser: opts.rasteriser.resolve(gpu.is_cpu()),
+            rasteriser: opts.rasteriser_for(gpu.is_cpu()),
             image_size,
             shading: opts.shading,
             shadow_rays: opts.shadow_rays,

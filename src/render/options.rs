@@ -204,6 +204,17 @@ impl RenderOptions {
             })
     }
 
+    /// Who draws the hemispheres on an adapter that is
+    /// (`adapter_is_cpu`) or is not a CPU rasteriser: `Device` or `Cpu`
+    /// (`--rasteriser` resolved; the tessellated projection always draws
+    /// on the device).
+    pub fn rasteriser_for(&self, adapter_is_cpu: bool) -> Rasteriser {
+        match self.projection {
+            Projection::Tessellated => Rasteriser::Device,
+            Projection::Exact => self.rasteriser.resolve(adapter_is_cpu),
+        }
+    }
+
     /// Fails on settings no solve can use.
     pub fn validate(&self) -> Result<(), RenderError> {
         self.resolution

@@ -107,7 +107,7 @@ impl Tier {
         }
         raster.set_count_coverage(opts.form_factor == FormFactorMethod::Hybrid);
         raster.set_cull_occluded(opts.occlusion_cull);
-        raster.set_software(opts.rasteriser.resolve(gpu.is_cpu()) == Rasteriser::Cpu);
+        raster.set_software(opts.rasteriser_for(gpu.is_cpu()) == Rasteriser::Cpu);
         Ok(Self {
             raster,
             cells: TierCells::new(res, layout, ranks, opts.form_factor),

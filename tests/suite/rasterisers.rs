@@ -185,4 +185,20 @@ fn a_solve_drawn_on_the_cpu_is_the_devices_and_tiles_alike() {
         Rasteriser::Device
     };
     assert_eq!(auto.report.settings.rasteriser, expected);
+    // The tessellated projection needs fixed-function rasterisation: the
+    // device draws it whatever is asked, and the report says so.
+    let tessellated = RenderOptions {
+        projection: radiosity::render::Projection::Tessellated,
+        rasteriser: Rasteriser::Cpu,
+        ..RenderOptions::default()
+    };
+    assert_eq!(tessellated.rasteriser_for(true), Rasteriser::Device);
+    assert_eq!(
+        RenderOptions::default().rasteriser_for(true),
+        Rasteriser::Cpu
+    );
+    assert_eq!(
+        RenderOptions::default().rasteriser_for(false),
+        Rasteriser::Device
+    );
 }
