@@ -536,3 +536,55 @@ fn draw_band_lanes(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn division_by_a_rounded_reciprocal_is_exact_below_the_bound() {
+        // Every quotient of an element index by a grid's elements per
+        // patch: all numerators below 2^16, then a stride up to the bound.
+        for d in 1..=64u32 {
+            let r = 1.0 / d as f32;
+            let big = (1 << 16..DIV_BY_EXACT)
+                .step_by(997)
+                .chain([DIV_BY_EXACT - 1]);
+            for a in (0..1 << 16).chain(big) {
+                assert_eq!(div_by(a as i32, r) as u32, a / d, "{a} / {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_span_holds_the_cells_whose_centres_the_rectangle_holds() {
+        // The rasteriser's rule, near edge in and far edge out, over a
+        // rank's columns of a tiled grid, for rectangles anywhere (the
+        // seam copies start below 0).
+        let res = Resolution { rows: 16, cols: 64 };
+        let layout = TileLayout {
+            tile_w: 3,
+            tile_h: 2,
+            px: 2,
+            py: 3,
+        };
+        let owned = Owned::new(res, &layout, (1, 2));
+        assert!(owned.cols.iter().all(|t| (t / 3) % 2 == 1));
+        assert!(owned.rows.iter().all(|p| (p / 2) % 3 == 2));
+        let edges = [
+            -70.0, -3.5, -0.5, 0.0, 0.5, 0.7, 3.0, 3.5, 17.25, 63.5, 64.0, 70.0,
+        ];
+        for &lo in &edges {
+            for &hi in &edges {
+                let span = Owned::span(&owned.cols, lo, hi);
+                let expected: Vec<u32> = owned
+                    .cols
+                    .iter()
+                    .copied()
+                    .filter(|&c| lo <= c as f32 + 0.5 && (c as f32 + 0.5) < hi)
+                    .collect();
+                assert_eq!(&owned.cols[span], &expected[..], "[{lo}, {hi})");
+            }
+        }
+    }
+}
