@@ -36,6 +36,11 @@ pub(super) struct Software {
     counts: Vec<Counts>,
     /// The drawn rectangles' element ranges (first, count).
     ranges: Vec<(u32, u32)>,
+    /// The rank's cells, kept while its place in the layout stays.
+    owned: Option<Owned>,
+    /// Each rectangle's test and owned cells (reused from shot to shot).
+    prepared: Vec<Prepared>,
+    spans: Vec<(Range<usize>, Range<usize>)>,
     elements: usize,
 }
 
@@ -44,6 +49,8 @@ type Counts = Vec<u32>;
 
 /// Which cells a rank draws: per axis, its cells in order.
 struct Owned {
+    /// The layout and the rank's place in it.
+    place: (TileLayout, (u32, u32)),
     cols: Vec<u32>,
     rows: Vec<u32>,
 }
@@ -53,6 +60,7 @@ impl Owned {
         let (tw, th) = (layout.tile_w.max(1), layout.tile_h.max(1));
         let (px, py) = (layout.px.max(1), layout.py.max(1));
         Self {
+            place: (*layout, own),
             cols: (0..res.cols).filter(|t| (t / tw) % px == own.0).collect(),
             rows: (0..res.rows).filter(|p| (p / th) % py == own.1).collect(),
         }
@@ -314,6 +322,9 @@ impl Software {
             depth: Vec::new(),
             counts: Vec::new(),
             ranges: Vec::new(),
+            owned: None,
+            prepared: Vec::new(),
+            spans: Vec::new(),
             elements,
         }
     }
@@ -340,7 +351,16 @@ impl Software {
         items.resize(rows * cols, EMPTY);
         self.depth.clear();
         self.depth.resize(rows * cols, 1.0);
-        let owned = Owned::new(self.res, layout, own);
+        if self
+            .owned
+            .as_ref()
+            .is_none_or(|o| o.place != (*layout, own))
+        {
+            self.owned = Some(Owned::new(self.res, layout, own));
+        }
+        let Some(owned) = &self.owned else {
+            return;
+        };
         let threads = threads.clamp(1, owned.rows.len().max(1));
         let counting = coverage.is_some();
         if counting {
@@ -363,21 +383,20 @@ impl Software {
             }
         }
         let inv_far = 1.0 / far;
-        let prepared: Vec<Prepared> = instances.iter().map(Prepared::new).collect();
-        let spans: Vec<(Range<usize>, Range<usize>)> = instances
-            .iter()
-            .map(|inst| {
-                let [x0, x1, y0, y1] = inst.rect;
-                (
-                    Owned::span(&owned.cols, x0, x1),
-                    Owned::span(&owned.rows, y0, y1),
-                )
-            })
-            .collect();
+        self.prepared.clear();
+        self.prepared.extend(instances.iter().map(Prepared::new));
+        self.spans.clear();
+        self.spans.extend(instances.iter().map(|inst| {
+            let [x0, x1, y0, y1] = inst.rect;
+            (
+                Owned::span(&owned.cols, x0, x1),
+                Owned::span(&owned.rows, y0, y1),
+            )
+        }));
         let shot = Shot {
             owned_cols: &owned.cols,
-            prepared: &prepared,
-            spans: &spans,
+            prepared: &self.prepared,
+            spans: &self.spans,
             rows: &self.rows,
             cols: &self.cols,
             inv_far,
@@ -385,20 +404,9 @@ impl Software {
         let run = |k: usize, band: &mut Band, counts: Option<&mut Counts>| {
             draw_band((k, threads), band, &shot, counts)
         };
-        let mut counts = self.counts.iter_mut().map(Some);
-        let mut work: Vec<(Band, Option<&mut Counts>)> = bands
-            .into_iter()
-            .map(|b| {
-                (
-                    b,
-                    if counting {
-                        counts.next().flatten()
-                    } else {
-                        None
-                    },
-                )
-            })
-            .collect();
+        let mut counts = self.counts.iter_mut().filter(|_| counting);
+        let mut work: Vec<(Band, Option<&mut Counts>)> =
+            bands.into_iter().map(|b| (b, counts.next())).collect();
         if let Some((first, rest)) = work.split_first_mut() {
             std::thread::scope(|s| {
                 for (k, (band, counts)) in rest.iter_mut().enumerate() {
