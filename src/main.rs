@@ -159,7 +159,8 @@ pub struct SolveArgs {
     /// test) or auto (cpu where the adapter is a CPU rasteriser such as
     /// lavapipe, whose per-rectangle overheads make a shot's drawing
     /// several times dearer; device otherwise). Results agree to a few
-    /// cells in a million (README "Performance").
+    /// cells in 100 000 (the same bits on lavapipe in cluttered rooms;
+    /// README "Drawn on the CPU").
     #[arg(long, value_enum, default_value = "auto")]
     rasteriser: radiosity::render::Rasteriser,
     /// Refinement passes by need: the mesh starts 2^N times coarser than the
