@@ -97,6 +97,22 @@ fn every_rank_count_exchange_and_tile_gives_identical_results() {
         let r = same_as_one(ranks, &tag, &["--deal-bounds", deal]);
         assert_eq!(r["settings"]["deal_bounds"], deal);
     }
+    // On lavapipe the runs above draw on the CPU (`--rasteriser auto`); the
+    // device's drawing gives the same bits on any rank count too, the
+    // packed lattice of 1 x 1 tiles included.
+    let device = ["--rasteriser", "device"];
+    let one = mpirun(1, dir.path(), "device-n1", &device);
+    assert_eq!(one["settings"]["rasteriser"], "device");
+    for (ranks, tile) in [(2, "64x32"), (3, "1x1")] {
+        let tag = format!("device-n{ranks}-{tile}");
+        let r = mpirun(
+            ranks,
+            dir.path(),
+            &tag,
+            &[&device[..], &["--tile", tile]].concat(),
+        );
+        same_result(&one, &r, &tag);
+    }
 }
 
 #[test]
