@@ -279,7 +279,7 @@ impl FormFactorAccumulator {
 /// `sort_unstable` gives, in a few passes over the keys instead of a
 /// comparison sort's log n (a cluttered room's shot touches 50 000
 /// elements of 276 000; the sort was a third of draining them).
-pub(crate) fn radix_sort(keys: &mut Vec<u32>, scratch: &mut Vec<u32>, bound: usize) {
+fn radix_sort(keys: &mut Vec<u32>, scratch: &mut Vec<u32>, bound: usize) {
     const BITS: u32 = 11;
     if keys.len() < 256 {
         keys.sort_unstable();

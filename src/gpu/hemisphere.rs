@@ -732,7 +732,36 @@ impl HemisphereRasterizer {
             }
         }
         let bounds = start.elapsed();
-        if let (Some(soft), None) = (self.software.as_mut(), &self.tess) {
+        let (rasterise, readback) = if self.software.is_some() && self.tess.is_none() {
+            self.draw_on_cpu(layout, own, items);
+            (start.elapsed() - bounds, Duration::ZERO)
+        } else {
+            self.upload(device, queue, layout, own, lattice)?;
+            let submission = self.submit(device, queue);
+            let waited =
+                self.read_items(device, submission.clone(), layout, own, lattice, items)?;
+            self.read_coverage(device, submission)?;
+            let read_start = waited.unwrap_or_else(Instant::now);
+            (read_start - start - bounds, read_start.elapsed())
+        };
+        Ok(RasterStats {
+            bounds,
+            rects: match &self.tess {
+                Some(t) => (t.vertices.len() / 3) as u32,
+                None => collected.rects as u32,
+            },
+            bounded: collected.bounded as u32,
+            occluded: collected.culled.map_or(0, |c| c.rects as u32),
+            skipped: collected.skipped as u32,
+            rasterise,
+            readback,
+        })
+    }
+
+    /// Draws the shot's rectangles on the CPU (`super::software`) into
+    /// `items`, and the coverage counts when counting.
+    fn draw_on_cpu(&mut self, layout: &TileLayout, own: (u32, u32), items: &mut Vec<u32>) {
+        if let Some(soft) = self.software.as_mut() {
             let threads = crate::parallel::cores().min(8);
             let coverage = self.count_coverage.then_some(&mut self.coverage);
             soft.draw(
@@ -744,34 +773,7 @@ impl HemisphereRasterizer {
                 items,
                 coverage,
             );
-            return Ok(RasterStats {
-                bounds,
-                rects: collected.rects as u32,
-                bounded: collected.bounded as u32,
-                occluded: collected.culled.map_or(0, |c| c.rects as u32),
-                skipped: collected.skipped as u32,
-                rasterise: start.elapsed() - bounds,
-                readback: Duration::ZERO,
-            });
         }
-        self.upload(device, queue, layout, own, lattice)?;
-        let submission = self.submit(device, queue);
-        let waited = self.read_items(device, submission.clone(), layout, own, lattice, items)?;
-        self.read_coverage(device, submission)?;
-        let read_start = waited.unwrap_or_else(Instant::now);
-        let rasterise = read_start - start - bounds;
-        Ok(RasterStats {
-            bounds,
-            rects: match &self.tess {
-                Some(t) => (t.vertices.len() / 3) as u32,
-                None => collected.rects as u32,
-            },
-            bounded: collected.bounded as u32,
-            occluded: collected.culled.map_or(0, |c| c.rects as u32),
-            skipped: collected.skipped as u32,
-            rasterise,
-            readback: read_start.elapsed(),
-        })
     }
 }
 

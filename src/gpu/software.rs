@@ -354,13 +354,14 @@ impl Software {
         if self
             .owned
             .as_ref()
-            .is_none_or(|o| o.place != (*layout, own))
+            .is_some_and(|o| o.place != (*layout, own))
         {
-            self.owned = Some(Owned::new(self.res, layout, own));
+            self.owned = None;
         }
-        let Some(owned) = &self.owned else {
-            return;
-        };
+        let res = self.res;
+        let owned = &*self
+            .owned
+            .get_or_insert_with(|| Owned::new(res, layout, own));
         let threads = threads.clamp(1, owned.rows.len().max(1));
         let counting = coverage.is_some();
         if counting {
