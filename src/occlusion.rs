@@ -51,6 +51,9 @@ pub struct OcclusionMap {
     /// Per cell (row-major): the distance within which something covers its
     /// centre (infinite: nothing known).
     depth: Vec<f32>,
+    /// Per row, per run of [`TILE`] columns: the farthest of its cells'
+    /// depths (a sphere or piece wholly behind it needs no look at them).
+    coarse: Vec<f32>,
     /// Per row: sin and cos of its centre's polar angle; per column: cos
     /// and sin of its centre's azimuth (`hemisphere::direction_table`, the
     /// shader's directions).
@@ -104,6 +107,7 @@ impl OcclusionMap {
         Self {
             res,
             depth: vec![f32::INFINITY; res.cells()],
+            coarse: vec![f32::INFINITY; res.rows as usize * tiles(res.cols as usize)],
             rows: rows.to_vec(),
             cols_cos: cols.iter().map(|c| c[0]).collect(),
             cols_sin: cols.iter().map(|c| c[1]).collect(),
@@ -113,6 +117,7 @@ impl OcclusionMap {
     /// Forgets every cell's cover (a new shot).
     pub fn clear(&mut self) {
         self.depth.iter_mut().for_each(|d| *d = f32::INFINITY);
+        self.coarse.iter_mut().for_each(|d| *d = f32::INFINITY);
     }
 
     /// Takes in a piece that is drawn: every cell whose centre direction is
@@ -125,6 +130,7 @@ impl OcclusionMap {
             cos: &self.cols_cos,
             sin: &self.cols_sin,
             depth: &mut self.depth,
+            coarse: &mut self.coarse,
             rows,
         };
         band.add(piece)
@@ -149,8 +155,9 @@ impl OcclusionMap {
             let handles: Vec<_> = self
                 .depth
                 .chunks_mut(band * cols)
+                .zip(self.coarse.chunks_mut(band * tiles(cols)))
                 .enumerate()
-                .map(|(k, depth)| {
+                .map(|(k, (depth, coarse))| {
                     let range = k * band..k * band + depth.len() / cols;
                     scope.spawn(move || {
                         let mut part = Band {
@@ -158,6 +165,7 @@ impl OcclusionMap {
                             cos,
                             sin,
                             depth,
+                            coarse,
                             rows: range,
                         };
                         items
@@ -183,31 +191,113 @@ impl OcclusionMap {
     /// Whether every cell whose centre `rect` holds is covered nearer than
     /// `nearest` (a block of polygons, none nearer than that, is hidden
     /// whole).
-    pub fn hides_rect(&self, rect: [f32; 4], nearest: f32) -> bool {
+    pub fn hides_rect(&mut self, rect: [f32; 4], nearest: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, just tested.
+            return unsafe { self.hides_rect_avx2(rect, nearest) };
+        }
+        self.hides_rect_lanes(rect, nearest)
+    }
+
+    /// [`OcclusionMap::hides_rect_lanes`] compiled for AVX2 (see [`Band::add`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn hides_rect_avx2(&mut self, rect: [f32; 4], nearest: f32) -> bool {
+        self.hides_rect_lanes(rect, nearest)
+    }
+
+    #[inline(always)]
+    fn hides_rect_lanes(&mut self, rect: [f32; 4], nearest: f32) -> bool {
         let cols = self.res.cols as usize;
         let (p0, p1) = row_span(self.res, rect, 0..self.res.rows as usize);
-        // The farthest cover of each run of cells (a branch-free reduction:
-        // a hidden block has every cell read anyway).
+        let farthest = |a: f32, d: &f32| a.max(*d);
+        // The farthest cover of each run of cells (branch-free reductions:
+        // a hidden block has every cell read anyway), whole tiles read
+        // from their farthest.
+        let res = self.res;
         (p0..p1).all(|p| {
             let depth = &self.depth[p * cols..(p + 1) * cols];
-            column_runs(self.res, rect).all(|run| {
-                let far = depth[run].iter().fold(0.0f32, |m, &d| m.max(d));
+            let coarse = &mut self.coarse[p * tiles(cols)..(p + 1) * tiles(cols)];
+            column_runs(res, rect).all(|run| {
+                let (first, end) = (run.start.div_ceil(TILE), run.end / TILE);
+                let far = if first < end {
+                    refresh(&mut coarse[first..end], depth, first);
+                    let head = depth[run.start..first * TILE].iter().fold(0.0, farthest);
+                    let middle = coarse[first..end].iter().fold(head, farthest);
+                    depth[end * TILE..run.end].iter().fold(middle, farthest)
+                } else {
+                    depth[run].iter().fold(0.0, farthest)
+                };
                 far * (1.0 + DEPTH_MARGIN) < nearest
             })
         })
+    }
+
+    /// Finds every stale tile's farthest depth (before [`OcclusionMap::hides`],
+    /// which reads a stale tile's cells instead).
+    pub fn refresh(&mut self) {
+        let cols = self.res.cols as usize;
+        for (coarse, depth) in self
+            .coarse
+            .chunks_mut(tiles(cols))
+            .zip(self.depth.chunks(cols))
+        {
+            refresh(coarse, depth, 0);
+        }
     }
 
     /// Whether every cell the piece could draw is covered nearer than the
     /// piece is there; `nearest` bounds its distance from below (used where
     /// its plane is seen edge-on).
     pub fn hides(&self, piece: &Piece, nearest: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, just tested.
+            return unsafe { self.hides_avx2(piece, nearest) };
+        }
+        self.hides_lanes(piece, nearest)
+    }
+
+    /// [`OcclusionMap::hides_lanes`] compiled for AVX2 (see [`Band::add`]).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn hides_avx2(&self, piece: &Piece, nearest: f32) -> bool {
+        self.hides_lanes(piece, nearest)
+    }
+
+    #[inline(always)]
+    fn hides_lanes(&self, piece: &Piece, nearest: f32) -> bool {
         let cols = self.res.cols as usize;
         let (p0, p1) = row_span(self.res, piece.rect, 0..self.res.rows as usize);
         (p0..p1).all(|p| {
             let planes = RowPlanes::new(piece, self.rows[p]);
             let depth = &self.depth[p * cols..(p + 1) * cols];
+            let coarse = &self.coarse[p * tiles(cols)..(p + 1) * tiles(cols)];
+            // A whole tile covered nearer than the piece can be is hidden
+            // without a look at its cells (`at` below is never nearer).
+            let hidden_tile = |t: usize| {
+                let far = coarse[t / TILE];
+                t % TILE == 0
+                    && t + TILE <= cols
+                    && far != STALE
+                    && far * (1.0 + DEPTH_MARGIN) < nearest
+            };
             column_runs(self.res, piece.rect).all(|run| {
-                run.into_iter().all(|t| {
+                let end = run.end;
+                let mut cells = run.into_iter();
+                let mut next = cells.next();
+                std::iter::from_fn(|| {
+                    let t = next?;
+                    if t + TILE <= end && hidden_tile(t) {
+                        next = cells.nth(TILE - 1);
+                        return Some(None);
+                    }
+                    next = cells.next();
+                    Some(Some(t))
+                })
+                .flatten()
+                .all(|t| {
                     let (ct, st) = (self.cols_cos[t], self.cols_sin[t]);
                     if planes.least(ct, st) < -INSIDE {
                         return true;
@@ -230,18 +320,64 @@ impl OcclusionMap {
     }
 }
 
+/// Finds the farthest depth of every stale tile of `coarse` (tiles
+/// `first..` of a row whose cells are `depth`).
+fn refresh(coarse: &mut [f32], depth: &[f32], first: usize) {
+    for (k, c) in coarse.iter_mut().enumerate() {
+        if *c == STALE {
+            let t = (first + k) * TILE;
+            *c = depth[t..(t + TILE).min(depth.len())]
+                .iter()
+                .fold(0.0f32, |m, &d| m.max(d));
+        }
+    }
+}
+
 /// Some rows of a map, for one thread to fill.
 struct Band<'a> {
     map: &'a [[f32; 2]],
     cos: &'a [f32],
     sin: &'a [f32],
-    /// The rows `rows` of the map's depths.
+    /// The rows `rows` of the map's depths, and of its tiles' farthest.
     depth: &'a mut [f32],
+    coarse: &'a mut [f32],
     rows: std::ops::Range<usize>,
 }
 
+/// Columns a tile of [`OcclusionMap::coarse`] spans.
+const TILE: usize = 16;
+
+/// [`OcclusionMap::coarse`] of a tile whose cells changed since it was
+/// last found (no depth is negative).
+const STALE: f32 = -1.0;
+
+/// Tiles of a row of `cols` columns.
+fn tiles(cols: usize) -> usize {
+    cols.div_ceil(TILE)
+}
+
 impl Band<'_> {
+    /// Takes in a piece (see [`OcclusionMap::add`]). Where the CPU has
+    /// AVX2 the same code runs compiled for it (eight cells an
+    /// instruction instead of four): the same operations, so the same map.
     fn add(&mut self, piece: &Piece) -> usize {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, just tested.
+            return unsafe { self.add_avx2(piece) };
+        }
+        self.add_lanes(piece)
+    }
+
+    /// [`Band::add_lanes`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn add_avx2(&mut self, piece: &Piece) -> usize {
+        self.add_lanes(piece)
+    }
+
+    #[inline(always)]
+    fn add_lanes(&mut self, piece: &Piece) -> usize {
         let cols = self.cos.len();
         let res = Resolution {
             rows: self.map.len() as u32,
@@ -256,13 +392,16 @@ impl Band<'_> {
                 held += run.len();
                 let (cos, sin) = (&self.cos[run.clone()], &self.sin[run.clone()]);
                 // Branch-free, so the loop vectorises.
-                for ((d, &ct), &st) in row[run].iter_mut().zip(cos).zip(sin) {
+                for ((d, &ct), &st) in row[run.clone()].iter_mut().zip(cos).zip(sin) {
                     let c = planes.cosine(ct, st);
                     let t_hit = piece.plane[3] / c;
                     let covers =
                         planes.least(ct, st) >= INSIDE && c.abs() >= GRAZING && t_hit > 0.0;
                     *d = if covers { d.min(t_hit) } else { *d };
                 }
+                // The tiles the run touched: their farthest, when asked.
+                let coarse = &mut self.coarse[(p - self.rows.start) * tiles(cols)..][..tiles(cols)];
+                coarse[run.start / TILE..=(run.end - 1) / TILE].fill(STALE);
             }
         }
         held
@@ -386,6 +525,74 @@ mod tests {
             plane: p4,
         };
         assert!(map.hides(&between, 2.0));
+    }
+
+    #[test]
+    fn the_tiles_change_no_verdict() {
+        // The tiles' farthest depths only let whole tiles be passed over:
+        // every verdict is the one the cells alone give.
+        let r = Resolution { rows: 24, cols: 96 };
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut map = OcclusionMap::new(r);
+        let mut pieces = Vec::new();
+        for _ in 0..40 {
+            let (x, y, h, z) = (
+                uniform() - 0.5,
+                uniform() - 0.5,
+                0.05 + uniform(),
+                0.2 + uniform(),
+            );
+            let c = [
+                [x - h, y - h, z],
+                [x - h, y + h, z],
+                [x + h, y + h, z],
+                [x + h, y - h, z],
+            ];
+            let rect = [
+                uniform() * r.cols as f32 - 20.0,
+                uniform() * r.cols as f32 + 40.0,
+                uniform() * 8.0,
+                8.0 + uniform() * 16.0,
+            ];
+            pieces.push((quad(c), rect, z));
+        }
+        let mut hidden = [0, 0];
+        for (k, ((edges, plane), rect, z)) in pieces.iter().enumerate() {
+            let piece = Piece {
+                rect: *rect,
+                edges,
+                plane: *plane,
+            };
+            // Before and after adding, against the cells read one by one.
+            for d in [0.3, *z, 1.5 * z] {
+                let mut cells_only = map.clone();
+                cells_only.coarse.fill(STALE);
+                let want = cells_only.hides(&piece, d);
+                map.refresh();
+                assert_eq!(map.hides(&piece, d), want, "piece {k} at {d}");
+                let (p0, p1) = row_span(r, *rect, 0..r.rows as usize);
+                let far = (p0..p1)
+                    .flat_map(|p| {
+                        column_runs(r, *rect).flat_map(move |run| run.map(move |t| (p, t)))
+                    })
+                    .map(|(p, t)| map.depth[p * r.cols as usize + t])
+                    .fold(0.0f32, f32::max);
+                let want_rect = p0 >= p1 || far * (1.0 + DEPTH_MARGIN) < d;
+                assert_eq!(map.hides_rect(*rect, d), want_rect, "rectangle {k} at {d}");
+                hidden[usize::from(want)] += 1;
+            }
+            map.add(&piece);
+        }
+        assert!(
+            hidden[0] > 10 && hidden[1] > 10,
+            "{hidden:?}: both verdicts"
+        );
     }
 
     #[test]
