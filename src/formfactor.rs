@@ -308,23 +308,82 @@ pub fn hybrid_row(
         columns: geo.outlines.len(),
         ..Row::default()
     };
-    // First the receivers and their visibilities (cheap), then the integrals.
-    let (jobs, partly) = receivers(mesh, table, &geo, counts, &mut row.near_hidden);
     let shares = column_shares(mesh, &geo, &columns);
-    let values = integrals(mesh, table, &geo, &shares, &columns, &jobs);
+    // Per run of whole patches: first the receivers and their visibilities
+    // (cheap), then the integrals. Every receiver's values are its own, so
+    // the runs, joined in order, make the row one run makes.
+    let run = |counts: &[(u32, u64)]| {
+        let mut near_hidden = 0;
+        let (jobs, partly) = receivers(mesh, table, &geo, counts, &mut near_hidden);
+        let values = integrals(mesh, table, &geo, &shares, &columns, &jobs);
+        (jobs, partly, near_hidden, values)
+    };
     let m = geo.outlines.len();
-    for ((&(j, _), v), &part) in jobs.iter().zip(values.chunks_exact(m)).zip(&partly) {
-        if v.iter().any(|&f| f > 0.0) {
-            row.ids.push(j);
-            row.values.extend_from_slice(v);
-            let share = to_share(v.iter().sum());
-            row.total += share;
-            if part {
-                row.partial += share;
+    for (jobs, partly, near_hidden, values) in on_patch_runs(table, counts, m, run) {
+        row.near_hidden += near_hidden;
+        for ((&(j, _), v), &part) in jobs.iter().zip(values.chunks_exact(m)).zip(&partly) {
+            if v.iter().any(|&f| f > 0.0) {
+                row.ids.push(j);
+                row.values.extend_from_slice(v);
+                let share = to_share(v.iter().sum());
+                row.total += share;
+                if part {
+                    row.partial += share;
+                }
             }
         }
     }
     row
+}
+
+/// `run` over `counts` (sorted by element, so each patch's are together)
+/// cut into runs of whole patches, one a core where the row is big (about
+/// [`PARALLEL_INTEGRALS`] integrals of `columns` columns), the results in
+/// order.
+fn on_patch_runs<T: Send>(
+    table: &ReceiverTable,
+    counts: &[(u32, u64)],
+    columns: usize,
+    run: impl Fn(&[(u32, u64)]) -> T + Sync,
+) -> Vec<T> {
+    let threads = if counts.len() * columns >= PARALLEL_INTEGRALS {
+        crate::parallel::cores().min(8)
+    } else {
+        1
+    };
+    if threads <= 1 {
+        return vec![run(counts)];
+    }
+    // Cut near equal shares, each moved on to its patch's end.
+    let mut cuts = vec![0];
+    for k in 1..threads {
+        let mut at = (counts.len() * k / threads).max(*cuts.last().unwrap_or(&0));
+        while at > 0
+            && at < counts.len()
+            && table.patch(counts[at].0) == table.patch(counts[at - 1].0)
+        {
+            at += 1;
+        }
+        cuts.push(at);
+    }
+    cuts.push(counts.len());
+    let run = &run;
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = cuts
+            .windows(2)
+            .skip(1)
+            .map(|w| scope.spawn(move || run(&counts[w[0]..w[1]])))
+            .collect();
+        // The first run on this thread.
+        let first = run(&counts[cuts[0]..cuts[1]]);
+        std::iter::once(first)
+            .chain(
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+            )
+            .collect()
+    })
 }
 
 /// What a hybrid row needs of its shooter patch.
@@ -503,26 +562,7 @@ fn integrals(
         }
         values
     };
-    // The integrals are independent: large rows use every core, joined in order.
-    let threads = if jobs.len() * outlines.len() >= PARALLEL_INTEGRALS {
-        crate::parallel::cores().min(8)
-    } else {
-        1
-    };
-    if threads <= 1 {
-        return eval(jobs);
-    }
-    let chunk = jobs.len().div_ceil(threads);
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = jobs
-            .chunks(chunk)
-            .map(|c| scope.spawn(move || eval(c)))
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-            .collect()
-    })
+    eval(jobs)
 }
 
 /// Fixed-point scale of the form factors a split decision sums: per

@@ -748,7 +748,7 @@ impl<'m> ShotLoop<'m> {
         if let Some(b) = source.busy_cpu.last_mut() {
             *b += cpu.own(self.comm);
         }
-        (self.landed, self.delivered) = self.landed_here(solver, best);
+        (self.landed, self.delivered) = shot.landed;
         self.last_power = Some(shot.shot_power);
         self.stats.update += dt;
         self.stats.patch_power[best.patch as usize] += shot.power;
@@ -756,16 +756,6 @@ impl<'m> ShotLoop<'m> {
             *b += dt.as_secs_f64();
         }
         Ok(shot)
-    }
-
-    /// What the last shot landed on this rank's elements (the sum of their
-    /// form factors) and the power it delivered to them over the emitted
-    /// power, both in [`UNSHOT_ONE`] fixed point, told at the next
-    /// collective. Each element's share is rounded on its own, so the sums
-    /// over ranks do not depend on how elements are split between them.
-    fn landed_here(&self, solver: &Solver, best: &Candidate) -> (u64, i64) {
-        let own = self.ff.iter().filter(|t| solver.owns_element(t.element));
-        landing(solver, best.patch, own)
     }
 }
 
@@ -781,11 +771,9 @@ fn landing<'t>(
     let area = solver.mesh().patches[shooter as usize].area;
     let (mut landed, mut delivered) = (0u64, 0i64);
     for t in ff {
-        landed += crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
-        if emitted > 0.0 {
-            let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
-            delivered += crate::numeric::round_i64(w / emitted * UNSHOT_ONE);
-        }
+        let (l, d) = crate::solver::landing_share(t, area, emitted);
+        landed += l;
+        delivered += d;
     }
     (landed, delivered)
 }

@@ -122,6 +122,25 @@ pub struct Shot {
     /// elements on one rank (1 in a closed scene), over the rank's own
     /// where a source gives only those (as the transport rows do).
     pub form_factor_sum: f64,
+    /// What it landed on this rank's elements (the sum of their form
+    /// factors) and the power it delivered to them over the emitted power,
+    /// both in [`UNSHOT_ONE`] fixed point (see [`landing_share`]).
+    pub landed: (u64, i64),
+}
+
+/// What transfer `t` of a shot from a patch of area `area` lands (its form
+/// factor) and delivers (its power over the `emitted` power), each in
+/// [`UNSHOT_ONE`] fixed point, rounded on its own: sums over any split of
+/// the elements between ranks agree.
+pub fn landing_share(t: &Transfer, area: f64, emitted: f64) -> (u64, i64) {
+    let landed = crate::numeric::round_u64(t.form_factor.clamp(0.0, 1.0) * UNSHOT_ONE);
+    let delivered = if emitted > 0.0 {
+        let w = (t.radiosity[0] + t.radiosity[1] + t.radiosity[2]) * area;
+        crate::numeric::round_i64(w / emitted * UNSHOT_ONE)
+    } else {
+        0
+    };
+    (landed, delivered)
 }
 
 /// A rank's proposal for the next shooter: its patch with the most unshot power.
@@ -795,6 +814,8 @@ impl<'m> Solver<'m> {
         // leave `direct` alone (adding d * 0 changed no bit, and the loop
         // is bound by its memory traffic).
         let direct = direct_share != [0.0; 3];
+        let emitted = self.emitted_power;
+        let mut landed = (0u64, 0i64);
         for (i, t) in ff.iter().enumerate() {
             if let Some(ahead) = ff.get(i + PREFETCH_AHEAD) {
                 let j = ahead.element as usize;
@@ -812,6 +833,8 @@ impl<'m> Solver<'m> {
             if owners.of(el.patch) != rank {
                 continue;
             }
+            let (l, d) = landing_share(t, area, emitted);
+            landed = (landed.0 + l, landed.1 + d);
             Self::touch(vote, rank, owners, el.patch as usize);
             let scale = area / el.area;
             let d = [0, 1, 2].map(|c| el.reflectance[c] * t.radiosity[c] * scale);
@@ -833,6 +856,7 @@ impl<'m> Solver<'m> {
             power: shooter.power,
             shot_power: power(&region.shoot, area),
             form_factor_sum,
+            landed,
         }
     }
 
