@@ -70,9 +70,33 @@ impl Owned {
     /// holds (the rasteriser's rule: a centre on the near edge is in,
     /// one on the far edge out).
     fn span(cells: &[u32], lo: f32, hi: f32) -> Range<usize> {
-        let first = cells.partition_point(|&c| (c as f32 + 0.5) < lo);
-        let end = cells.partition_point(|&c| (c as f32 + 0.5) < hi);
+        let first = Self::before(cells, lo);
+        let end = Self::before(cells, hi);
         first..end.max(first)
+    }
+
+    /// How many of `cells` have their centre before `x`: where every cell
+    /// is there (one rank's whole hemisphere), a guess from `x` moved to
+    /// the exact count, else a binary search (the same count either way).
+    fn before(cells: &[u32], x: f32) -> usize {
+        let n = cells.len();
+        let whole = cells.last().is_none_or(|&c| c as usize + 1 == n);
+        if !whole {
+            return cells.partition_point(|&c| (c as f32 + 0.5) < x);
+        }
+        let centre_before = |c: usize| (c as f32 + 0.5) < x;
+        let mut k = if x.is_nan() {
+            0
+        } else {
+            (x - 0.5).ceil().clamp(0.0, n as f32) as usize
+        };
+        while k > 0 && !centre_before(k - 1) {
+            k -= 1;
+        }
+        while k < n && centre_before(k) {
+            k += 1;
+        }
+        k
     }
 }
 
@@ -438,16 +462,60 @@ impl Software {
         );
         self.ranges.sort_unstable();
         self.ranges.dedup();
-        let counts = &mut self.counts[..threads];
-        for &(first, n) in &self.ranges {
-            for id in first as usize..(first + n) as usize {
-                let sum: u64 = counts
-                    .iter_mut()
-                    .map(|c| u64::from(std::mem::take(&mut c[id])))
-                    .sum();
-                if sum > 0 {
-                    out.push((id as u32, sum));
-                }
+        let (ranges, counts) = (&self.ranges, &mut self.counts[..threads]);
+        // Two halves of the elements (ranges are disjoint, in order), the
+        // second on another thread where there are many.
+        let total: usize = ranges.iter().map(|r| r.1 as usize).sum();
+        let cut = if threads > 1 && total >= PARALLEL_GATHER {
+            let mut seen = 0;
+            ranges
+                .iter()
+                .position(|r| {
+                    seen += r.1 as usize;
+                    2 * seen > total
+                })
+                .map_or(ranges.len(), |k| k + 1)
+        } else {
+            ranges.len()
+        };
+        let Some(&(split, _)) = ranges.get(cut) else {
+            sum_counts(&ranges[..], counts.iter_mut().map(|c| &mut c[..]), 0, out);
+            return;
+        };
+        let (low, high): (Vec<&mut [u32]>, Vec<&mut [u32]>) = counts
+            .iter_mut()
+            .map(|c| c.split_at_mut(split as usize))
+            .unzip();
+        let mut rest = Vec::new();
+        std::thread::scope(|s| {
+            let later = &ranges[cut..];
+            s.spawn(|| sum_counts(later, high.into_iter(), split as usize, &mut rest));
+            sum_counts(&ranges[..cut], low.into_iter(), 0, out);
+        });
+        out.extend_from_slice(&rest);
+    }
+}
+
+/// Elements below which the counts are gathered on one thread.
+const PARALLEL_GATHER: usize = 1 << 15;
+
+/// The threads' counts (each of elements `from..`) over element `ranges`,
+/// summed into `out` in element order where not zero, and reset.
+fn sum_counts<'a>(
+    ranges: &[(u32, u32)],
+    counts: impl Iterator<Item = &'a mut [u32]>,
+    from: usize,
+    out: &mut Vec<(u32, u64)>,
+) {
+    let mut counts: Vec<&mut [u32]> = counts.collect();
+    for &(first, n) in ranges {
+        for id in first as usize..(first + n) as usize {
+            let sum: u64 = counts
+                .iter_mut()
+                .map(|c| u64::from(std::mem::take(&mut c[id - from])))
+                .sum();
+            if sum > 0 {
+                out.push((id as u32, sum));
             }
         }
     }
@@ -580,19 +648,29 @@ mod tests {
         let owned = Owned::new(res, &layout, (1, 2));
         assert!(owned.cols.iter().all(|t| (t / 3) % 2 == 1));
         assert!(owned.rows.iter().all(|p| (p / 2) % 3 == 2));
-        let edges = [
-            -70.0, -3.5, -0.5, 0.0, 0.5, 0.7, 3.0, 3.5, 17.25, 63.5, 64.0, 70.0,
+        // And over one rank's whole hemisphere (found without a search).
+        let whole = Owned::new(res, &TileLayout::whole(res), (0, 0));
+        let below = |x: f32| f32::from_bits(x.to_bits() - 1);
+        let above = |x: f32| f32::from_bits(x.to_bits() + 1);
+        let mut edges = vec![
+            -70.0, -3.5, -0.5, 0.0, 1e-30, 0.5, 0.7, 3.0, 3.5, 17.25, 63.5, 64.0, 70.0,
         ];
-        for &lo in &edges {
-            for &hi in &edges {
-                let span = Owned::span(&owned.cols, lo, hi);
-                let expected: Vec<u32> = owned
-                    .cols
-                    .iter()
-                    .copied()
-                    .filter(|&c| lo <= c as f32 + 0.5 && (c as f32 + 0.5) < hi)
-                    .collect();
-                assert_eq!(&owned.cols[span], &expected[..], "[{lo}, {hi})");
+        edges.extend(
+            [0.5f32, 3.5, 17.5, 63.5]
+                .iter()
+                .flat_map(|&x| [below(x), above(x)]),
+        );
+        for cells in [&owned.cols, &whole.cols] {
+            for &lo in &edges {
+                for &hi in &edges {
+                    let span = Owned::span(cells, lo, hi);
+                    let expected: Vec<u32> = cells
+                        .iter()
+                        .copied()
+                        .filter(|&c| lo <= c as f32 + 0.5 && (c as f32 + 0.5) < hi)
+                        .collect();
+                    assert_eq!(&cells[span], &expected[..], "[{lo}, {hi})");
+                }
             }
         }
     }
