@@ -373,7 +373,15 @@ impl Proxies {
             (None, _) => self.visit_in_parallel(threads, &visit, &mut drawn),
         };
         if let (Some((map, agree)), true) = (occlusion, culling) {
-            let cull = drawn.cull_hidden(map, threads, agree, self.polygons.len(), filled);
+            // The verdicts take every core, even where the walk kept to
+            // one (beside the far receivers' scan, which has mostly ended
+            // by now; the work is shared out as the threads come free).
+            let verdict_threads = if self.corners.len() < PARALLEL_PROXIES {
+                1
+            } else {
+                crate::parallel::cores().min(8)
+            };
+            let cull = drawn.cull_hidden(map, verdict_threads, agree, self.polygons.len(), filled);
             done.culled = Some(cull);
         }
         *instances = drawn.instances;
