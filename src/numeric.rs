@@ -139,9 +139,101 @@ atan2_for!(
     |u| ATAN_32.iter().rev().fold(0.0, |acc, &c| acc * u + c)
 );
 
+/// [`atan2`] in four lanes at once, for CPUs with AVX2: the same
+/// operations in the same order, lane by lane, so the same bits.
+#[cfg(target_arch = "x86_64")]
+pub mod lanes {
+    use super::{ATAN_64, FRAC_PI_2, PI};
+    use std::arch::x86_64::*;
+
+    /// `atan2(y[k], x[k])` in lane k.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn atan2(y: __m256d, x: __m256d) -> __m256d {
+        let sign = _mm256_set1_pd(-0.0);
+        let (ax, ay) = (_mm256_andnot_pd(sign, x), _mm256_andnot_pd(sign, y));
+        // (num, den) = if ay <= ax { (ay, ax) } else { (ax, ay) }
+        let low = _mm256_cmp_pd::<_CMP_LE_OQ>(ay, ax);
+        let num = _mm256_blendv_pd(ax, ay, low);
+        let den = _mm256_blendv_pd(ay, ax, low);
+        let t = _mm256_div_pd(num, den);
+        let u = _mm256_mul_pd(t, t);
+        // Estrin's scheme, as `estrin_16`.
+        let u2 = _mm256_mul_pd(u, u);
+        let u4 = _mm256_mul_pd(u2, u2);
+        let u8 = _mm256_mul_pd(u4, u4);
+        let c = |k: usize| _mm256_set1_pd(ATAN_64[k]);
+        let p: [__m256d; 8] =
+            std::array::from_fn(|k| _mm256_add_pd(c(2 * k), _mm256_mul_pd(c(2 * k + 1), u)));
+        let q: [__m256d; 4] =
+            std::array::from_fn(|k| _mm256_add_pd(p[2 * k], _mm256_mul_pd(p[2 * k + 1], u2)));
+        let r0 = _mm256_add_pd(q[0], _mm256_mul_pd(q[1], u4));
+        let r1 = _mm256_add_pd(q[2], _mm256_mul_pd(q[3], u4));
+        let poly = _mm256_add_pd(r0, _mm256_mul_pd(r1, u8));
+        let mut a = _mm256_mul_pd(t, poly);
+        // if ay > ax { a = pi/2 - a }; if x < 0 { a = pi - a }
+        let steep = _mm256_cmp_pd::<_CMP_GT_OQ>(ay, ax);
+        a = _mm256_blendv_pd(a, _mm256_sub_pd(_mm256_set1_pd(FRAC_PI_2), a), steep);
+        let left = _mm256_cmp_pd::<_CMP_LT_OQ>(x, _mm256_setzero_pd());
+        a = _mm256_blendv_pd(a, _mm256_sub_pd(_mm256_set1_pd(PI), a), left);
+        // den == 0: pi or 0 by the sign of x.
+        let zero = _mm256_cmp_pd::<_CMP_EQ_OQ>(den, _mm256_setzero_pd());
+        let x_negative = _mm256_castsi256_pd(_mm256_srai_epi64_emulated(_mm256_castpd_si256(x)));
+        let edge = _mm256_and_pd(x_negative, _mm256_set1_pd(PI));
+        a = _mm256_blendv_pd(a, edge, zero);
+        // a.copysign(y)
+        _mm256_or_pd(_mm256_andnot_pd(sign, a), _mm256_and_pd(sign, y))
+    }
+
+    /// All ones in the lanes whose sign bit is set (AVX2 has no 64-bit
+    /// arithmetic shift).
+    #[target_feature(enable = "avx2")]
+    unsafe fn _mm256_srai_epi64_emulated(v: __m256i) -> __m256i {
+        let high = _mm256_srai_epi32::<31>(v);
+        _mm256_shuffle_epi32::<0b11_11_01_01>(high)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn four_lanes_give_the_angle_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        use std::arch::x86_64::*;
+        let mut pairs = points();
+        for &y in &[0.0, -0.0, 1.0, -1.0, 1e-300, f64::NAN, f64::INFINITY] {
+            for &x in &[0.0, -0.0, 1.0, -1.0, 1e-300, f64::NAN, f64::NEG_INFINITY] {
+                pairs.push((y, x));
+            }
+        }
+        for chunk in pairs.chunks_exact(4) {
+            let (y, x): (Vec<f64>, Vec<f64>) = chunk.iter().copied().unzip();
+            let mut got = [0.0f64; 4];
+            // SAFETY: the CPU has AVX2, just tested.
+            unsafe {
+                let v = lanes::atan2(_mm256_loadu_pd(y.as_ptr()), _mm256_loadu_pd(x.as_ptr()));
+                _mm256_storeu_pd(got.as_mut_ptr(), v);
+            }
+            for k in 0..4 {
+                let want = atan2(y[k], x[k]);
+                assert!(
+                    got[k].to_bits() == want.to_bits() || (got[k].is_nan() && want.is_nan()),
+                    "atan2({}, {}): {} against {}",
+                    y[k],
+                    x[k],
+                    got[k],
+                    want
+                );
+            }
+        }
+    }
 
     /// Points on circles of many radii in every direction, the axes and the
     /// diagonals included.
