@@ -85,11 +85,8 @@ impl Owned {
             return cells.partition_point(|&c| (c as f32 + 0.5) < x);
         }
         let centre_before = |c: usize| (c as f32 + 0.5) < x;
-        let mut k = if x.is_nan() {
-            0
-        } else {
-            (x - 0.5).ceil().clamp(0.0, n as f32) as usize
-        };
+        // A saturating cast (NaN: 0) within one of the count; no libm call.
+        let mut k = ((x - 0.5) as i64).clamp(0, n as i64) as usize;
         while k > 0 && !centre_before(k - 1) {
             k -= 1;
         }
