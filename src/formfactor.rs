@@ -775,13 +775,8 @@ mod tests {
     fn the_edges_side_by_side_are_the_edges_one_by_one() {
         // The AVX2 edge terms against the scalar ones, bit for bit: quads
         // near and far, seen from points on their corners and edges too.
-        let mut seed = 0x853c_49e6_748f_ea9bu64;
-        let mut uniform = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::fuzz::Rng(0x853c_49e6_748f_ea9b);
+        let mut uniform = move || rng.unit();
         let mut cases = 0;
         for k in 0..20_000usize {
             let scale = 10f64.powi(k as i32 % 7 - 3);

@@ -31,6 +31,11 @@ impl Rng {
         z ^ (z >> 31)
     }
 
+    /// A number in [0, 1) (53 random bits).
+    pub fn unit(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
     /// A number in 0..n (0 when n is 0).
     pub fn below(&mut self, n: usize) -> usize {
         (self.next_u64() % n.max(1) as u64) as usize

@@ -532,13 +532,8 @@ mod tests {
         // The tiles' farthest depths only let whole tiles be passed over:
         // every verdict is the one the cells alone give.
         let r = Resolution { rows: 24, cols: 96 };
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = crate::fuzz::Rng(0x2545_f491_4f6c_dd1d);
+        let mut uniform = move || rng.unit() as f32;
         let mut map = OcclusionMap::new(r);
         let mut pieces = Vec::new();
         for _ in 0..40 {
