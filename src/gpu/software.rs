@@ -40,7 +40,7 @@ pub(super) struct Software {
     owned: Option<Owned>,
     /// Each rectangle's test and owned cells (reused from shot to shot).
     prepared: Vec<Prepared>,
-    spans: Vec<(Range<usize>, Range<usize>)>,
+    spans: Vec<Spans>,
     elements: usize,
 }
 
@@ -405,16 +405,32 @@ impl Software {
             }
         }
         let inv_far = 1.0 / far;
-        self.prepared.clear();
-        self.prepared.extend(instances.iter().map(Prepared::new));
-        self.spans.clear();
-        self.spans.extend(instances.iter().map(|inst| {
-            let [x0, x1, y0, y1] = inst.rect;
-            (
-                Owned::span(&owned.cols, x0, x1),
-                Owned::span(&owned.rows, y0, y1),
-            )
-        }));
+        // Each rectangle's test and cells, the second half on another
+        // thread where there are many.
+        let prepare = |list: &[Instance], prepared: &mut Vec<Prepared>, spans: &mut Vec<Spans>| {
+            prepared.clear();
+            prepared.extend(list.iter().map(Prepared::new));
+            spans.clear();
+            spans.extend(list.iter().map(|inst| {
+                let [x0, x1, y0, y1] = inst.rect;
+                (
+                    Owned::span(&owned.cols, x0, x1),
+                    Owned::span(&owned.rows, y0, y1),
+                )
+            }));
+        };
+        if threads > 1 && instances.len() >= PARALLEL_PREPARE {
+            let (first, second) = instances.split_at(instances.len() / 2);
+            let (mut prepared, mut spans) = (Vec::new(), Vec::new());
+            std::thread::scope(|s| {
+                s.spawn(|| prepare(second, &mut prepared, &mut spans));
+                prepare(first, &mut self.prepared, &mut self.spans);
+            });
+            self.prepared.append(&mut prepared);
+            self.spans.append(&mut spans);
+        } else {
+            prepare(instances, &mut self.prepared, &mut self.spans);
+        }
         let shot = Shot {
             owned_cols: &owned.cols,
             prepared: &self.prepared,
@@ -493,6 +509,12 @@ impl Software {
     }
 }
 
+/// Rectangles below which they are prepared on one thread.
+const PARALLEL_PREPARE: usize = 1024;
+
+/// A rectangle's owned columns and rows (positions in the owned lists).
+type Spans = (Range<usize>, Range<usize>);
+
 /// Elements below which the counts are gathered on one thread.
 const PARALLEL_GATHER: usize = 1 << 15;
 
@@ -525,7 +547,7 @@ struct Shot<'a> {
     /// The rectangles, in drawing order, and the owned columns and rows
     /// (positions in the owned lists) their cells' centres lie in.
     prepared: &'a [Prepared],
-    spans: &'a [(Range<usize>, Range<usize>)],
+    spans: &'a [Spans],
     /// The direction tables (see [`Software`]).
     rows: &'a [[f32; 2]],
     cols: &'a [[f32; 2]],

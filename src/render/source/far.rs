@@ -382,12 +382,14 @@ impl GpuFormFactors<'_> {
             // its elements' visibilities do not depend on whether a
             // hidden polygon was drawn (the occlusion cull) or not.
             let (receivers, rayed) = (&self.receivers, &mut self.rayed);
+            let added = self.pairs.len() - before;
             let mut index = 0;
             self.pairs.retain(|&(j, _)| {
                 index += 1;
                 index > before || !rayed[receivers.patch(j) as usize]
             });
-            for &(j, _) in &self.pairs {
+            // Only the rays' patches were marked (they end the list).
+            for &(j, _) in &self.pairs[self.pairs.len() - added..] {
                 rayed[receivers.patch(j) as usize] = false;
             }
             // Two sorted runs (the cells' pairs, then these in patch
