@@ -118,6 +118,11 @@ pub struct HemisphereRasterizer {
     tess: Option<Tessellation>,
     /// Whether to count coverage this shot.
     count_coverage: bool,
+    /// Whether the CPU drawing packs each element's visible cells with
+    /// its coverage (see [`HemisphereRasterizer::set_pack_visible`]), and
+    /// whether the last shot did.
+    pack_visible: bool,
+    packed: bool,
     /// Whether to leave out polygons hidden behind nearer ones.
     cull_occluded: bool,
     /// The occlusion cull's map, reused from shot to shot.
@@ -230,6 +235,8 @@ impl HemisphereRasterizer {
             module,
             tess: None,
             count_coverage: false,
+            pack_visible: false,
+            packed: false,
             cull_occluded: true,
             occlusion: crate::occlusion::OcclusionMap::new(res),
             cull_waits: std::collections::HashMap::new(),
@@ -407,6 +414,21 @@ impl HemisphereRasterizer {
         if !on {
             self.coverage.clear();
         }
+    }
+
+    /// Whether a shot drawn on the CPU over one rank's whole hemisphere, with
+    /// coverage counted, also counts each element's visible cells into its
+    /// coverage pair (visible << 32 | covered, `formfactor::unpack`'s
+    /// packing: what the hybrid method sums from the items), so the items
+    /// need not be summed again.
+    pub fn set_pack_visible(&mut self, on: bool) {
+        self.pack_visible = on;
+    }
+
+    /// Whether the last shot's coverage pairs hold packed visible counts
+    /// (see [`HemisphereRasterizer::set_pack_visible`]).
+    pub fn coverage_packs_visible(&self) -> bool {
+        self.packed
     }
 
     /// The last shot's unoccluded cell counts (this rank's cells only), as
@@ -667,6 +689,7 @@ impl HemisphereRasterizer {
         peers: Option<Peers<'_>>,
     ) -> Result<RasterStats, GpuError> {
         let start = Instant::now();
+        self.packed = false;
         // With 1 x 1 tiles over several ranks, draw only this rank's cells,
         // packed (see the shader); otherwise draw all and discard others' cells.
         // The tessellated projection always draws the full image: packing
@@ -764,7 +787,8 @@ impl HemisphereRasterizer {
         if let Some(soft) = self.software.as_mut() {
             let threads = crate::parallel::cores().min(8);
             let coverage = self.count_coverage.then_some(&mut self.coverage);
-            soft.draw(
+            let visible = self.pack_visible && layout.ranks() == 1;
+            self.packed = soft.draw(
                 &self.instances,
                 self.far,
                 layout,
@@ -772,6 +796,7 @@ impl HemisphereRasterizer {
                 threads,
                 items,
                 coverage,
+                visible,
             );
         }
     }

@@ -32,8 +32,10 @@ pub(super) struct Software {
     rows: Vec<[f32; 2]>,
     cols: Vec<[f32; 2]>,
     depth: Vec<f32>,
-    /// Per thread, its cells' coverage counts.
+    /// Per thread, its cells' coverage counts, and where asked its visible
+    /// cells' counts (see [`Software::draw`]).
     counts: Vec<Counts>,
+    visible: Vec<Counts>,
     /// The drawn rectangles' element ranges (first, count).
     ranges: Vec<(u32, u32)>,
     /// The rank's cells, kept while its place in the layout stays.
@@ -342,6 +344,7 @@ impl Software {
             cols: cols.to_vec(),
             depth: Vec::new(),
             counts: Vec::new(),
+            visible: Vec::new(),
             ranges: Vec::new(),
             owned: None,
             prepared: Vec::new(),
@@ -354,7 +357,11 @@ impl Software {
     /// cells other ranks own stay [`EMPTY`]) as the device would, for
     /// rank `own` of `layout`, on up to `threads` threads; with `coverage`,
     /// fills it with every element's count of covered cells, hidden or
-    /// not, in element order.
+    /// not, in element order; with `visible` too, where this rank draws
+    /// every cell, each count packed with the element's visible cells
+    /// (visible << 32 | covered, as `formfactor::unpack` reads it: what
+    /// the hybrid weights summed over `items` and added to the coverage
+    /// give). Returns whether it packed them.
     // The shot's parts, each needed: see `HemisphereRasterizer::render`.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn draw(
@@ -366,7 +373,8 @@ impl Software {
         threads: usize,
         items: &mut Vec<u32>,
         coverage: Option<&mut Vec<(u32, u64)>>,
-    ) {
+        visible: bool,
+    ) -> bool {
         let (rows, cols) = (self.res.rows as usize, self.res.cols as usize);
         items.clear();
         items.resize(rows * cols, EMPTY);
@@ -388,6 +396,14 @@ impl Software {
         if counting {
             self.counts.resize_with(threads, Counts::default);
             for c in &mut self.counts[..threads] {
+                c.resize(self.elements, 0);
+            }
+        }
+        // Visible cells are counted only where every cell is the rank's.
+        let packing = counting && visible && owned.cols.len() == cols && owned.rows.len() == rows;
+        if packing {
+            self.visible.resize_with(threads, Counts::default);
+            for c in &mut self.visible[..threads] {
                 c.resize(self.elements, 0);
             }
         }
@@ -439,24 +455,44 @@ impl Software {
             cols: &self.cols,
             inv_far,
         };
-        let run = |k: usize, band: &mut Band, counts: Option<&mut Counts>| {
-            draw_band((k, threads), band, &shot, counts)
-        };
+        let run =
+            |k: usize, band: &mut Band, counts: Option<&mut Counts>, seen: Option<&mut Counts>| {
+                draw_band((k, threads), band, &shot, counts);
+                // Each element's visible cells in the band's rows.
+                if let Some(seen) = seen {
+                    for (_, row, _) in band.iter() {
+                        for &id in row.iter() {
+                            if let Some(c) = seen.get_mut(id as usize) {
+                                *c += 1;
+                            }
+                        }
+                    }
+                }
+            };
         let mut counts = self.counts.iter_mut().filter(|_| counting);
-        let mut work: Vec<(Band, Option<&mut Counts>)> =
-            bands.into_iter().map(|b| (b, counts.next())).collect();
+        let mut seen = self.visible.iter_mut().filter(|_| packing);
+        let mut work: Vec<(Band, Option<&mut Counts>, Option<&mut Counts>)> = bands
+            .into_iter()
+            .map(|b| (b, counts.next(), seen.next()))
+            .collect();
         if let Some((first, rest)) = work.split_first_mut() {
             std::thread::scope(|s| {
-                for (k, (band, counts)) in rest.iter_mut().enumerate() {
-                    s.spawn(move || run(k + 1, band, counts.as_deref_mut()));
+                for (k, (band, counts, seen)) in rest.iter_mut().enumerate() {
+                    s.spawn(move || run(k + 1, band, counts.as_deref_mut(), seen.as_deref_mut()));
                 }
-                run(0, &mut first.0, first.1.as_deref_mut());
+                run(
+                    0,
+                    &mut first.0,
+                    first.1.as_deref_mut(),
+                    first.2.as_deref_mut(),
+                );
             });
         }
         drop(work);
         if let Some(out) = coverage {
-            self.gather(instances, threads, out);
+            self.gather(instances, (threads, packing), out);
         }
+        packing
     }
 
     /// The threads' counts, summed into `out` in element order, and reset.
@@ -464,7 +500,12 @@ impl Software {
     /// ranges, in order without repeats (a polygon's pieces, seam copies
     /// and tile cuts share one), are read, so no thread keeps a list of
     /// what it touched (a branch a fragment).
-    fn gather(&mut self, instances: &[Instance], threads: usize, out: &mut Vec<(u32, u64)>) {
+    fn gather(
+        &mut self,
+        instances: &[Instance],
+        (threads, packing): (usize, bool),
+        out: &mut Vec<(u32, u64)>,
+    ) {
         out.clear();
         self.ranges.clear();
         self.ranges.extend(
@@ -476,6 +517,7 @@ impl Software {
         self.ranges.sort_unstable();
         self.ranges.dedup();
         let (ranges, counts) = (&self.ranges, &mut self.counts[..threads]);
+        let visible = &mut self.visible[..if packing { threads } else { 0 }];
         // Two halves of the elements (ranges are disjoint, in order), the
         // second on another thread where there are many.
         let total: usize = ranges.iter().map(|r| r.1 as usize).sum();
@@ -492,21 +534,30 @@ impl Software {
             ranges.len()
         };
         let Some(&(split, _)) = ranges.get(cut) else {
-            sum_counts(&ranges[..], counts.iter_mut().map(|c| &mut c[..]), 0, out);
+            let all = (whole(counts), whole(visible));
+            sum_counts(&ranges[..], all, 0, out);
             return;
         };
-        let (low, high): (Vec<&mut [u32]>, Vec<&mut [u32]>) = counts
-            .iter_mut()
-            .map(|c| c.split_at_mut(split as usize))
-            .unzip();
+        let split_all = |list| halves(list, split as usize);
+        let ((low, high), (low_seen, high_seen)) = (split_all(counts), split_all(visible));
         let mut rest = Vec::new();
         std::thread::scope(|s| {
             let later = &ranges[cut..];
-            s.spawn(|| sum_counts(later, high.into_iter(), split as usize, &mut rest));
-            sum_counts(&ranges[..cut], low.into_iter(), 0, out);
+            s.spawn(|| sum_counts(later, (high, high_seen), split as usize, &mut rest));
+            sum_counts(&ranges[..cut], (low, low_seen), 0, out);
         });
         out.extend_from_slice(&rest);
     }
+}
+
+/// Every thread's counts, whole.
+fn whole(list: &mut [Counts]) -> Vec<&mut [u32]> {
+    list.iter_mut().map(|c| &mut c[..]).collect()
+}
+
+/// Every thread's counts cut at element `split`.
+fn halves(list: &mut [Counts], split: usize) -> (Vec<&mut [u32]>, Vec<&mut [u32]>) {
+    list.iter_mut().map(|c| c.split_at_mut(split)).unzip()
 }
 
 /// Rectangles below which they are prepared on one thread.
@@ -518,21 +569,24 @@ type Spans = (Range<usize>, Range<usize>);
 /// Elements below which the counts are gathered on one thread.
 const PARALLEL_GATHER: usize = 1 << 15;
 
-/// The threads' counts (each of elements `from..`) over element `ranges`,
-/// summed into `out` in element order where not zero, and reset.
-fn sum_counts<'a>(
+/// The threads' coverage counts and, where kept, visible counts (each of
+/// elements `from..`) over element `ranges`, summed into `out` in element
+/// order where not zero (visible << 32 | covered: `formfactor::unpack`'s
+/// packing), and reset.
+fn sum_counts(
     ranges: &[(u32, u32)],
-    counts: impl Iterator<Item = &'a mut [u32]>,
+    (mut counts, mut visible): (Vec<&mut [u32]>, Vec<&mut [u32]>),
     from: usize,
     out: &mut Vec<(u32, u64)>,
 ) {
-    let mut counts: Vec<&mut [u32]> = counts.collect();
+    let total = |list: &mut Vec<&mut [u32]>, id: usize| -> u64 {
+        list.iter_mut()
+            .map(|c| u64::from(std::mem::take(&mut c[id - from])))
+            .sum()
+    };
     for &(first, n) in ranges {
         for id in first as usize..(first + n) as usize {
-            let sum: u64 = counts
-                .iter_mut()
-                .map(|c| u64::from(std::mem::take(&mut c[id - from])))
-                .sum();
+            let sum = (total(&mut visible, id) << 32) | total(&mut counts, id);
             if sum > 0 {
                 out.push((id as u32, sum));
             }

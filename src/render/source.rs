@@ -106,6 +106,9 @@ impl Tier {
             raster.use_tessellation(&gpu.device, opts.tessellation_tolerance)?;
         }
         raster.set_count_coverage(opts.form_factor == FormFactorMethod::Hybrid);
+        // The hybrid method's weights count a visible cell as VISIBLE_ONE:
+        // the CPU drawing can count them itself.
+        raster.set_pack_visible(opts.form_factor == FormFactorMethod::Hybrid);
         raster.set_cull_occluded(opts.occlusion_cull);
         raster.set_software(opts.rasteriser_for(gpu.is_cpu()) == Rasteriser::Cpu);
         Ok(Self {
@@ -325,6 +328,7 @@ impl<'a> GpuFormFactors<'a> {
         let mut exchange = Duration::ZERO;
         self.view = [0; 3];
         let cut = reach.is_finite();
+        let mut packed = false;
         if self.comm.size() == 1 {
             // One process, perhaps standing in for a rank grid: draw every
             // rank's tiles in turn.
@@ -336,7 +340,15 @@ impl<'a> GpuFormFactors<'a> {
                 let v = self.view_of(tier, t, own, cut);
                 self.view = [0, 1, 2].map(|i| self.view[i] + v[i]);
                 let Tier { raster, cells, .. } = &self.tiers[tier];
-                Exchanger::add_own(&mut self.acc, cells, &self.items, raster.coverage_pairs());
+                if raster.coverage_packs_visible() {
+                    // The drawing counted every element's visible and
+                    // covered cells (one tile: the whole hemisphere).
+                    packed = true;
+                    self.pairs.clear();
+                    self.pairs.extend(raster.coverage_pairs());
+                } else {
+                    Exchanger::add_own(&mut self.acc, cells, &self.items, raster.coverage_pairs());
+                }
             }
         } else {
             let own = self.tiers[tier].cells.grid_position(self.comm.rank());
@@ -350,7 +362,9 @@ impl<'a> GpuFormFactors<'a> {
         if self.acc.take_overflow() {
             return Err(RenderError::Overflow(shooter));
         }
-        self.acc.drain_fixed(&mut self.pairs);
+        if !packed {
+            self.acc.drain_fixed(&mut self.pairs);
+        }
         Ok(exchange)
     }
 

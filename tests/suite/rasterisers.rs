@@ -47,7 +47,8 @@ fn agree(scene: &radiosity::scene::Scene, mesh: &radiosity::mesh::Mesh, res: Res
         assert_eq!(r.software(), cpu);
         r
     };
-    let (mut device, mut cpu) = (new(false), new(true));
+    let (mut device, mut cpu, mut packing) = (new(false), new(true), new(true));
+    packing.set_pack_visible(true);
     let layouts = [
         (TileLayout::whole(res), (0, 0)),
         (
@@ -71,7 +72,7 @@ fn agree(scene: &radiosity::scene::Scene, mesh: &radiosity::mesh::Mesh, res: Res
     ];
     // What a cell shows: a polygon, a back face or nothing.
     let polygon = |item: u32| mesh.elements.get(item as usize).map(|e| e.polygon);
-    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let (mut a, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
     for (layout, own) in layouts {
         let (mut cells, mut drawn, mut elements, mut polygons) = (0, 0, 0, 0);
         let (mut counted, mut count_diff) = (0u64, 0u64);
@@ -82,6 +83,28 @@ fn agree(scene: &radiosity::scene::Scene, mesh: &radiosity::mesh::Mesh, res: Res
                 .expect("device");
             cpu.render(&g.device, &g.queue, &frame, &layout, own, &mut b, None)
                 .expect("cpu");
+            // Counting visible cells into the coverage pairs (one rank's
+            // whole hemisphere only) changes no cell, and each pair is the
+            // element's visible cells << 32 | its covered cells.
+            packing
+                .render(&g.device, &g.queue, &frame, &layout, own, &mut c, None)
+                .expect("cpu, packing");
+            assert!(
+                b == c,
+                "{layout:?}: counting visible cells changed the cells"
+            );
+            let whole = layout.ranks() == 1;
+            assert_eq!(packing.coverage_packs_visible(), whole, "{layout:?}");
+            let mut want: BTreeMap<u32, u64> = cpu.coverage_pairs().collect();
+            if whole {
+                for &item in &b {
+                    if let Some(count) = want.get_mut(&item) {
+                        *count += 1 << 32;
+                    }
+                }
+            }
+            let got: BTreeMap<u32, u64> = packing.coverage_pairs().collect();
+            assert!(got == want, "{layout:?}: other packed counts");
             assert_eq!(a.len(), b.len());
             cells += a.len();
             drawn += b.iter().filter(|&&c| c != EMPTY).count();
