@@ -73,6 +73,11 @@ pub struct Transport {
     back: Vec<f64>,
     /// The groups' patches.
     members: Members,
+    /// The landings by the group landed on: group p's are
+    /// `into[into_offsets[p]..into_offsets[p + 1]]` as (group it left,
+    /// share), in the order [`Transport::irradiance`] adds them.
+    into_offsets: Vec<usize>,
+    into: Vec<(u32, f64)>,
 }
 
 /// Each group's patches: group g's are `patches[offsets[g]..offsets[g + 1]]`,
@@ -347,6 +352,7 @@ impl Transport {
             landings.len(),
             start.elapsed().as_secs_f64()
         );
+        let (into_offsets, into) = transposed(&offsets, &landings, count);
         Self {
             group_of,
             area,
@@ -355,6 +361,8 @@ impl Transport {
             landings,
             back,
             members,
+            into_offsets,
+            into,
         }
     }
 
@@ -399,18 +407,46 @@ impl Transport {
         let mut leaving: Vec<[f64; 3]> = unshot.to_vec();
         leaving.resize(n, [0.0; 3]);
         let mut landing = vec![[0.0; 3]; n];
+        // Each group's landing gathered from the groups it is reached from,
+        // in the order a pass over the leaving groups would add them (so
+        // the same sums), the groups shared out between the cores where
+        // the landings are many.
+        let threads = if self.into.len() >= PARALLEL_CARRY {
+            crate::parallel::cores().min(8)
+        } else {
+            1
+        };
+        let chunk = n.div_ceil(threads.max(1)).max(1);
         for _ in 0..MAX_BOUNCES {
-            landing.iter_mut().for_each(|l| *l = [0.0; 3]);
-            for (q, out) in leaving.iter().enumerate() {
-                if *out == [0.0; 3] {
-                    continue;
-                }
-                for &(p, s) in self.row(q) {
-                    let l = &mut landing[p as usize];
-                    for c in 0..3 {
-                        l[c] += s * out[c];
+            let gather = |first: usize, part: &mut [[f64; 3]]| {
+                for (k, l) in part.iter_mut().enumerate() {
+                    let p = first + k;
+                    *l = [0.0; 3];
+                    for &(q, s) in &self.into[self.into_offsets[p]..self.into_offsets[p + 1]] {
+                        let out = leaving[q as usize];
+                        if out == [0.0; 3] {
+                            continue;
+                        }
+                        for c in 0..3 {
+                            l[c] += s * out[c];
+                        }
                     }
                 }
+            };
+            if threads <= 1 {
+                gather(0, &mut landing);
+            } else {
+                std::thread::scope(|scope| {
+                    let mut parts = landing.chunks_mut(chunk).enumerate();
+                    let first = parts.next();
+                    for (k, part) in parts {
+                        let gather = &gather;
+                        scope.spawn(move || gather(k * chunk, part));
+                    }
+                    if let Some((_, part)) = first {
+                        gather(0, part);
+                    }
+                });
             }
             let mut flight = 0.0;
             for p in 0..n {
@@ -430,6 +466,40 @@ impl Transport {
             .map(|(t, &a)| if a > 0.0 { t.map(|x| x / a) } else { [0.0; 3] })
             .collect()
     }
+}
+
+/// Landings below which a bounce of [`Transport::irradiance`] runs on one
+/// thread.
+const PARALLEL_CARRY: usize = 1 << 16;
+
+/// The landings by group left (`offsets`, `landings`) as the landings by
+/// group landed on, each group's in order of the group left (a stable
+/// counting sort): (offsets, (group left, share)).
+fn transposed(
+    offsets: &[usize],
+    landings: &[(u32, f64)],
+    count: usize,
+) -> (Vec<usize>, Vec<(u32, f64)>) {
+    let mut into_offsets = vec![0usize; count + 1];
+    for &(p, _) in landings {
+        if let Some(o) = into_offsets.get_mut(p as usize + 1) {
+            *o += 1;
+        }
+    }
+    for k in 0..count {
+        into_offsets[k + 1] += into_offsets[k];
+    }
+    let mut next = into_offsets.clone();
+    let mut into = vec![(0u32, 0.0f64); into_offsets[count]];
+    for q in 0..offsets.len().saturating_sub(1) {
+        for &(p, s) in &landings[offsets[q]..offsets[q + 1]] {
+            if let Some(at) = next.get_mut(p as usize) {
+                into[*at] = (q as u32, s);
+                *at += 1;
+            }
+        }
+    }
+    (into_offsets, into)
 }
 
 /// Per patch, its group: the patch itself in meshes of up to
@@ -912,6 +982,68 @@ mod tests {
                 "({u}, {v}) -> ({a}, {b})"
             );
         }
+    }
+
+    #[test]
+    fn gathered_landings_carry_the_light_as_scattered_ones_do() {
+        // Each group's landing gathered from where it came, on every core,
+        // against a pass over the leaving groups (the way it was carried
+        // first): the same bits, for signed unshot light with zero groups.
+        let scene = crate::scene::open("cornell").expect("built-in scene");
+        let mesh = Mesh::build(&scene, &MeshSettings::default());
+        let t = Transport::new(&mesh);
+        assert!(
+            t.into.len() >= PARALLEL_CARRY,
+            "{} landings: one thread",
+            t.into.len()
+        );
+        let mut rng = crate::fuzz::Rng(7);
+        let n = t.groups();
+        let unshot: Vec<[f64; 3]> = (0..n)
+            .map(|_| {
+                if rng.below(4) == 0 {
+                    [0.0; 3]
+                } else {
+                    [(); 3].map(|_| rng.unit() - 0.3)
+                }
+            })
+            .collect();
+        // The scattering pass, as it was.
+        let start: f64 = unshot.iter().flatten().map(|x| x.abs()).sum();
+        let (mut total, mut leaving) = (vec![[0.0; 3]; n], unshot.clone());
+        let mut landing = vec![[0.0f64; 3]; n];
+        for _ in 0..MAX_BOUNCES {
+            landing.iter_mut().for_each(|l| *l = [0.0; 3]);
+            for (q, out) in leaving.iter().enumerate() {
+                if *out == [0.0; 3] {
+                    continue;
+                }
+                for &(p, s) in t.row(q) {
+                    for c in 0..3 {
+                        landing[p as usize][c] += s * out[c];
+                    }
+                }
+            }
+            let mut flight = 0.0;
+            for p in 0..n {
+                for c in 0..3 {
+                    total[p][c] += landing[p][c];
+                    leaving[p][c] = t.reflectance[p][c] * landing[p][c];
+                    flight += leaving[p][c].abs();
+                }
+            }
+            if flight <= CARRY_TOLERANCE * start {
+                break;
+            }
+        }
+        let want: Vec<[f64; 3]> = total
+            .iter()
+            .zip(&t.area)
+            .map(|(x, &a)| if a > 0.0 { x.map(|x| x / a) } else { [0.0; 3] })
+            .collect();
+        let got = t.irradiance(&unshot);
+        let bits = |v: &[[f64; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert!(bits(&got) == bits(&want), "other irradiances");
     }
 
     #[test]
