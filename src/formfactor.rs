@@ -532,37 +532,34 @@ fn integrals(
     jobs: &[(u32, f64)],
 ) -> Vec<f64> {
     let outlines = &geo.outlines;
-    let eval = |jobs: &[(u32, f64)]| -> Vec<f64> {
-        let mut values = Vec::with_capacity(jobs.len() * outlines.len());
-        let mut column = vec![0.0; outlines.len()];
-        for &(j, v) in jobs {
-            let r = &table.elements[j as usize];
-            let x = r.centre.as_dvec3();
-            let normal = table.normals[r.polygon as usize].as_dvec3();
-            let scale = v * r.area / geo.patch.area;
-            let reach = geo.radius.max(r.radius);
-            if x.distance(geo.origin) > NEAR_FIELD * reach {
-                // Far: one integral over the whole patch, at the element's centre.
-                let f = scale * point_to_polygon(x, normal, geo.patch_outline());
-                values.extend(shares.iter().map(|a| f * a));
-            } else {
-                // Near: per shooter element, averaged over four points of the
-                // receiver (the midpoint rule alone is off where the
-                // integrand bends within the element).
-                column.iter_mut().for_each(|c| *c = 0.0);
-                for y in sub_points(&mesh.elements[j as usize]) {
-                    for (k, (c, (o, n))) in column.iter_mut().zip(outlines).enumerate() {
-                        if columns.contains(&k) {
-                            *c += point_to_polygon(y, normal, &o[..*n]);
-                        }
+    let mut values = Vec::with_capacity(jobs.len() * outlines.len());
+    let mut column = vec![0.0; outlines.len()];
+    for &(j, v) in jobs {
+        let r = &table.elements[j as usize];
+        let x = r.centre.as_dvec3();
+        let normal = table.normals[r.polygon as usize].as_dvec3();
+        let scale = v * r.area / geo.patch.area;
+        let reach = geo.radius.max(r.radius);
+        if x.distance(geo.origin) > NEAR_FIELD * reach {
+            // Far: one integral over the whole patch, at the element's centre.
+            let f = scale * point_to_polygon(x, normal, geo.patch_outline());
+            values.extend(shares.iter().map(|a| f * a));
+        } else {
+            // Near: per shooter element, averaged over four points of the
+            // receiver (the midpoint rule alone is off where the
+            // integrand bends within the element).
+            column.iter_mut().for_each(|c| *c = 0.0);
+            for y in sub_points(&mesh.elements[j as usize]) {
+                for (k, (c, (o, n))) in column.iter_mut().zip(outlines).enumerate() {
+                    if columns.contains(&k) {
+                        *c += point_to_polygon(y, normal, &o[..*n]);
                     }
                 }
-                values.extend(column.iter().map(|c| scale * c / 4.0));
             }
+            values.extend(column.iter().map(|c| scale * c / 4.0));
         }
-        values
-    };
-    eval(jobs)
+    }
+    values
 }
 
 /// Fixed-point scale of the form factors a split decision sums: per
@@ -617,8 +614,7 @@ pub fn point_to_polygon(x: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
         let r = [*p0 - x, *p1 - x, *p2 - x, *p3 - x];
         if r.iter().all(|a| n.dot(*a) >= 0.0) {
             // A quad wholly in front (most calls): nothing to clip, and its
-            // four edges written out, so the compiler interleaves their
-            // square roots, divisions and arctangents. The same terms,
+            // four edges side by side (`quad_edge_terms`). The same terms,
             // summed in the same order as below.
             let t = quad_edge_terms(&r, n);
             let sum = 0.0 + t[0] + t[1] + t[2] + t[3];

@@ -278,43 +278,38 @@ impl OcclusionMap {
             // without a look at its cells (`at` below is never nearer).
             let hidden_tile = |t: usize| {
                 let far = coarse[t / TILE];
-                t % TILE == 0
-                    && t + TILE <= cols
-                    && far != STALE
-                    && far * (1.0 + DEPTH_MARGIN) < nearest
+                far != STALE && far * (1.0 + DEPTH_MARGIN) < nearest
             };
-            column_runs(self.res, piece.rect).all(|run| {
-                let end = run.end;
-                let mut cells = run.into_iter();
-                let mut next = cells.next();
-                std::iter::from_fn(|| {
-                    let t = next?;
-                    if t + TILE <= end && hidden_tile(t) {
-                        next = cells.nth(TILE - 1);
-                        return Some(None);
-                    }
-                    next = cells.next();
-                    Some(Some(t))
-                })
-                .flatten()
-                .all(|t| {
-                    let (ct, st) = (self.cols_cos[t], self.cols_sin[t]);
-                    if planes.least(ct, st) < -INSIDE {
+            let hidden_cell = |t: usize| {
+                let (ct, st) = (self.cols_cos[t], self.cols_sin[t]);
+                if planes.least(ct, st) < -INSIDE {
+                    return true;
+                }
+                let cos = planes.cosine(ct, st);
+                let t_hit = piece.plane[3] / cos;
+                let at = if cos.abs() >= GRAZING && t_hit.is_finite() {
+                    if t_hit <= 0.0 {
+                        // Behind the hemisphere: no fragment.
                         return true;
                     }
-                    let cos = planes.cosine(ct, st);
-                    let t_hit = piece.plane[3] / cos;
-                    let at = if cos.abs() >= GRAZING && t_hit.is_finite() {
-                        if t_hit <= 0.0 {
-                            // Behind the hemisphere: no fragment.
-                            return true;
-                        }
-                        t_hit.max(nearest)
-                    } else {
-                        nearest
-                    };
-                    depth[t] * (1.0 + DEPTH_MARGIN) < at
-                })
+                    t_hit.max(nearest)
+                } else {
+                    nearest
+                };
+                depth[t] * (1.0 + DEPTH_MARGIN) < at
+            };
+            column_runs(self.res, piece.rect).all(|run| {
+                // Tile by tile, each run of its cells.
+                let mut t = run.start;
+                while t < run.end {
+                    let next = ((t / TILE + 1) * TILE).min(run.end);
+                    let whole = next - t == TILE && hidden_tile(t);
+                    if !whole && !(t..next).all(hidden_cell) {
+                        return false;
+                    }
+                    t = next;
+                }
+                true
             })
         })
     }

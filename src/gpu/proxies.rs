@@ -152,13 +152,18 @@ fn block_spheres(polygons: &[PolygonProxies]) -> Vec<(Vec3, f32)> {
                 .iter()
                 .map(|p| p.centre.distance(centre) + p.radius)
                 .fold(0.0f32, f32::max);
-            // Grown a little: f32 rounding must not put a polygon outside it.
-            (
-                centre,
-                radius * (1.0 + 1e-5) + 1e-6 * centre.abs().max_element(),
-            )
+            grown(centre, radius)
         })
         .collect()
+}
+
+/// A bounding sphere grown a little: f32 rounding must not put what it
+/// bounds outside it.
+fn grown(centre: Vec3, radius: f32) -> (Vec3, f32) {
+    (
+        centre,
+        radius * (1.0 + 1e-5) + 1e-6 * centre.abs().max_element(),
+    )
 }
 
 impl Proxies {
@@ -224,14 +229,7 @@ impl Proxies {
         let solid_spheres = mesh
             .solids
             .iter()
-            .map(|s| {
-                let centre = 0.5 * (s.lo + s.hi);
-                let radius = 0.5 * (s.hi - s.lo).length();
-                (
-                    centre,
-                    radius * (1.0 + 1e-5) + 1e-6 * centre.abs().max_element(),
-                )
-            })
+            .map(|s| grown(0.5 * (s.lo + s.hi), 0.5 * (s.hi - s.lo).length()))
             .collect();
         Self {
             solid_spheres,

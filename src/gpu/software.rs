@@ -43,6 +43,9 @@ pub(super) struct Software {
     /// Each rectangle's test and owned cells (reused from shot to shot).
     prepared: Vec<Prepared>,
     spans: Vec<Spans>,
+    /// The same for the second half of a shot's rectangles, prepared on
+    /// another thread (kept too).
+    second: (Vec<Prepared>, Vec<Spans>),
     elements: usize,
 }
 
@@ -348,6 +351,7 @@ impl Software {
             ranges: Vec::new(),
             owned: None,
             prepared: Vec::new(),
+            second: (Vec::new(), Vec::new()),
             spans: Vec::new(),
             elements,
         }
@@ -437,13 +441,13 @@ impl Software {
         };
         if threads > 1 && instances.len() >= PARALLEL_PREPARE {
             let (first, second) = instances.split_at(instances.len() / 2);
-            let (mut prepared, mut spans) = (Vec::new(), Vec::new());
+            let (prepared, spans) = &mut self.second;
             std::thread::scope(|s| {
-                s.spawn(|| prepare(second, &mut prepared, &mut spans));
+                s.spawn(|| prepare(second, prepared, spans));
                 prepare(first, &mut self.prepared, &mut self.spans);
             });
-            self.prepared.append(&mut prepared);
-            self.spans.append(&mut spans);
+            self.prepared.append(prepared);
+            self.spans.append(spans);
         } else {
             prepare(instances, &mut self.prepared, &mut self.spans);
         }

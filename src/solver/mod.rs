@@ -454,13 +454,6 @@ impl<'m> Solver<'m> {
         self.owners.of(self.receiving[element as usize].patch)
     }
 
-    /// Whether this rank updates element `element` (its patch's owner).
-    pub fn owns_element(&self, element: u32) -> bool {
-        self.receiving
-            .get(element as usize)
-            .is_some_and(|e| self.owns(e.patch))
-    }
-
     fn own_patches(&self) -> impl Iterator<Item = usize> {
         self.owners.patches(self.rank, self.mesh.patches.len())
     }
