@@ -171,8 +171,6 @@ pub struct GpuFormFactors<'a> {
     split: bool,
     /// Per patch, whether the last hemisphere's cells saw it (a visible cell).
     seen: Vec<bool>,
-    /// Per patch: whether the far receivers' rays saw it in this shot.
-    rayed: Vec<bool>,
     /// The receivers as hybrid rows and the marking of patches seen read
     /// them (compact: see [`formfactor::ReceiverTable`]).
     receivers: formfactor::ReceiverTable,
@@ -252,7 +250,6 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, per_rank_cache, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
-            rayed: vec![false; mesh.patches.len()],
             receivers: formfactor::ReceiverTable::new(mesh),
             far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh

@@ -344,7 +344,6 @@ impl GpuFormFactors<'_> {
         let mesh = self.mesh;
         let shot = self.far_shot(shooter, centre, tier, within);
         self.mark_seen();
-        let before = self.pairs.len();
         let seen = &self.seen;
         let clear = match ahead {
             Some(clear) => clear,
@@ -372,29 +371,31 @@ impl GpuFormFactors<'_> {
             found
         };
         let found = on_every_core(&clear, (PARALLEL_CLEAR, CLEAR_RUN), elements);
-        for j in found {
-            self.pairs.push((j, formfactor::VISIBLE_ONE + 1));
-            self.rayed[self.receivers.patch(j) as usize] = true;
-        }
-        if self.pairs.len() > before {
+        if !found.is_empty() {
             // A patch the rays saw takes their verdict alone: the cells
             // it covered (all hidden, or it would have been seen) go, so
             // its elements' visibilities do not depend on whether a
-            // hidden polygon was drawn (the occlusion cull) or not.
-            let (receivers, rayed) = (&self.receivers, &mut self.rayed);
-            let added = self.pairs.len() - before;
-            let mut index = 0;
-            self.pairs.retain(|&(j, _)| {
-                index += 1;
-                index > before || !rayed[receivers.patch(j) as usize]
-            });
-            // Only the rays' patches were marked (they end the list).
-            for &(j, _) in &self.pairs[self.pairs.len() - added..] {
-                rayed[receivers.patch(j) as usize] = false;
+            // hidden polygon was drawn (the occlusion cull) or not. Both
+            // lists are sorted by element (the rays' in patch order, a
+            // patch's elements a run of their own), so one merge takes
+            // the rays' pairs in and their patches' cells' pairs out.
+            let old = std::mem::take(&mut self.pairs);
+            let mut merged = Vec::with_capacity(old.len() + found.len());
+            let (mut at, mut i) = (0, 0);
+            while let Some(&first) = found.get(i) {
+                let patch = &mesh.patches[self.receivers.patch(first) as usize];
+                let (lo, hi) = (patch.elements.start, patch.elements.end);
+                let below = at + old[at..].partition_point(|p| p.0 < lo);
+                merged.extend_from_slice(&old[at..below]);
+                at = below + old[below..].partition_point(|p| p.0 < hi);
+                while let Some(&j) = found.get(i).filter(|&&j| j < hi) {
+                    merged.push((j, formfactor::VISIBLE_ONE + 1));
+                    i += 1;
+                }
             }
-            // Two sorted runs (the cells' pairs, then these in patch
-            // order): the stable sort finds them and merges in one pass.
-            self.pairs.sort_by_key(|p| p.0);
+            merged.extend_from_slice(&old[at..]);
+            debug_assert!(merged.windows(2).all(|w| w[0].0 < w[1].0));
+            self.pairs = merged;
         }
         self.timings.far += start.elapsed();
     }
