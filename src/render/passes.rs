@@ -4,14 +4,14 @@
 
 use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
-use super::shoot::{shoot_until, Flags, LoopHooks};
+use super::shoot::{Flags, LoopHooks, ShotLoop, Step};
 use super::source::GpuFormFactors;
 use super::trace::{gather_whole, Extra, Trace};
 use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
 use crate::gpu::Gpu;
 use crate::lights::KeptField;
 use crate::mesh::Mesh;
-use crate::parallel::Collectives;
+use crate::parallel::{Collectives, Single};
 use crate::refine::{self, PatchStats};
 use crate::report::{Refinement, TracePoint};
 use crate::scene::Scene;
@@ -302,7 +302,14 @@ fn one_pass(
     (pass, before): (u32, f64),
     (progress, show): (&mut dyn FnMut(&Progress), ShowPass<'_>),
 ) -> Result<Measured, RenderError> {
-    let mut source = GpuFormFactors::new(gpu, mesh, opts, comm, scene.extent())?;
+    // A batched solve's passes are batched too, each rank drawing whole
+    // hemispheres for its rows (as the final solve's: see
+    // `ShotLoop::batched`), so the ranks divide the passes as they divide
+    // the solve; the mesh then depends on the batch, never on the ranks.
+    let one = Single::default();
+    let source_comm: &dyn Collectives = if opts.batch > 1 { &one } else { comm };
+    let mut source = GpuFormFactors::new(gpu, mesh, opts, source_comm, scene.extent())?;
+    source.set_transport_ranks(comm.rank(), comm.size());
     // Coarse, unsplit hemispheres measure what the pass decides by as
     // well, in 2-6x less pass time (README "Refinement by need"); the
     // emitters draw fine, as a coarse light over-refined the 64 cubes
@@ -327,15 +334,11 @@ fn one_pass(
         progress,
         show: (pass, show),
     };
-    let stats = shoot_until(
-        mesh,
-        &opts.stop,
-        floor,
-        comm,
-        &mut source,
-        &mut solver,
-        &mut hooks,
-    )?;
+    let mut shots = ShotLoop::new(mesh, comm, opts.stop, floor)
+        .batched(opts.batch)
+        .dealing_rows(opts.deal_rows);
+    while let Step::Shot(_) = shots.step(&mut source, &mut solver, &mut hooks)? {}
+    let stats = shots.stats;
     let seconds = started
         .elapsed()
         .saturating_sub(hooks.trace.spent)

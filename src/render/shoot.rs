@@ -394,6 +394,11 @@ impl<'m> ShotLoop<'m> {
                 });
             }
         }
+        // A shooter's penumbra is its last row's, which another rank may
+        // have drawn: the passes sum every rank's (see `refined_mesh`).
+        for (c, _) in chosen.iter().zip(&drew).filter(|(_, &d)| !d) {
+            source.forget_penumbra(c.patch);
+        }
         self.split_round(
             (source, solver),
             (&chosen, &regions, &drew),

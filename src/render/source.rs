@@ -740,6 +740,14 @@ impl GpuFormFactors<'_> {
         self.choice.measuring = true;
     }
 
+    /// Forgets what `shooter`'s last row measured of its penumbra (another
+    /// rank drew its row this time, and holds the new measure).
+    pub fn forget_penumbra(&mut self, shooter: u32) {
+        if let Some(p) = self.penumbra.get_mut(shooter as usize) {
+            *p = [0, 0];
+        }
+    }
+
     /// Builds transport rows for rank `rank` of `ranks`' elements only
     /// (a batched solve's source of one process: see `ShotLoop::batched`).
     pub fn set_transport_ranks(&mut self, rank: usize, ranks: usize) {

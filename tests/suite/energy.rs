@@ -164,8 +164,30 @@ fn batched_shots_conserve_energy_and_agree_on_any_rank_count() {
         one.timings.transport_shots,
         one.shots
     );
+    // The passes are batched too, their rows dealt over the ranks: a
+    // shooter's penumbra is its last row's, wherever that was drawn, so
+    // the passes choose the same mesh on any rank count.
+    let refined = |r: &radiosity::report::Report| {
+        let f = &r.refinement;
+        (
+            f.end,
+            f.shots,
+            f.shooter_refinements,
+            f.receiver_refinements,
+        )
+    };
+    assert!(
+        one.refinement.shooter_refinements > 0,
+        "no shooter refined: {:?}",
+        refined(&one)
+    );
     for ranks in [2, 3] {
         let r = run(ranks);
+        assert_eq!(
+            refined(&r),
+            refined(&one),
+            "{ranks} ranks: the passes' mesh"
+        );
         // Split shots' groups are dealt over the ranks in a second round
         // of their batch: the bits compared below are assembled from
         // groups drawn on other ranks than their rows.
