@@ -197,6 +197,10 @@ pub struct ShotLoop<'m> {
     batch: usize,
     /// Whether a batch's rows and groups are pooled ([`Deal`]).
     pooled: bool,
+    /// A batch's rows and the words sent to each rank, kept from batch to
+    /// batch: fresh ones cost the kernel's zeroing of their pages every
+    /// batch (a fortieth of a one-core shot in cubes-b1).
+    kept: (Vec<Vec<Transfer>>, Vec<Vec<u32>>),
     /// What the loop measured so far.
     pub stats: LoopStats,
 }
@@ -216,6 +220,7 @@ impl<'m> ShotLoop<'m> {
             ff: Vec::new(),
             batch: 1,
             pooled: true,
+            kept: (Vec::new(), Vec::new()),
             stats: LoopStats {
                 patch_power: vec![0.0; mesh.patches.len()],
                 ..LoopStats::default()
@@ -360,8 +365,11 @@ impl<'m> ShotLoop<'m> {
         };
         let deal = Deal::new(&costs, ranks, self.pooled);
         // This rank's rows, each sent in pieces to the owners of its elements.
-        let mut outgoing = vec![Vec::new(); ranks];
-        let mut rows = vec![Vec::new(); chosen.len()];
+        let (mut rows, mut outgoing) = std::mem::take(&mut self.kept);
+        rows.resize_with(chosen.len(), Vec::new);
+        outgoing.resize_with(ranks, Vec::new);
+        rows.iter_mut().for_each(Vec::clear);
+        outgoing.iter_mut().for_each(Vec::clear);
         let mut sums = vec![0.0; chosen.len() * ROW_SUMS];
         let batch_start = solver.shots();
         let recorded = batch_start < MAX_ROW_RECORDS;
@@ -443,6 +451,7 @@ impl<'m> ShotLoop<'m> {
             .shot_times
             .extend(std::iter::repeat_n(per_shot, chosen.len()));
         hooks.after_shot(solver, unshot_fraction);
+        self.kept = (rows, outgoing);
         Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
     }
 
