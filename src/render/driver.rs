@@ -4,7 +4,7 @@
 use super::hooks::{Progress, SolveHooks};
 use super::options::{fingerprint, RenderError, RenderOptions};
 use super::passes::{refined_mesh, shared_transport, wants_transport, Handoff, Refined};
-use super::shoot::{LoopStats, ShotLoop, Step};
+use super::shoot::{shoot_until, LoopStats};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Extra, Trace};
 use crate::checkpoint::Header;
@@ -174,11 +174,7 @@ fn final_solve<'m>(
     let ambient = t.elapsed().as_secs_f64();
     // Its gather is not a form-factor exchange: the report's bytes leave it out.
     let ambient_traffic = comm.traffic().since(before);
-    let mut shots = ShotLoop::new(mesh, comm, opts.stop, 0.0)
-        .batched(opts.batch)
-        .dealing_rows(opts.deal_rows);
-    while let Step::Shot(_) = shots.step(source, solver, &mut hooks)? {}
-    let stats = shots.stats;
+    let stats = shoot_until(mesh, opts, 0.0, comm, source, solver, &mut hooks)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
     Ok(Solved {
@@ -224,12 +220,8 @@ pub fn render_on(
     }
     crate::report::log_memory("the mesh");
     let t = Instant::now();
-    // A batched solve draws whole hemispheres on every rank: its source is
-    // one process's.
     let one = Single::default();
-    let source_comm: &dyn Collectives = if opts.batch > 1 { &one } else { comm };
-    let mut source = GpuFormFactors::new(gpu, &mesh, opts, source_comm, scene.extent())?;
-    source.set_transport_ranks(comm.rank(), comm.size());
+    let mut source = GpuFormFactors::for_solve(gpu, &mesh, opts, (comm, &one), scene.extent())?;
     timings.setup = t.elapsed().as_secs_f64();
     crate::report::log_memory("the rasteriser's set-up");
     let (mut solver, trace, so_far) =

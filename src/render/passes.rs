@@ -4,7 +4,7 @@
 
 use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
-use super::shoot::{Flags, LoopHooks, ShotLoop, Step};
+use super::shoot::{shoot_until, Flags, LoopHooks};
 use super::source::GpuFormFactors;
 use super::trace::{gather_whole, Extra, Trace};
 use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
@@ -307,9 +307,7 @@ fn one_pass(
     // `ShotLoop::batched`), so the ranks divide the passes as they divide
     // the solve; the mesh then depends on the batch, never on the ranks.
     let one = Single::default();
-    let source_comm: &dyn Collectives = if opts.batch > 1 { &one } else { comm };
-    let mut source = GpuFormFactors::new(gpu, mesh, opts, source_comm, scene.extent())?;
-    source.set_transport_ranks(comm.rank(), comm.size());
+    let mut source = GpuFormFactors::for_solve(gpu, mesh, opts, (comm, &one), scene.extent())?;
     // Coarse, unsplit hemispheres measure what the pass decides by as
     // well, in 2-6x less pass time (README "Refinement by need"); the
     // emitters draw fine, as a coarse light over-refined the 64 cubes
@@ -334,11 +332,15 @@ fn one_pass(
         progress,
         show: (pass, show),
     };
-    let mut shots = ShotLoop::new(mesh, comm, opts.stop, floor)
-        .batched(opts.batch)
-        .dealing_rows(opts.deal_rows);
-    while let Step::Shot(_) = shots.step(&mut source, &mut solver, &mut hooks)? {}
-    let stats = shots.stats;
+    let stats = shoot_until(
+        mesh,
+        opts,
+        floor,
+        comm,
+        &mut source,
+        &mut solver,
+        &mut hooks,
+    )?;
     let seconds = started
         .elapsed()
         .saturating_sub(hooks.trace.spent)

@@ -4,7 +4,7 @@
 //! cache and whether to save or stop; so every rank makes the same decision
 //! at the same shot.
 
-use super::options::RenderError;
+use super::options::{RenderError, RenderOptions};
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
 use crate::parallel::{Collectives, Deal};
@@ -910,17 +910,23 @@ fn unpack_rows(incoming: &[Vec<u32>], rows: &mut [Vec<Transfer>]) {
     }
 }
 
-/// Shoots until the loop stops (see [`ShotLoop`]).
+/// Shoots until the loop stops (see [`ShotLoop`]), as `opts` says: its
+/// stop rule, its batch and how a batch's rows are dealt. The final solve
+/// and the refinement passes both shoot here (with `source` from
+/// [`GpuFormFactors::for_solve`]).
+#[allow(clippy::too_many_arguments)]
 pub fn shoot_until<'m>(
     mesh: &'m Mesh,
-    stop: &StopRule,
+    opts: &RenderOptions,
     floor: f64,
     comm: &dyn Collectives,
     source: &mut GpuFormFactors,
     solver: &mut Solver<'m>,
     hooks: &mut dyn LoopHooks<'m>,
 ) -> Result<LoopStats, RenderError> {
-    let mut shots = ShotLoop::new(mesh, comm, *stop, floor);
+    let mut shots = ShotLoop::new(mesh, comm, opts.stop, floor)
+        .batched(opts.batch)
+        .dealing_rows(opts.deal_rows);
     while let Step::Shot(_) = shots.step(source, solver, hooks)? {}
     Ok(shots.stats)
 }

@@ -11,7 +11,7 @@ use crate::formfactor::{self, Row};
 use crate::gpu::{self, Gpu, GpuError, HemisphereRasterizer};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, EMPTY, FIXED_ONE};
 use crate::mesh::{Mesh, ShooterFrame};
-use crate::parallel::{self, Collectives};
+use crate::parallel::{self, Collectives, Single};
 use crate::settings::{FormFactorMethod, Projection, Rasteriser};
 use crate::solver::{FormFactorSource, ShotRegion, Transfer};
 use std::time::{Duration, Instant};
@@ -196,6 +196,23 @@ pub struct GpuFormFactors<'a> {
 }
 
 impl<'a> GpuFormFactors<'a> {
+    /// The source of a solve over `comm`'s ranks: a batched one
+    /// (`--batch`) draws whole hemispheres on every rank, so its source is
+    /// one process's (`one`), its transport rows still this rank's
+    /// elements'; otherwise the ranks split each hemisphere over `comm`.
+    pub fn for_solve(
+        gpu: &'a Gpu,
+        mesh: &'a Mesh,
+        opts: &RenderOptions,
+        (comm, one): (&'a dyn Collectives, &'a Single),
+        extent: f32,
+    ) -> Result<Self, RenderError> {
+        let source_comm: &dyn Collectives = if opts.batch > 1 { one } else { comm };
+        let mut source = Self::new(gpu, mesh, opts, source_comm, extent)?;
+        source.set_transport_ranks(comm.rank(), comm.size());
+        Ok(source)
+    }
+
     /// Uploads the mesh and builds the pipelines. With one process and a
     /// multi-rank `layout`, every rank's tiles are drawn here in turn.
     pub fn new(
