@@ -193,17 +193,29 @@ pub fn wants_transport(opts: &RenderOptions, mesh: &Mesh) -> bool {
     opts.ambient == AmbientTerm::Carried || opts.transport_below_for(mesh.patches.len()) > 0.0
 }
 
+/// Runs of groups per rank that a transport's rays are cut into
+/// ([`crate::ambient::Plan::pieces`]): enough that the last one taken is
+/// short, few enough that a ticket a run costs nothing.
+const TRANSPORT_RUNS_PER_RANK: usize = 32;
+
 /// Gives `mesh` its ambient transport (once), of `budget` rays
-/// ([`Transport::built_within`]), every rank of `comm` casting the groups
-/// dealt to it ([`crate::ambient::Plan::dealt`]) and all gathering the
-/// counts: the same bits as one rank casting them all.
+/// ([`Transport::built_within`]), every rank of `comm` casting runs of
+/// groups taken from a pool as it comes free
+/// ([`crate::ambient::Plan::pieces`]) and all gathering the counts: the
+/// same bits as one rank casting them all, whoever cast what.
 pub(super) fn shared_transport(mesh: &Mesh, budget: usize, comm: &dyn Collectives) {
     mesh.ambient.get_or_init(|| {
         Transport::built_within(mesh, budget, |plan| {
-            let (rank, ranks) = (comm.rank(), comm.size());
+            let ranks = comm.size();
+            if ranks == 1 {
+                return plan.cast_all();
+            }
+            let runs = plan.pieces(ranks * TRANSPORT_RUNS_PER_RANK);
             let mut words = Vec::new();
-            for row in plan.cast_these(&plan.dealt(rank, ranks)) {
-                row.pack(&mut words);
+            for k in crate::parallel::pool(comm, runs.len()) {
+                for row in plan.cast_these(&runs[k].clone().collect::<Vec<_>>()) {
+                    row.pack(&mut words);
+                }
             }
             let mut rows: Vec<GroupRays> = comm
                 .all_gather_u32(&words, None)

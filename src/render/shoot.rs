@@ -385,7 +385,7 @@ impl<'m> ShotLoop<'m> {
             match source.start_row(c.patch, region, &mut self.ff)? {
                 Started::Row => {
                     let out = (&mut outgoing[..], &mut rows[..], &mut sums[..]);
-                    self.send_row(solver, source, (c.patch, k), out);
+                    self.send_row(solver, source, (c.patch, k, region.shoot), out);
                 }
                 Started::Split(n) => groups[k] = n as u32,
             }
@@ -419,7 +419,7 @@ impl<'m> ShotLoop<'m> {
         // Each shot's sums come from one rank; the others add exact zeros.
         let all_sums = self.comm.all_gather_f64(&sums);
         source.timings.exchange += t.elapsed();
-        unpack_rows(&incoming, &mut rows);
+        unpack_rows(&incoming, &mut rows, &regions);
         let landing_start = Instant::now();
         let mut totals = vec![0.0; sums.len()];
         for part in all_sums.chunks_exact(sums.len().max(1)) {
@@ -455,20 +455,21 @@ impl<'m> ShotLoop<'m> {
         Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
     }
 
-    /// Row `k` of a batch (shooter `patch`), just made in `self.ff`: its
-    /// sums noted and its transfers packed for their owners.
+    /// Row `k` of a batch (shooter `patch`, shooting `shoot` as a whole),
+    /// just made in `self.ff`: its sums noted and its transfers packed for
+    /// their owners.
     fn send_row(
         &self,
         solver: &Solver,
         source: &GpuFormFactors,
-        (patch, k): (u32, usize),
+        (patch, k, shoot): (u32, usize, [f64; 3]),
         (outgoing, rows, sums): BatchOut<'_>,
     ) {
         let s = row_sums(solver, patch, &self.ff, source.last_blocked());
         sums[k * ROW_SUMS..(k + 1) * ROW_SUMS].copy_from_slice(&s);
         pack_row(
             solver,
-            (k, self.comm.rank()),
+            (k, self.comm.rank(), shoot),
             &self.ff,
             outgoing,
             &mut rows[k],
@@ -586,7 +587,7 @@ impl<'m> ShotLoop<'m> {
             self.send_row(
                 solver,
                 source,
-                (c.patch, k),
+                (c.patch, k, region.shoot),
                 (&mut *outgoing, &mut *rows, &mut *sums),
             );
             let cpu_seconds = crate::parallel::process_cpu_seconds() - cpu;
@@ -838,6 +839,15 @@ fn row_sums(solver: &Solver, shooter: u32, ff: &[Transfer], blocked: f64) -> [f6
 /// form factor's and each channel's radiosity's f64 bits, two words each.
 const TRANSFER_WORDS: usize = 9;
 
+/// Words a transfer of a uniform shot takes: its element and the form
+/// factor's bits. Its radiosities are F times what the patch shoots, which
+/// every rank knows (the batch's regions), so the owner makes them again,
+/// to the same bits.
+const UNIFORM_WORDS: usize = 3;
+
+/// A row's header bit saying its transfers travel as [`UNIFORM_WORDS`].
+const UNIFORM_ROW: u32 = 1 << 31;
+
 /// Appends `x`'s bits as two words, low first.
 fn push_bits(out: &mut Vec<u32>, x: f64) {
     let b = x.to_bits();
@@ -850,22 +860,38 @@ fn from_words(w: &[u32]) -> f64 {
     f64::from_bits(u64::from(w[0]) | u64::from(w[1]) << 32)
 }
 
+/// What a uniform shot of `shoot` sends a receiver of form factor `f`.
+fn uniform(f: f64, shoot: [f64; 3]) -> [f64; 3] {
+    shoot.map(|s| f * s)
+}
+
 /// Splits shot `k`'s row, computed on rank `rank`, between its elements'
 /// owners: this rank's transfers to `own`, the others' appended to their
 /// words as the shot's index and its transfer count, then
 /// [`TRANSFER_WORDS`] words a transfer (36 bytes: the element once, not
-/// once per value).
+/// once per value), or [`UNIFORM_WORDS`] (12 bytes, marked by
+/// [`UNIFORM_ROW`]) when every transfer's radiosities are, bit for bit,
+/// its form factor times `shoot` (a patch shooting uniformly).
 fn pack_row(
     solver: &Solver,
-    (k, rank): (usize, usize),
+    (k, rank, shoot): (usize, usize, [f64; 3]),
     ff: &[Transfer],
     outgoing: &mut [Vec<u32>],
     own: &mut Vec<Transfer>,
 ) {
+    let bits = |r: [f64; 3]| r.map(f64::to_bits);
+    let compact = ff
+        .iter()
+        .all(|t| bits(t.radiosity) == bits(uniform(t.form_factor, shoot)));
+    let (mark, words) = if compact {
+        (UNIFORM_ROW, UNIFORM_WORDS)
+    } else {
+        (0, TRANSFER_WORDS)
+    };
     let starts: Vec<usize> = outgoing.iter().map(Vec::len).collect();
     for (r, out) in outgoing.iter_mut().enumerate() {
         if r != rank {
-            out.extend([k as u32, 0]);
+            out.extend([k as u32 | mark, 0]);
         }
     }
     for t in ff {
@@ -877,35 +903,53 @@ fn pack_row(
         let out = &mut outgoing[r];
         out.push(t.element);
         push_bits(out, t.form_factor);
-        for c in t.radiosity {
-            push_bits(out, c);
+        if !compact {
+            for c in t.radiosity {
+                push_bits(out, c);
+            }
         }
     }
     for (r, (out, start)) in outgoing.iter_mut().zip(starts).enumerate() {
         if r != rank {
-            out[start + 1] = ((out.len() - start - 2) / TRANSFER_WORDS) as u32;
+            out[start + 1] = ((out.len() - start - 2) / words) as u32;
         }
     }
 }
 
 /// Adds the rows [`pack_row`] sent this rank to `rows`, by shot (each in
-/// its row's order), from every rank's words.
-fn unpack_rows(incoming: &[Vec<u32>], rows: &mut [Vec<Transfer>]) {
+/// its row's order), from every rank's words; `regions[k]` is how shot k
+/// shoots.
+fn unpack_rows(incoming: &[Vec<u32>], rows: &mut [Vec<Transfer>], regions: &[ShotRegion]) {
     for words in incoming {
         let mut at = 0;
-        while let [k, count, ..] = words[at..] {
-            let (k, count) = (k as usize, count as usize);
+        while let [head, count, ..] = words[at..] {
+            let (k, count) = ((head & !UNIFORM_ROW) as usize, count as usize);
+            let compact = head & UNIFORM_ROW != 0;
+            let size = if compact {
+                UNIFORM_WORDS
+            } else {
+                TRANSFER_WORDS
+            };
             at += 2;
-            let Some(body) = words.get(at..at + TRANSFER_WORDS * count) else {
+            let Some(body) = words.get(at..at + size * count) else {
                 break;
             };
-            let Some(row) = rows.get_mut(k) else { break };
-            row.extend(body.chunks_exact(TRANSFER_WORDS).map(|t| Transfer {
-                element: t[0],
-                form_factor: from_words(&t[1..3]),
-                radiosity: [3, 5, 7].map(|c| from_words(&t[c..c + 2])),
+            let (Some(row), Some(region)) = (rows.get_mut(k), regions.get(k)) else {
+                break;
+            };
+            row.extend(body.chunks_exact(size).map(|t| {
+                let form_factor = from_words(&t[1..3]);
+                Transfer {
+                    element: t[0],
+                    form_factor,
+                    radiosity: if compact {
+                        uniform(form_factor, region.shoot)
+                    } else {
+                        [3, 5, 7].map(|c| from_words(&t[c..c + 2]))
+                    },
+                }
             }));
-            at += TRANSFER_WORDS * count;
+            at += size * count;
         }
     }
 }
@@ -967,6 +1011,78 @@ mod tests {
             },
         ] {
             assert_eq!(Vote::unpack(&vote.pack()), vote);
+        }
+    }
+
+    #[test]
+    fn rows_travel_exactly_and_uniform_ones_in_a_third() {
+        let mesh = crate::mesh::unit_square(64, 2);
+        let solver = Solver::partitioned(&mesh, 0, 2);
+        let shoot = [0.3, 0.7, 1e-9];
+        let uniform_row: Vec<Transfer> = (0..mesh.elements.len() as u32)
+            .map(|j| {
+                let f = 1.0 / (1.0 + f64::from(j));
+                Transfer {
+                    element: j,
+                    form_factor: f,
+                    radiosity: uniform(f, shoot),
+                }
+            })
+            .collect();
+        // One transfer not F times the patch's (a shooter weighted by
+        // element), and one whose zero's sign differs: both rows go whole.
+        let mut weighted = uniform_row.clone();
+        weighted[4000].radiosity[1] *= 1.5;
+        let mut signed = uniform_row.clone();
+        signed[4001].radiosity = [-0.0, 0.0, 0.0];
+        signed[4001].form_factor = 0.0;
+        let rows_in = [uniform_row, weighted, signed];
+        let (mut outgoing, mut own) = (vec![Vec::new(); 2], vec![Vec::new(); 3]);
+        for (k, row) in rows_in.iter().enumerate() {
+            pack_row(&solver, (k, 0, shoot), row, &mut outgoing, &mut own[k]);
+        }
+        assert!(outgoing[0].is_empty(), "nothing to itself");
+        let theirs = |row: &[Transfer]| -> Vec<Transfer> {
+            row.iter()
+                .filter(|t| solver.element_rank(t.element) == 1)
+                .copied()
+                .collect()
+        };
+        let n = theirs(&rows_in[0]).len();
+        assert!(
+            n > 1000 && n < mesh.elements.len() - 1000,
+            "both ranks own some"
+        );
+        assert_eq!(
+            outgoing[1].len(),
+            3 * 2 + n * (UNIFORM_WORDS + 2 * TRANSFER_WORDS),
+            "the uniform row in 12 bytes a transfer, the others in 36"
+        );
+        let regions = vec![
+            ShotRegion {
+                shoot,
+                ..ShotRegion::default()
+            };
+            3
+        ];
+        let mut rows = vec![Vec::new(); 3];
+        unpack_rows(&[Vec::new(), outgoing[1].clone()], &mut rows, &regions);
+        let bits = |row: &[Transfer]| -> Vec<(u32, u64, [u64; 3])> {
+            row.iter()
+                .map(|t| {
+                    let r = t.radiosity.map(f64::to_bits);
+                    (t.element, t.form_factor.to_bits(), r)
+                })
+                .collect()
+        };
+        for k in 0..3 {
+            assert_eq!(bits(&rows[k]), bits(&theirs(&rows_in[k])), "row {k}");
+            let mine: Vec<Transfer> = rows_in[k]
+                .iter()
+                .filter(|t| solver.element_rank(t.element) == 0)
+                .copied()
+                .collect();
+            assert_eq!(bits(&own[k]), bits(&mine), "row {k}, kept");
         }
     }
 }
