@@ -490,8 +490,11 @@ pub struct Model {
 /// ([`crate::parallel::Deal`]: one of the dearest rows a rank, the rest
 /// taken by whichever rank comes free first). The slowest rank's rows set a
 /// batch's time, so the imbalance is the rows' own, not a fitted law. A
-/// rank's CPU seconds outside its rows follow `rest_a + rest_b / N` (on
-/// this machine beyond its 2 cores, times the rows' growth there).
+/// rank's CPU seconds outside its rows follow `rest_a + s rest_b / N`,
+/// where s is the rows' contention on N ranks (1 on one rank): the divided
+/// rest (the display transport's rays, the landing) is memory-bound work
+/// like the rows, and costs two busy cores more as they do; on this
+/// machine beyond its 2 cores, times the rows' growth there.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Replay {
     /// Per batch, each row's (weight, CPU seconds).
@@ -562,9 +565,11 @@ impl Replay {
     }
 
     /// A rank's CPU seconds a shot outside its rows on `n` ranks, one
-    /// core a rank.
+    /// core a rank: its divided part slowed by the cores' contention as
+    /// the rows are.
     pub fn rest(&self, n: f64) -> f64 {
-        self.rest_a + self.rest_b / n.max(1.0)
+        let n = n.max(1.0);
+        self.rest_a + self.contention(n, false) * self.rest_b / n
     }
 
     /// The same on `n` ranks of this machine (`here`), where beyond its 2
@@ -950,8 +955,12 @@ impl Calibration {
             }
             // Batched shots whose rows were recorded: replayed (the rows'
             // own imbalance), with the rest of a rank's CPU seconds fitted
-            // as a + b / N through every rank count, and the rows' CPU
-            // seconds on N ranks over one rank's as the contention.
+            // as a + s b / N through every rank count, and the rows' CPU
+            // seconds on N ranks over one rank's as the contention s (the
+            // rest's divided work slows as the rows do: the transport's
+            // rays, each group cast once on some rank, cost two ranks
+            // 9-15 % more CPU than one; fitted as a + b / N, that excess
+            // counted as work every rank repeats at any N).
             let own_runs: Vec<&Run> = runs
                 .iter()
                 .filter(used)
@@ -982,7 +991,8 @@ impl Calibration {
                         } else {
                             1.0
                         };
-                        (1.0, 1.0 / r.ranks as f64, Run::mean(&rest) / slicing)
+                        let shared = if r.ranks > 1 { contention2 } else { 1.0 };
+                        (1.0, shared / r.ranks as f64, Run::mean(&rest) / slicing)
                     })
                     .collect();
                 let (a, b) = least_squares_2(&rest);
@@ -1370,11 +1380,14 @@ mod tests {
             contention_power: 0.5,
             ..Replay::default()
         };
-        // One core a rank: the rest as fitted, wherever.
+        // One core a rank: the rest as fitted, wherever; its divided part
+        // shares the cores' contention with the rows (1.1 on any ranks).
+        assert_eq!(r.rest(1.0), 5.0);
         assert_eq!(r.rest_on(8.0, false), r.rest(8.0));
-        assert_eq!(r.rest_on(2.0, true), 3.0);
+        assert!((r.rest_on(2.0, true) - (1.0 + 1.1 * 2.0)).abs() < 1e-12);
+        assert!((r.rest(64.0) - (1.0 + 1.1 * 4.0 / 64.0)).abs() < 1e-12);
         // 8 ranks on this machine's 2 cores: (8 / 2)^0.5 = 2 times.
-        assert!((r.rest_on(8.0, true) - 2.0 * 1.5).abs() < 1e-12);
+        assert!((r.rest_on(8.0, true) - 2.0 * (1.0 + 1.1 * 0.5)).abs() < 1e-12);
     }
 
     #[test]
