@@ -271,20 +271,53 @@ struct Receiving {
     patch: u32,
 }
 
-/// The area-weighted mean reflectance of a mesh, per channel.
-fn mean_reflectance(mesh: &Mesh) -> [f64; 3] {
-    let total_area = ambient_area(mesh);
-    let mut out = [0.0; 3];
-    if total_area <= 0.0 {
-        return out;
-    }
-    for e in mesh.elements.iter().filter(|e| takes_ambient(mesh, e)) {
-        let rho = e.reflectance;
-        for c in 0..3 {
-            out[c] += rho[c] * e.area;
+/// What a solver keeps of each element, read in one pass over the
+/// elements (120-byte records: four passes were most of a solver's set-up,
+/// which every rank repeats): each element's exitance and `Receiving`,
+/// and over the elements that take the ambient term their area and
+/// area-weighted mean reflectance per channel (summed in element order).
+struct PerElement {
+    exitance: Vec<[f64; 3]>,
+    receiving: Vec<Receiving>,
+    mean_reflectance: [f64; 3],
+    ambient_area: f64,
+}
+
+impl PerElement {
+    fn of(mesh: &Mesh) -> Self {
+        let n = mesh.elements.len();
+        let (mut exitance, mut receiving) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        // The area starts where `Iterator::sum` starts (its zero's sign),
+        // so it is the sum the solver took before, bit for bit.
+        let (mut weighted, mut area) = ([0.0; 3], std::iter::empty::<f64>().sum::<f64>());
+        for e in &mesh.elements {
+            let polygon = &mesh.polygons[e.polygon as usize];
+            exitance.push(polygon.exitance);
+            receiving.push(Receiving {
+                reflectance: e.reflectance,
+                area: e.area,
+                patch_share: patch_share(mesh, e),
+                patch: e.patch,
+            });
+            if takes_ambient(mesh, e) {
+                area += e.area;
+                for c in 0..3 {
+                    weighted[c] += e.reflectance[c] * e.area;
+                }
+            }
+        }
+        let mean_reflectance = if area <= 0.0 {
+            [0.0; 3]
+        } else {
+            weighted.map(|x| x / area)
+        };
+        Self {
+            exitance,
+            receiving,
+            mean_reflectance,
+            ambient_area: area,
         }
     }
-    out.map(|x| x / total_area)
 }
 
 /// Whether element `e` gets the ambient term: every element but those of
@@ -293,15 +326,6 @@ fn mean_reflectance(mesh: &Mesh) -> [f64; 3] {
 /// spread the unshot light over twice the area).
 fn takes_ambient(mesh: &Mesh, e: &crate::mesh::Element) -> bool {
     !mesh.polygons[e.polygon as usize].back_side
-}
-
-/// The area the ambient term is spread over (see [`takes_ambient`]).
-fn ambient_area(mesh: &Mesh) -> f64 {
-    mesh.elements
-        .iter()
-        .filter(|e| takes_ambient(mesh, e))
-        .map(|e| e.area)
-        .sum()
 }
 
 /// Element `e`'s share of its patch's area (0 in a patch of no area: a
@@ -334,11 +358,12 @@ impl<'m> Solver<'m> {
 
     /// The share of rank `rank` of `ranks` (it holds every patch but updates only its own).
     pub fn partitioned(mesh: &'m Mesh, rank: usize, ranks: usize) -> Self {
-        let radiosity: Vec<[f64; 3]> = mesh
-            .elements
-            .iter()
-            .map(|e| mesh.polygons[e.polygon as usize].exitance)
-            .collect();
+        let PerElement {
+            exitance: radiosity,
+            receiving,
+            mean_reflectance,
+            ambient_area,
+        } = PerElement::of(mesh);
         let unshot: Vec<[f64; 3]> = mesh
             .patches
             .iter()
@@ -358,8 +383,8 @@ impl<'m> Solver<'m> {
             retention: [0.0; 2],
             energy: [0.0; 3],
             overshoot: false,
-            mean_reflectance: mean_reflectance(mesh),
-            total_area: ambient_area(mesh),
+            mean_reflectance,
+            total_area: ambient_area,
             direct: vec![[0.0; 3]; mesh.elements.len()],
             emission_unshot: mesh
                 .patches
@@ -368,16 +393,7 @@ impl<'m> Solver<'m> {
                 .collect(),
             direct_known: true,
             patch_area: mesh.patches.iter().map(|p| p.area).collect(),
-            receiving: mesh
-                .elements
-                .iter()
-                .map(|e| Receiving {
-                    reflectance: e.reflectance,
-                    area: e.area,
-                    patch_share: patch_share(mesh, e),
-                    patch: e.patch,
-                })
-                .collect(),
+            receiving,
             vote: Default::default(),
         };
         solver.receive_lights();
