@@ -309,14 +309,14 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
     )?;
     writeln!(
         s,
-        "| scene | exchange | batches | rows | rest a + b / N | contention s(2), power | slowest rank's rows at 16 / 64 ranks | speedup 64 (cluster) |"
+        "| scene | exchange | batches | rows | rest a + s b / N | contention s(2), power | slowest rank's rows at 16 / 64 ranks | speedup 64 (cluster) |"
     )?;
     writeln!(s, "|---|---|---|---|---|---|---|---|")?;
     for m in &cal.models {
         let Some(r) = &m.replay else { continue };
         writeln!(
             s,
-            "| {} | {} | {} | {:.1} ms | {:.2} + {:.2} / N ms | {:.3}, {:.2} | {:.2} / {:.2} ms | {:.1} |",
+            "| {} | {} | {} | {:.1} ms | {:.2} + s {:.2} / N ms | {:.3}, {:.2} | {:.2} / {:.2} ms | {:.1} |",
             m.scene,
             m.exchange,
             r.batches.len(),
