@@ -301,8 +301,8 @@ impl PerElement {
             });
             if takes_ambient(mesh, e) {
                 area += e.area;
-                for c in 0..3 {
-                    weighted[c] += e.reflectance[c] * e.area;
+                for (w, rho) in weighted.iter_mut().zip(e.reflectance) {
+                    *w += rho * e.area;
                 }
             }
         }
