@@ -8,6 +8,10 @@ use mpi::traits::*;
 use mpi::Count;
 use std::cell::Cell;
 
+/// The tag of `all_to_all_u32_into`'s point-to-point messages (the only
+/// tagged messages between ranks; each pair's arrive in order).
+const ALL_TO_ALL_TAG: mpi::Tag = 19;
+
 /// The MPI world of this process (a singleton world when not under mpirun).
 pub struct MpiComm {
     // Dropping the universe finalises MPI, so it lives as long as the communicator.
@@ -293,18 +297,72 @@ impl Collectives for MpiComm {
     }
 
     fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>> {
+        let mut words = Vec::new();
+        let starts = self.all_to_all_u32_into(outgoing, &mut words);
+        starts
+            .windows(2)
+            .map(|w| words[w[0]..w[1]].to_vec())
+            .collect()
+    }
+
+    fn all_to_all_u32_into(&self, outgoing: &[Vec<u32>], incoming: &mut Vec<u32>) -> Vec<usize> {
         let _call = self.call();
         let plan = self.plan(outgoing.iter().map(Vec::len));
-        let incoming = plan.move_all(&self.world, &outgoing.concat());
-        self.count(
-            4 * plan.sent_to_others(self.rank()) + 4 * plan.ranks(),
-            4 * plan.received_from_others(self.rank()) + 4 * plan.ranks(),
-        );
-        plan.recv_counts
+        let me = self.rank();
+        let starts: Vec<usize> = plan
+            .recv_displs
             .iter()
-            .zip(&plan.recv_displs)
-            .map(|(&c, &d)| incoming[d as usize..(d + c) as usize].to_vec())
-            .collect()
+            .map(|&d| d as usize)
+            .chain(std::iter::once(
+                plan.recv_counts.iter().map(|&c| c as usize).sum(),
+            ))
+            .collect();
+        incoming.clear();
+        incoming.resize(starts[starts.len() - 1], 0);
+        // Point to point from each rank's own words into its place here:
+        // an all-to-all of varying counts wants one send buffer, and
+        // copying a batch's megabytes into one first cost more than the
+        // transfer (pages the kernel zeroes, then the copy).
+        let mut slices: Vec<&mut [u32]> = Vec::with_capacity(self.size());
+        let mut rest = &mut incoming[..];
+        for w in starts.windows(2) {
+            let (here, after) = rest.split_at_mut(w[1] - w[0]);
+            slices.push(here);
+            rest = after;
+        }
+        mpi::request::scope(|scope| {
+            let mut receives = Vec::new();
+            let mut sends = Vec::new();
+            for (r, slice) in slices.into_iter().enumerate() {
+                if r == me {
+                    slice.copy_from_slice(&outgoing[me]);
+                } else if !slice.is_empty() {
+                    let from = self.world.process_at_rank(r as mpi::Rank);
+                    receives.push(from.immediate_receive_into_with_tag(
+                        scope,
+                        slice,
+                        ALL_TO_ALL_TAG,
+                    ));
+                }
+            }
+            for (r, words) in outgoing.iter().enumerate() {
+                if r != me && !words.is_empty() {
+                    let to = self.world.process_at_rank(r as mpi::Rank);
+                    sends.push(to.immediate_send_with_tag(scope, &words[..], ALL_TO_ALL_TAG));
+                }
+            }
+            for r in receives {
+                r.wait();
+            }
+            for s in sends {
+                s.wait();
+            }
+        });
+        self.count(
+            4 * plan.sent_to_others(me) + 4 * plan.ranks(),
+            4 * plan.received_from_others(me) + 4 * plan.ranks(),
+        );
+        starts
     }
 
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {

@@ -95,6 +95,22 @@ pub trait Collectives {
     /// Sends `outgoing[r]` to rank r; returns what each rank sent to this
     /// one, in rank order (this rank's own included).
     fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>>;
+    /// As [`Collectives::all_to_all_u32`], into `incoming` (its words
+    /// replaced, its allocation kept, so a caller that keeps it between
+    /// calls copies and faults in no fresh pages): what rank r sent is
+    /// `incoming[starts[r]..starts[r + 1]]`, and `starts` (`size() + 1` of
+    /// them) is returned.
+    fn all_to_all_u32_into(&self, outgoing: &[Vec<u32>], incoming: &mut Vec<u32>) -> Vec<usize> {
+        let parts = self.all_to_all_u32(outgoing);
+        incoming.clear();
+        let mut starts = Vec::with_capacity(parts.len() + 1);
+        starts.push(0);
+        for part in parts {
+            incoming.extend_from_slice(&part);
+            starts.push(incoming.len());
+        }
+        starts
+    }
     /// Rank 0 gets every rank's `local`, in rank order; the others get `None`.
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>>;
     /// Whether every rank passed `ok`; when not, rank 0 gets the failing

@@ -200,7 +200,7 @@ pub struct ShotLoop<'m> {
     /// A batch's rows and the words sent to each rank, kept from batch to
     /// batch: fresh ones cost the kernel's zeroing of their pages every
     /// batch (a fortieth of a one-core shot in cubes-b1).
-    kept: (Vec<Vec<Transfer>>, Vec<Vec<u32>>),
+    kept: (Vec<Vec<Transfer>>, Vec<Vec<u32>>, Vec<u32>),
     /// What the loop measured so far.
     pub stats: LoopStats,
 }
@@ -220,7 +220,7 @@ impl<'m> ShotLoop<'m> {
             ff: Vec::new(),
             batch: 1,
             pooled: true,
-            kept: (Vec::new(), Vec::new()),
+            kept: (Vec::new(), Vec::new(), Vec::new()),
             stats: LoopStats {
                 patch_power: vec![0.0; mesh.patches.len()],
                 ..LoopStats::default()
@@ -365,7 +365,7 @@ impl<'m> ShotLoop<'m> {
         };
         let deal = Deal::new(&costs, ranks, self.pooled);
         // This rank's rows, each sent in pieces to the owners of its elements.
-        let (mut rows, mut outgoing) = std::mem::take(&mut self.kept);
+        let (mut rows, mut outgoing, mut incoming) = std::mem::take(&mut self.kept);
         rows.resize_with(chosen.len(), Vec::new);
         outgoing.resize_with(ranks, Vec::new);
         rows.iter_mut().for_each(Vec::clear);
@@ -415,11 +415,12 @@ impl<'m> ShotLoop<'m> {
         )?;
         let t = Instant::now();
         let cpu = crate::parallel::CpuSpan::start(self.comm);
-        let incoming = self.comm.all_to_all_u32(&outgoing);
+        let starts = self.comm.all_to_all_u32_into(&outgoing, &mut incoming);
         // Each shot's sums come from one rank; the others add exact zeros.
         let all_sums = self.comm.all_gather_f64(&sums);
         source.timings.exchange += t.elapsed();
-        unpack_rows(&incoming, &mut rows, &regions);
+        let parts = starts.windows(2).filter_map(|w| incoming.get(w[0]..w[1]));
+        unpack_rows(parts, &mut rows, &regions);
         let landing_start = Instant::now();
         let mut totals = vec![0.0; sums.len()];
         for part in all_sums.chunks_exact(sums.len().max(1)) {
@@ -451,7 +452,7 @@ impl<'m> ShotLoop<'m> {
             .shot_times
             .extend(std::iter::repeat_n(per_shot, chosen.len()));
         hooks.after_shot(solver, unshot_fraction);
-        self.kept = (rows, outgoing);
+        self.kept = (rows, outgoing, incoming);
         Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
     }
 
@@ -919,7 +920,11 @@ fn pack_row(
 /// Adds the rows [`pack_row`] sent this rank to `rows`, by shot (each in
 /// its row's order), from every rank's words; `regions[k]` is how shot k
 /// shoots.
-fn unpack_rows(incoming: &[Vec<u32>], rows: &mut [Vec<Transfer>], regions: &[ShotRegion]) {
+fn unpack_rows<'w>(
+    incoming: impl Iterator<Item = &'w [u32]>,
+    rows: &mut [Vec<Transfer>],
+    regions: &[ShotRegion],
+) {
     for words in incoming {
         let mut at = 0;
         while let [head, count, ..] = words[at..] {
@@ -1066,7 +1071,8 @@ mod tests {
             3
         ];
         let mut rows = vec![Vec::new(); 3];
-        unpack_rows(&[Vec::new(), outgoing[1].clone()], &mut rows, &regions);
+        let sent: [&[u32]; 2] = [&[], &outgoing[1]];
+        unpack_rows(sent.into_iter(), &mut rows, &regions);
         let bits = |row: &[Transfer]| -> Vec<(u32, u64, [u64; 3])> {
             row.iter()
                 .map(|t| {
