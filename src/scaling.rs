@@ -957,10 +957,10 @@ impl Calibration {
             // own imbalance), with the rest of a rank's CPU seconds fitted
             // as a + s b / N through every rank count, and the rows' CPU
             // seconds on N ranks over one rank's as the contention s (the
-            // rest's divided work slows as the rows do: the transport's
-            // rays, each group cast once on some rank, cost two ranks
-            // 9-15 % more CPU than one; fitted as a + b / N, that excess
-            // counted as work every rank repeats at any N).
+            // rest's divided work, the transport's rays and the landing,
+            // is of the rows' kind and slows as they do on busy cores;
+            // fitted as a + b / N, that excess counted as work every rank
+            // repeats at any N).
             let own_runs: Vec<&Run> = runs
                 .iter()
                 .filter(used)
