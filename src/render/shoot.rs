@@ -81,6 +81,15 @@ pub struct LoopStats {
     pub rows_cpu_seconds: f64,
 }
 
+/// A batched step's buffers: per row this rank's own transfers, per rank
+/// the words sent to it, and the words received from every rank.
+#[derive(Default)]
+struct BatchBuffers {
+    rows: Vec<Vec<Transfer>>,
+    outgoing: Vec<Vec<u32>>,
+    incoming: Vec<u32>,
+}
+
 /// What a batch's rounds fill: per rank the row pieces to send, per row
 /// this rank's own transfers, and per row its sums.
 type BatchOut<'a> = (&'a mut [Vec<u32>], &'a mut [Vec<Transfer>], &'a mut [f64]);
@@ -197,10 +206,10 @@ pub struct ShotLoop<'m> {
     batch: usize,
     /// Whether a batch's rows and groups are pooled ([`Deal`]).
     pooled: bool,
-    /// A batch's rows and the words sent to each rank, kept from batch to
-    /// batch: fresh ones cost the kernel's zeroing of their pages every
-    /// batch (a fortieth of a one-core shot in cubes-b1).
-    kept: (Vec<Vec<Transfer>>, Vec<Vec<u32>>, Vec<u32>),
+    /// A batch's buffers, kept from batch to batch: fresh ones cost the
+    /// kernel's zeroing of their pages every batch (a fortieth of a
+    /// one-core shot in cubes-b1).
+    kept: BatchBuffers,
     /// What the loop measured so far.
     pub stats: LoopStats,
 }
@@ -220,7 +229,7 @@ impl<'m> ShotLoop<'m> {
             ff: Vec::new(),
             batch: 1,
             pooled: true,
-            kept: (Vec::new(), Vec::new(), Vec::new()),
+            kept: BatchBuffers::default(),
             stats: LoopStats {
                 patch_power: vec![0.0; mesh.patches.len()],
                 ..LoopStats::default()
@@ -365,7 +374,11 @@ impl<'m> ShotLoop<'m> {
         };
         let deal = Deal::new(&costs, ranks, self.pooled);
         // This rank's rows, each sent in pieces to the owners of its elements.
-        let (mut rows, mut outgoing, mut incoming) = std::mem::take(&mut self.kept);
+        let BatchBuffers {
+            mut rows,
+            mut outgoing,
+            mut incoming,
+        } = std::mem::take(&mut self.kept);
         rows.resize_with(chosen.len(), Vec::new);
         outgoing.resize_with(ranks, Vec::new);
         rows.iter_mut().for_each(Vec::clear);
@@ -452,7 +465,11 @@ impl<'m> ShotLoop<'m> {
             .shot_times
             .extend(std::iter::repeat_n(per_shot, chosen.len()));
         hooks.after_shot(solver, unshot_fraction);
-        self.kept = (rows, outgoing, incoming);
+        self.kept = BatchBuffers {
+            rows,
+            outgoing,
+            incoming,
+        };
         Ok(last.map_or(Step::Stopped(Stopped::Floor), Step::Shot))
     }
 
@@ -963,7 +980,6 @@ fn unpack_rows<'w>(
 /// stop rule, its batch and how a batch's rows are dealt. The final solve
 /// and the refinement passes both shoot here (with `source` from
 /// [`GpuFormFactors::for_solve`]).
-#[allow(clippy::too_many_arguments)]
 pub fn shoot_until<'m>(
     mesh: &'m Mesh,
     opts: &RenderOptions,

@@ -767,7 +767,7 @@ impl GpuFormFactors<'_> {
 
     /// Builds transport rows for rank `rank` of `ranks`' elements only
     /// (a batched solve's source of one process: see `ShotLoop::batched`).
-    pub fn set_transport_ranks(&mut self, rank: usize, ranks: usize) {
+    fn set_transport_ranks(&mut self, rank: usize, ranks: usize) {
         self.transport_ranks = (rank, ranks);
     }
 
