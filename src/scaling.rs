@@ -27,6 +27,10 @@
 //!   each rank saw (bytes fitted as a power of N) and, where the ranks deal
 //!   the bounds, the all-to-all of rectangles to their tiles' owners (a
 //!   rank's share falling as a fitted power of N, N - 1 messages a call).
+//!   Batched shots exchange their rows in one all-to-all a step (a batch,
+//!   and a round for its split shots' groups), and rows pooled as ranks
+//!   come free cost a ticket each, a round trip to rank 0 (see
+//!   [`Model::stages`]).
 //!
 //! The module reads reports as JSON and knows nothing of GPUs or MPI.
 
@@ -244,6 +248,16 @@ impl Run {
             total += load.iter().copied().fold(0.0, f64::max);
         }
         total / self.shots
+    }
+
+    /// Batched runs: the steps their recorded rows were drawn in (a batch,
+    /// and a second round where it split shots), each ended by one
+    /// all-to-all of the rows.
+    pub fn steps(&self) -> f64 {
+        let mut steps: Vec<u64> = self.rows.iter().map(|r| r.0).collect();
+        steps.sort_unstable();
+        steps.dedup();
+        steps.len() as f64
     }
 
     /// Hemispheres drawn per shot (split shots draw several, coarse ones
@@ -466,7 +480,8 @@ pub struct Model {
     pub replicated: f64,
     /// ... and what the ranks share.
     pub divided: f64,
-    /// Collective calls a shot.
+    /// Collective calls a shot (a pooled batch's tickets apart: see
+    /// [`Replay::tickets`]).
     pub calls: f64,
     /// Hemispheres drawn a shot.
     pub hemispheres: f64,
@@ -514,6 +529,10 @@ pub struct Replay {
     /// grow further, as `contention2 (N / 2)^contention_power` (time
     /// slicing); one core a rank stays at `contention2`.
     pub contention_power: f64,
+    /// Whether ranks take the rows from a pool as they come free (a ticket
+    /// a row, and one more a step for each rank, each a round trip to the
+    /// pool's counter on rank 0), rather than dealt before any is drawn.
+    pub pooled: bool,
 }
 
 impl Replay {
@@ -526,8 +545,34 @@ impl Replay {
                 .collect(),
             shots,
             contention2: 1.0,
+            pooled: true,
             ..Self::default()
         }
+    }
+
+    /// All-to-alls a shot: one a step (a batch's rows; its split shots'
+    /// groups, a second round), on any rank count.
+    pub fn all_to_alls(&self) -> f64 {
+        self.batches.len() as f64 / self.shots
+    }
+
+    /// Tickets a rank takes a shot on `n` ranks where the rows are pooled:
+    /// of each step's pool (the rows the deal does not fix, one of the
+    /// dearest a rank), 1 / n of them, and one each rank takes past its end.
+    pub fn tickets(&self, n: f64) -> f64 {
+        if !self.pooled || n <= 1.0 {
+            return 0.0;
+        }
+        let ranks = n as usize;
+        let mut tickets = 0.0;
+        for batch in &self.batches {
+            let weights: Vec<f64> = (0..ranks).flat_map(|_| batch.iter().map(|r| r.0)).collect();
+            let pool = crate::parallel::Deal::new(&weights, ranks, true).pool.len();
+            if pool > 0 {
+                tickets += pool as f64 / n + 1.0;
+            }
+        }
+        tickets / self.shots
     }
 
     /// Row CPU seconds a shot on one rank.
@@ -644,21 +689,34 @@ impl Model {
         (self.replicated + q * (1.0 - u)) / (self.replicated + q * (1.0 + u))
     }
 
+    /// Latencies a shot on `n` ranks: `calls` collectives of ceil(log2 N)
+    /// stages each, with the paper's own schedule (`paper_schedule`) N
+    /// broadcasts a hemisphere instead of a tree, N - 1 messages an
+    /// all-to-all of pairs or dealt rectangles, and 2 a pooled row's ticket
+    /// (a fetch-and-add on rank 0 and its answer).
+    pub fn stages(&self, n: f64, paper_schedule: bool) -> f64 {
+        if n <= 1.0 {
+            return 0.0;
+        }
+        let mut stages = self.calls * log2_stages(n);
+        if paper_schedule && self.bytes.items > 0.0 {
+            stages += self.hemispheres * (n - log2_stages(n));
+        }
+        for p in self.bytes.pairs.iter().chain(&self.bytes.rects) {
+            stages += p.calls * (n - 1.0 - log2_stages(n));
+        }
+        if let Some(r) = &self.replay {
+            stages += 2.0 * r.tickets(n);
+        }
+        stages
+    }
+
     /// Exchange seconds a shot on `n` ranks over `net`.
     pub fn exchange(&self, n: f64, net: &Network) -> f64 {
         if n <= 1.0 {
             return 0.0;
         }
-        let mut stages = self.calls * log2_stages(n);
-        if net.paper_schedule && self.bytes.items > 0.0 {
-            // The paper's N broadcasts instead of a tree.
-            stages += self.hemispheres * (n - log2_stages(n));
-        }
-        for p in self.bytes.pairs.iter().chain(&self.bytes.rects) {
-            // Pairs and dealt rectangles go to every other rank: N - 1 messages.
-            stages += p.calls * (n - 1.0 - log2_stages(n));
-        }
-        stages * net.latency + self.bytes.on_the_wire(n) / net.bandwidth
+        self.stages(n, net.paper_schedule) * net.latency + self.bytes.on_the_wire(n) / net.bandwidth
     }
 
     /// Seconds a shot on `n` ranks over `net`.
@@ -838,7 +896,14 @@ impl Calibration {
             let b2 = Run::mean(&two.bytes);
             // Every rank's cells of a shot's hemispheres, 4 bytes each.
             let items = 4.0 * single.cells.iter().sum::<f64>();
-            let pair_calls = hemispheres;
+            // Pairs go in one all-to-all a hemisphere; a batched run's rows
+            // in one a step (a batch, and a second round for its split shots'
+            // groups), counted from its rows where it recorded them.
+            let pair_calls = match two.exchange.strip_prefix("batches-") {
+                Some(_) if !two.rows.is_empty() => two.steps() / two.shots,
+                Some(k) => 1.0 / k.parse::<f64>().unwrap_or(1.0).max(1.0),
+                None => hemispheres,
+            };
             // This exchange's runs beyond 2 ranks, which give the bytes' fall.
             let more = || {
                 runs.iter()
@@ -1009,6 +1074,14 @@ impl Calibration {
                 if replay.contention_power.is_nan() {
                     replay.contention_power = 0.0;
                 }
+                // The 2-rank run's calls count the tickets it took (none if it
+                // dealt its rows); the model adds them again for each rank count.
+                let taken = Replay {
+                    pooled: two.pooled,
+                    ..replay.clone()
+                }
+                .tickets(2.0);
+                model.calls = (calls - taken).max(0.0);
                 model.replicated = replay.rest_a;
                 model.divided = replay.rest_b + rows1;
                 model.imbalance2 = f64::NAN;
@@ -1019,7 +1092,7 @@ impl Calibration {
             // slowest rank's compute (waits in collectives are the
             // imbalance, already counted there).
             net_rows.push((
-                calls,
+                model.stages(2.0, false),
                 model.bytes.on_the_wire(2.0),
                 two.seconds_per_shot() - model.compute_max(2.0),
             ));
@@ -1159,6 +1232,14 @@ impl Calibration {
                         r.slowest_rows(),
                         replay.contention(n, true) * replay.loads(r.ranks, r.pooled).0,
                     ));
+                    // The calls: the collectives, and the tickets of rows
+                    // taken from a pool (the oversubscribed runs deal theirs).
+                    let taken = Replay {
+                        pooled: r.pooled,
+                        ..replay.clone()
+                    }
+                    .tickets(n);
+                    out.push(what(CALLS, Run::mean(&r.calls), m.calls + taken));
                 }
             }
             if r.ranks > 1 {
@@ -1290,6 +1371,10 @@ pub const BESIDE: &str = "cull and deal bytes a shot";
 /// replay's deal of the same rows.
 pub const SLOWEST_ROWS: &str = "slowest rank's rows CPU seconds a shot";
 
+/// A batched run's MPI calls a rank makes a shot (collectives and pool
+/// tickets), against the model's count.
+pub const CALLS: &str = "calls a shot";
+
 /// Reads every `*.json` report in `dir`, sorted by name.
 pub fn read_runs(dir: &Path) -> Result<Vec<Run>, ScalingError> {
     let entries = std::fs::read_dir(dir).map_err(|source| ScalingError::Read {
@@ -1369,6 +1454,66 @@ mod tests {
         let two = Replay::from_rows(&[(0, 1.0, 1.0, 0), (5, 0.5, 2.0, 0)], 2.0);
         assert_eq!(two.batches.len(), 2);
         assert_eq!(two.loads(2, true).0, 3.0 / 2.0);
+    }
+
+    #[test]
+    fn a_batched_run_exchanges_once_a_step_and_takes_a_ticket_a_pooled_row() {
+        // Two steps of 100 shots: a batch of 10 rows, then a second round of
+        // 3 groups of its split shots.
+        let mut rows: Vec<(u64, f64, f64, usize)> = (0..10).map(|_| (0, 1.0, 1.0, 0)).collect();
+        rows.extend((0..3).map(|_| (1, 1.0, 1.0, 0)));
+        let run = Run {
+            path: PathBuf::new(),
+            scene: "s".into(),
+            resolution: [128, 512],
+            ranks: 1,
+            exchange: "batches-10".into(),
+            shots: 100.0,
+            solve: 1.0,
+            phases: Vec::new(),
+            bytes: Vec::new(),
+            occlusion_bytes: Vec::new(),
+            rect_bytes: Vec::new(),
+            calls: Vec::new(),
+            cpu_own: Vec::new(),
+            cells: Vec::new(),
+            hemisphere_cells: 65536.0,
+            epsilon_cpu: 1.0,
+            rows_cpu: Vec::new(),
+            rows: rows.clone(),
+            pooled: true,
+        };
+        assert_eq!(run.steps(), 2.0);
+        let r = Replay::from_rows(&rows, 100.0);
+        assert!((r.all_to_alls() - 0.02).abs() < 1e-12);
+        // 2 ranks: each fixes one row a step; the pools of 8 and 1 give a
+        // rank half of them and one ticket past each pool's end.
+        assert!((r.tickets(2.0) - (9.0 / 2.0 + 2.0) / 100.0).abs() < 1e-12);
+        // 16 ranks: every row fixed, no pool, no ticket; dealt, none either.
+        assert_eq!(r.tickets(16.0), 0.0);
+        let dealt = Replay {
+            pooled: false,
+            ..r.clone()
+        };
+        assert_eq!(dealt.tickets(2.0), 0.0);
+        // The latencies: the collectives' trees, N - 1 messages for each
+        // step's all-to-all (one of the collectives), 2 a ticket.
+        let mut m = model(0.1, 0.0, 0.0);
+        m.bytes = Bytes {
+            pairs: Some(Pairs {
+                at2: 100.0,
+                delta: 1.0,
+                calls: r.all_to_alls(),
+                size: PAIR_BYTES,
+            }),
+            ..Bytes::default()
+        };
+        m.replay = Some(r.clone());
+        for n in [2.0, 8.0, 64.0] {
+            let want =
+                4.0 * log2_stages(n) + 0.02 * (n - 1.0 - log2_stages(n)) + 2.0 * r.tickets(n);
+            assert!((m.stages(n, false) - want).abs() < 1e-12, "{n}");
+        }
     }
 
     #[test]

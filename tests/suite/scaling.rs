@@ -6,7 +6,7 @@
 //! at 1 to 16 ranks within 15 %. The runs are measurements, not outputs of
 //! this build: the test checks the model, not the renderer's speed.
 
-use radiosity::scaling::{read_runs, Calibration, AP1000, CLUSTER, SLOWEST_ROWS};
+use radiosity::scaling::{read_runs, Calibration, AP1000, CALLS, CLUSTER, SLOWEST_ROWS};
 use std::path::Path;
 
 /// The two committed calibrations: the device's drawing, then the CPU's.
@@ -42,6 +42,9 @@ fn reproduces(runs: &str) {
     assert!(timed
         .iter()
         .any(|c| c.ranks == 16 && c.quantity == SLOWEST_ROWS));
+    // ... and their calls: the collectives the 2-rank run made beside its
+    // pool's tickets, against the runs beyond 2 ranks, which deal theirs.
+    assert!(timed.iter().any(|c| c.ranks == 16 && c.quantity == CALLS));
     let bad: Vec<String> = timed
         .iter()
         .filter(|c| c.relative_error().abs() > 0.15)
