@@ -199,6 +199,16 @@ pub fn render_on(
 ) -> Result<Option<Rendered>, RenderError> {
     opts.validate()?;
     scene.check_lit()?;
+    if comm.rank() == 0 && opts.batch > 1 && comm.size() > opts.batch {
+        // Not an error: the split shots' groups, the transport's rays and
+        // the landing still go to every rank (docs/scaling.md).
+        log::warn!(
+            "--batch {} on {} ranks: a batch's rows keep at most {} ranks drawing; a batch of at least the rank count uses them all (the numbers depend on --batch, not on the ranks)",
+            opts.batch,
+            comm.size(),
+            opts.batch
+        );
+    }
     let mut timings = Timings {
         load: load_time.as_secs_f64(),
         ..Default::default()
