@@ -309,14 +309,14 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
     )?;
     writeln!(
         s,
-        "| scene | exchange | batches | rows | rest a + s b / N | contention s(2), power | slowest rank's rows at 16 / 64 ranks | speedup 64 (cluster) |"
+        "| scene | exchange | steps | rows | rest a + s b / N | contention s(2), power | slowest rank's rows at 16 / 64 ranks | 64 ranks (cluster): compute + exchange, latencies | speedup 64 (cluster) |"
     )?;
-    writeln!(s, "|---|---|---|---|---|---|---|---|")?;
+    writeln!(s, "|---|---|---|---|---|---|---|---|---|")?;
     for m in &cal.models {
         let Some(r) = &m.replay else { continue };
         writeln!(
             s,
-            "| {} | {} | {} | {:.1} ms | {:.2} + s {:.2} / N ms | {:.3}, {:.2} | {:.2} / {:.2} ms | {:.1} |",
+            "| {} | {} | {} | {:.1} ms | {:.2} + s {:.2} / N ms | {:.3}, {:.2} | {:.2} / {:.2} ms | {:.3} + {:.3} ms, {:.1} | {:.1} |",
             m.scene,
             m.exchange,
             r.batches.len(),
@@ -327,6 +327,9 @@ fn summary(cal: &Calibration, checks: &[scaling::Check]) -> Result<String> {
             r.contention_power,
             r.loads(16, true).0 * 1e3,
             r.loads(64, true).0 * 1e3,
+            m.compute_max(64.0) * 1e3,
+            m.exchange(64.0, &CLUSTER) * 1e3,
+            m.stages(64.0, CLUSTER.paper_schedule),
             m.speedup(64.0, &CLUSTER)
         )?;
     }
