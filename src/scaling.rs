@@ -69,7 +69,7 @@ pub const PHASES: [&str; 6] = [
 ];
 
 /// One measured run, per shot.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct Run {
     /// File it came from.
     pub path: PathBuf,
@@ -159,16 +159,8 @@ impl Run {
             shots,
             solve: num(&v["timings"]["solve"], "solve")?
                 - num(&v["refinement"]["seconds"], "refinement.seconds")?,
-            phases: Vec::new(),
-            bytes: Vec::new(),
-            occlusion_bytes: Vec::new(),
-            rect_bytes: Vec::new(),
-            calls: Vec::new(),
-            cpu_own: Vec::new(),
-            cells: Vec::new(),
             hemisphere_cells: num(&v["counts"]["cells"], "cells")?,
             epsilon_cpu: num(&p["load_balance_cpu"]["mean"], "load_balance_cpu")?,
-            rows_cpu: Vec::new(),
             rows: p["rows"]
                 .as_array()
                 .map(|rows| {
@@ -188,6 +180,8 @@ impl Run {
                 })
                 .unwrap_or_default(),
             pooled: v["settings"]["deal_rows"].as_str() == Some("pool"),
+            // Per rank, filled below.
+            ..Run::default()
         };
         for r in per_rank {
             let mut ph = [0.0; 6];
@@ -1463,25 +1457,11 @@ mod tests {
         let mut rows: Vec<(u64, f64, f64, usize)> = (0..10).map(|_| (0, 1.0, 1.0, 0)).collect();
         rows.extend((0..3).map(|_| (1, 1.0, 1.0, 0)));
         let run = Run {
-            path: PathBuf::new(),
-            scene: "s".into(),
-            resolution: [128, 512],
-            ranks: 1,
             exchange: "batches-10".into(),
             shots: 100.0,
-            solve: 1.0,
-            phases: Vec::new(),
-            bytes: Vec::new(),
-            occlusion_bytes: Vec::new(),
-            rect_bytes: Vec::new(),
-            calls: Vec::new(),
-            cpu_own: Vec::new(),
-            cells: Vec::new(),
-            hemisphere_cells: 65536.0,
-            epsilon_cpu: 1.0,
-            rows_cpu: Vec::new(),
             rows: rows.clone(),
             pooled: true,
+            ..Run::default()
         };
         assert_eq!(run.steps(), 2.0);
         let r = Replay::from_rows(&rows, 100.0);
