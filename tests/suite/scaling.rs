@@ -84,3 +84,42 @@ fn keeps_orderings(runs: &str) {
         assert!(hem.speedup(1024.0, &CLUSTER) <= hem.amdahl_limit() * (1.0 + 1e-9));
     }
 }
+
+/// A batched run's calls a shot are counts, so the model gets them within
+/// 1 %: the calibration's oversubscribed runs, whose rows are dealt (the
+/// collectives alone), and pooled runs beyond 2 ranks
+/// (`docs/scaling/cpu/pooled`: 4 and 8 ranks on this machine's 2 cores,
+/// made for this check and not fitted), whose ranks also take the pool's
+/// tickets, fewer each as the ranks grow.
+#[test]
+fn the_model_counts_a_batched_runs_calls() {
+    for runs in CALIBRATIONS {
+        let calls: Vec<_> = calibration(runs)
+            .validation()
+            .into_iter()
+            .filter(|c| c.quantity == CALLS)
+            .collect();
+        assert!(calls.iter().any(|c| c.ranks == 16), "{runs}");
+        for c in calls {
+            assert!(c.relative_error().abs() < 0.01, "{runs}: {}", c.row());
+        }
+    }
+    let cal = calibration(CALIBRATIONS[1]);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scaling/cpu/pooled");
+    let runs = read_runs(&dir).expect("the committed pooled runs");
+    assert_eq!(runs.len(), 4);
+    for r in &runs {
+        assert!(r.pooled && r.ranks > 2, "{}", r.path.display());
+        let m = cal
+            .model(&r.scene, r.resolution, &r.exchange)
+            .expect("a batched model of the run's scene");
+        let replay = m.replay.as_ref().expect("batched runs are replayed");
+        let predicted = m.calls + replay.tickets(r.ranks as f64);
+        let measured = r.calls.iter().sum::<f64>() / r.calls.len() as f64;
+        assert!(
+            (predicted / measured - 1.0).abs() < 0.01,
+            "{}: {measured} calls a shot, the model {predicted}",
+            r.path.display()
+        );
+    }
+}
