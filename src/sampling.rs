@@ -40,6 +40,14 @@ pub fn unit(rng: &mut Rng) -> f32 {
 /// number of threads.
 pub fn in_parallel<T: Send>(out: &mut [T], work: impl Fn(usize, &mut T) + Sync) {
     let threads = crate::parallel::cores();
+    if threads <= 1 || out.len() <= 1 {
+        // One core (a rank pinned to its own): no thread to start for it,
+        // here once a shot and once a run of a transport's rays.
+        for (k, slot) in out.iter_mut().enumerate() {
+            work(k, slot);
+        }
+        return;
+    }
     let chunk = out.len().div_ceil(threads * 8).max(1);
     let next = std::sync::Mutex::new(out.chunks_mut(chunk).enumerate());
     std::thread::scope(|s| {

@@ -164,13 +164,14 @@ fn centre_rays(
 
 /// `scan` over `items` on every core, in runs of `run` items joined in
 /// order (a ray's hint only saves time, so the verdicts are the same
-/// however it is split), or on this thread alone below `parallel` items.
+/// however it is split), or on this thread alone below `parallel` items
+/// or on one core (a pinned rank: no thread to start, one hint throughout).
 fn on_every_core<T: Sync, U: Clone + Send>(
     items: &[T],
     (parallel, run): (usize, usize),
     scan: impl Fn(&[T]) -> Vec<U> + Sync,
 ) -> Vec<U> {
-    if items.len() < parallel {
+    if items.len() < parallel || crate::parallel::cores() <= 1 {
         return scan(items);
     }
     let runs: Vec<&[T]> = items.chunks(run).collect();
