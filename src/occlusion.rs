@@ -151,34 +151,40 @@ impl OcclusionMap {
         let cols = self.res.cols as usize;
         let band = (self.res.rows as usize).div_ceil(threads).max(1);
         let (rows, cos, sin) = (&self.rows, &self.cols_cos, &self.cols_sin);
+        let add = |k: usize, (depth, coarse): (&mut [f32], &mut [f32])| {
+            let range = k * band..k * band + depth.len() / cols;
+            let mut part = Band {
+                map: rows,
+                cos,
+                sin,
+                depth,
+                coarse,
+                rows: range,
+            };
+            items
+                .iter()
+                .map(|item| part.add(&piece(item)))
+                .sum::<usize>()
+        };
+        let mut bands = self
+            .depth
+            .chunks_mut(band * cols)
+            .zip(self.coarse.chunks_mut(band * tiles(cols)))
+            .enumerate();
+        let first = bands.next();
         std::thread::scope(|scope| {
-            let handles: Vec<_> = self
-                .depth
-                .chunks_mut(band * cols)
-                .zip(self.coarse.chunks_mut(band * tiles(cols)))
-                .enumerate()
-                .map(|(k, (depth, coarse))| {
-                    let range = k * band..k * band + depth.len() / cols;
-                    scope.spawn(move || {
-                        let mut part = Band {
-                            map: rows,
-                            cos,
-                            sin,
-                            depth,
-                            coarse,
-                            rows: range,
-                        };
-                        items
-                            .iter()
-                            .map(|item| part.add(&piece(item)))
-                            .sum::<usize>()
-                    })
+            let handles: Vec<_> = bands
+                .map(|(k, part)| {
+                    let add = &add;
+                    scope.spawn(move || add(k, part))
                 })
                 .collect();
-            handles
+            // The first band on this thread: one thread fewer to start.
+            let mine = first.map_or(0, |(k, part)| add(k, part));
+            mine + handles
                 .into_iter()
                 .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .sum()
+                .sum::<usize>()
         })
     }
 

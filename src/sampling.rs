@@ -50,15 +50,18 @@ pub fn in_parallel<T: Send>(out: &mut [T], work: impl Fn(usize, &mut T) + Sync) 
     }
     let chunk = out.len().div_ceil(threads * 8).max(1);
     let next = std::sync::Mutex::new(out.chunks_mut(chunk).enumerate());
-    std::thread::scope(|s| {
-        for _ in 0..threads {
-            s.spawn(|| loop {
-                let item = next.lock().map(|mut it| it.next()).ok().flatten();
-                let Some((c, slots)) = item else { break };
-                for (k, slot) in slots.iter_mut().enumerate() {
-                    work(c * chunk + k, slot);
-                }
-            });
+    let worker = || loop {
+        let item = next.lock().map(|mut it| it.next()).ok().flatten();
+        let Some((c, slots)) = item else { break };
+        for (k, slot) in slots.iter_mut().enumerate() {
+            work(c * chunk + k, slot);
         }
+    };
+    // The calling thread is one of the workers: one thread fewer to start.
+    std::thread::scope(|s| {
+        for _ in 1..threads {
+            s.spawn(worker);
+        }
+        worker();
     });
 }

@@ -561,15 +561,21 @@ impl Proxies {
         std::thread::scope(|scope| {
             let handles: Vec<_> = bounds
                 .windows(2)
+                .skip(1)
                 .map(|w| {
                     let (lo, hi) = (w[0], w[1]);
                     scope.spawn(move || run(lo, hi))
                 })
                 .collect();
+            // The first run on this thread: one thread fewer to start.
+            let first = run(bounds[0], bounds.get(1).copied().unwrap_or(bounds[0]));
             // A panic in a worker is a bug; surface it on this thread.
-            handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            std::iter::once(first)
+                .chain(
+                    handles
+                        .into_iter()
+                        .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+                )
                 .collect()
         })
     }
