@@ -438,12 +438,12 @@ impl Transport {
             if threads <= 1 {
                 gather(0, &mut landing);
             } else {
-                std::thread::scope(|scope| {
+                crate::parallel::scope(|scope| {
                     let mut parts = landing.chunks_mut(chunk).enumerate();
                     let first = parts.next();
                     for (k, part) in parts {
                         let gather = &gather;
-                        scope.spawn(move || gather(k * chunk, part));
+                        scope.spawn(move |_| gather(k * chunk, part));
                     }
                     if let Some((_, part)) = first {
                         gather(0, part);

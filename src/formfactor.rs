@@ -368,22 +368,20 @@ fn on_patch_runs<T: Send>(
     }
     cuts.push(counts.len());
     let run = &run;
-    std::thread::scope(|scope| {
-        let handles: Vec<_> = cuts
-            .windows(2)
-            .skip(1)
-            .map(|w| scope.spawn(move || run(&counts[w[0]..w[1]])))
-            .collect();
+    let mut out: Vec<Option<T>> = cuts.windows(2).map(|_| None).collect();
+    crate::parallel::scope(|scope| {
+        let mut runs = cuts.windows(2).zip(out.iter_mut());
+        let first = runs.next();
+        for (w, slot) in runs {
+            scope.spawn(move |_| *slot = Some(run(&counts[w[0]..w[1]])));
+        }
         // The first run on this thread.
-        let first = run(&counts[cuts[0]..cuts[1]]);
-        std::iter::once(first)
-            .chain(
-                handles
-                    .into_iter()
-                    .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
-            )
-            .collect()
-    })
+        if let Some((w, slot)) = first {
+            *slot = Some(run(&counts[w[0]..w[1]]));
+        }
+    });
+    // Every slot is filled (a worker's panic resumes here first).
+    out.into_iter().flatten().collect()
 }
 
 /// What a hybrid row needs of its shooter patch.

@@ -166,26 +166,25 @@ impl OcclusionMap {
                 .map(|item| part.add(&piece(item)))
                 .sum::<usize>()
         };
-        let mut bands = self
+        let parts: Vec<_> = self
             .depth
             .chunks_mut(band * cols)
             .zip(self.coarse.chunks_mut(band * tiles(cols)))
-            .enumerate();
-        let first = bands.next();
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = bands
-                .map(|(k, part)| {
-                    let add = &add;
-                    scope.spawn(move || add(k, part))
-                })
-                .collect();
-            // The first band on this thread: one thread fewer to start.
-            let mine = first.map_or(0, |(k, part)| add(k, part));
-            mine + handles
-                .into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
-                .sum::<usize>()
-        })
+            .collect();
+        let mut held = vec![0usize; parts.len()];
+        crate::parallel::scope(|scope| {
+            let mut bands = parts.into_iter().zip(held.iter_mut()).enumerate();
+            let first = bands.next();
+            for (k, (part, out)) in bands {
+                let add = &add;
+                scope.spawn(move |_| *out = add(k, part));
+            }
+            // The first band on this thread.
+            if let Some((k, (part, out))) = first {
+                *out = add(k, part);
+            }
+        });
+        held.iter().sum()
     }
 
     /// How many cell centres `rect` holds (what drawing it costs).

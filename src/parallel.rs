@@ -202,6 +202,29 @@ pub fn cores() -> usize {
     })
 }
 
+/// Runs `op` on this thread with a scope whose spawned work runs on the
+/// process's worker threads ([`cores`] less one of them, started at the
+/// first call; this thread is the other), as `std::thread::scope` does
+/// without starting a thread each time: a shot forks and joins several
+/// times, and starting and joining a thread took about 25 us here, a
+/// sixth of a Cornell box's shot. Spawned work must not wait on other
+/// spawned work (each call here only forks and joins).
+pub fn scope<'scope, R>(op: impl FnOnce(&rayon_core::Scope<'scope>) -> R) -> R {
+    static WORKERS: std::sync::Once = std::sync::Once::new();
+    WORKERS.call_once(|| {
+        // If it fails (threads cannot start), rayon's own global pool is
+        // built at the first spawn instead: the same work, more threads.
+        let built = rayon_core::ThreadPoolBuilder::new()
+            .num_threads(cores().saturating_sub(1).max(1))
+            .thread_name(|k| format!("radiosity worker {k}"))
+            .build_global();
+        if let Err(e) = built {
+            log::debug!("worker threads: {e}");
+        }
+    });
+    rayon_core::in_place_scope(op)
+}
+
 /// The ranks mpirun started on this host (Open MPI's
 /// `OMPI_COMM_WORLD_LOCAL_SIZE`; 1 outside mpirun).
 pub fn ranks_on_this_host() -> usize {

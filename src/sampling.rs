@@ -57,10 +57,10 @@ pub fn in_parallel<T: Send>(out: &mut [T], work: impl Fn(usize, &mut T) + Sync) 
             work(c * chunk + k, slot);
         }
     };
-    // The calling thread is one of the workers: one thread fewer to start.
-    std::thread::scope(|s| {
+    // The calling thread is one of the workers.
+    crate::parallel::scope(|s| {
         for _ in 1..threads {
-            s.spawn(worker);
+            s.spawn(move |_| worker());
         }
         worker();
     });

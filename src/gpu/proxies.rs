@@ -558,26 +558,21 @@ impl Proxies {
         bounds.push(self.polygons.len());
         bounds.dedup();
         let run = &run;
-        std::thread::scope(|scope| {
-            let handles: Vec<_> = bounds
-                .windows(2)
-                .skip(1)
-                .map(|w| {
-                    let (lo, hi) = (w[0], w[1]);
-                    scope.spawn(move || run(lo, hi))
-                })
-                .collect();
-            // The first run on this thread: one thread fewer to start.
-            let first = run(bounds[0], bounds.get(1).copied().unwrap_or(bounds[0]));
-            // A panic in a worker is a bug; surface it on this thread.
-            std::iter::once(first)
-                .chain(
-                    handles
-                        .into_iter()
-                        .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
-                )
-                .collect()
-        })
+        let mut out: Vec<Option<T>> = bounds.windows(2).map(|_| None).collect();
+        crate::parallel::scope(|scope| {
+            let mut runs = bounds.windows(2).zip(out.iter_mut());
+            let first = runs.next();
+            for (w, slot) in runs {
+                let (lo, hi) = (w[0], w[1]);
+                scope.spawn(move |_| *slot = Some(run(lo, hi)));
+            }
+            // The first run on this thread.
+            if let Some((w, slot)) = first {
+                *slot = Some(run(w[0], w[1]));
+            }
+        });
+        // Every slot is filled (a worker's panic resumes here first).
+        out.into_iter().flatten().collect()
     }
 
     /// Pushes the rectangles of `poly`'s proxies (see [`push_piece`]);

@@ -442,8 +442,8 @@ impl Software {
         if threads > 1 && instances.len() >= PARALLEL_PREPARE {
             let (first, second) = instances.split_at(instances.len() / 2);
             let (prepared, spans) = &mut self.second;
-            std::thread::scope(|s| {
-                s.spawn(|| prepare(second, prepared, spans));
+            crate::parallel::scope(|s| {
+                s.spawn(|_| prepare(second, prepared, spans));
                 prepare(first, &mut self.prepared, &mut self.spans);
             });
             self.prepared.append(prepared);
@@ -480,9 +480,10 @@ impl Software {
             .map(|b| (b, counts.next(), seen.next()))
             .collect();
         if let Some((first, rest)) = work.split_first_mut() {
-            std::thread::scope(|s| {
+            crate::parallel::scope(|s| {
                 for (k, (band, counts, seen)) in rest.iter_mut().enumerate() {
-                    s.spawn(move || run(k + 1, band, counts.as_deref_mut(), seen.as_deref_mut()));
+                    let run = &run;
+                    s.spawn(move |_| run(k + 1, band, counts.as_deref_mut(), seen.as_deref_mut()));
                 }
                 run(
                     0,
@@ -545,9 +546,10 @@ impl Software {
         let split_all = |list| halves(list, split as usize);
         let ((low, high), (low_seen, high_seen)) = (split_all(counts), split_all(visible));
         let mut rest = Vec::new();
-        std::thread::scope(|s| {
+        crate::parallel::scope(|s| {
             let later = &ranges[cut..];
-            s.spawn(|| sum_counts(later, (high, high_seen), split as usize, &mut rest));
+            let rest = &mut rest;
+            s.spawn(move |_| sum_counts(later, (high, high_seen), split as usize, rest));
             sum_counts(&ranges[..cut], (low, low_seen), 0, out);
         });
         out.extend_from_slice(&rest);

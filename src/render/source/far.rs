@@ -299,18 +299,20 @@ impl GpuFormFactors<'_> {
         let far = std::mem::take(&mut self.far_patches);
         let patches = &far;
         self.tiers[tier].raster.set_bounds_threads(1);
-        let (drawn, ((clear, spent), waited)) = std::thread::scope(|s| {
-            let scan = s.spawn(move || {
+        let mut scanned = None;
+        let (drawn, waiting) = crate::parallel::scope(|s| {
+            let (scanned, shot) = (&mut scanned, &shot);
+            s.spawn(move |_| {
                 let start = Instant::now();
-                let clear = centre_rays(mesh, patches, &shot, None, &|_| true);
-                (clear, start.elapsed())
+                let clear = centre_rays(mesh, patches, shot, None, &|_| true);
+                *scanned = Some((clear, start.elapsed()));
             });
             let drawn = self.hemisphere(shooter, centre, tier, f32::INFINITY);
-            let waiting = Instant::now();
-            // A panic in the scan is a bug; carry it on here.
-            let done = scan.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
-            (drawn, (done, waiting.elapsed()))
+            // The scope ends when the scan has (a panic in it resumes here).
+            (drawn, Instant::now())
         });
+        let waited = waiting.elapsed();
+        let (clear, spent) = scanned.unwrap_or_default();
         // Waiting for the scan counts as the far receivers' time.
         self.timings.far += waited;
         self.tiers[tier].raster.set_bounds_threads(usize::MAX);
