@@ -523,10 +523,6 @@ pub struct Replay {
     /// grow further, as `contention2 (N / 2)^contention_power` (time
     /// slicing); one core a rank stays at `contention2`.
     pub contention_power: f64,
-    /// Whether ranks take the rows from a pool as they come free (a ticket
-    /// a row, and one more a step for each rank, each a round trip to the
-    /// pool's counter on rank 0), rather than dealt before any is drawn.
-    pub pooled: bool,
 }
 
 impl Replay {
@@ -539,7 +535,6 @@ impl Replay {
                 .collect(),
             shots,
             contention2: 1.0,
-            pooled: true,
             ..Self::default()
         }
     }
@@ -550,11 +545,13 @@ impl Replay {
         self.batches.len() as f64 / self.shots
     }
 
-    /// Tickets a rank takes a shot on `n` ranks where the rows are pooled:
-    /// of each step's pool (the rows the deal does not fix, one of the
-    /// dearest a rank), 1 / n of them, and one each rank takes past its end.
-    pub fn tickets(&self, n: f64) -> f64 {
-        if !self.pooled || n <= 1.0 {
+    /// Tickets a rank takes a shot on `n` ranks, the rows `pooled` (each a
+    /// round trip to the pool's counter on rank 0) or dealt before any is
+    /// drawn (none): of each step's pool (the rows the deal does not fix,
+    /// one of the dearest a rank), 1 / n of them, and one each rank takes
+    /// past its end.
+    pub fn tickets(&self, n: f64, pooled: bool) -> f64 {
+        if !pooled || n <= 1.0 {
             return 0.0;
         }
         let ranks = n as usize;
@@ -700,7 +697,8 @@ impl Model {
             stages += p.calls * (n - 1.0 - log2_stages(n));
         }
         if let Some(r) = &self.replay {
-            stages += 2.0 * r.tickets(n);
+            // The render pools the rows, as the replay deals them.
+            stages += 2.0 * r.tickets(n, true);
         }
         stages
     }
@@ -1070,12 +1068,7 @@ impl Calibration {
                 }
                 // The 2-rank run's calls count the tickets it took (none if it
                 // dealt its rows); the model adds them again for each rank count.
-                let taken = Replay {
-                    pooled: two.pooled,
-                    ..replay.clone()
-                }
-                .tickets(2.0);
-                model.calls = (calls - taken).max(0.0);
+                model.calls = (calls - replay.tickets(2.0, two.pooled)).max(0.0);
                 model.replicated = replay.rest_a;
                 model.divided = replay.rest_b + rows1;
                 model.imbalance2 = f64::NAN;
@@ -1228,11 +1221,7 @@ impl Calibration {
                     ));
                     // The calls: the collectives, and the tickets of rows
                     // taken from a pool (the oversubscribed runs deal theirs).
-                    let taken = Replay {
-                        pooled: r.pooled,
-                        ..replay.clone()
-                    }
-                    .tickets(n);
+                    let taken = replay.tickets(n, r.pooled);
                     out.push(what(CALLS, Run::mean(&r.calls), m.calls + taken));
                 }
             }
@@ -1468,14 +1457,10 @@ mod tests {
         assert!((r.all_to_alls() - 0.02).abs() < 1e-12);
         // 2 ranks: each fixes one row a step; the pools of 8 and 1 give a
         // rank half of them and one ticket past each pool's end.
-        assert!((r.tickets(2.0) - (9.0 / 2.0 + 2.0) / 100.0).abs() < 1e-12);
+        assert!((r.tickets(2.0, true) - (9.0 / 2.0 + 2.0) / 100.0).abs() < 1e-12);
         // 16 ranks: every row fixed, no pool, no ticket; dealt, none either.
-        assert_eq!(r.tickets(16.0), 0.0);
-        let dealt = Replay {
-            pooled: false,
-            ..r.clone()
-        };
-        assert_eq!(dealt.tickets(2.0), 0.0);
+        assert_eq!(r.tickets(16.0, true), 0.0);
+        assert_eq!(r.tickets(2.0, false), 0.0);
         // The latencies: the collectives' trees, N - 1 messages for each
         // step's all-to-all (one of the collectives), 2 a ticket.
         let mut m = model(0.1, 0.0, 0.0);
@@ -1491,7 +1476,7 @@ mod tests {
         m.replay = Some(r.clone());
         for n in [2.0, 8.0, 64.0] {
             let want =
-                4.0 * log2_stages(n) + 0.02 * (n - 1.0 - log2_stages(n)) + 2.0 * r.tickets(n);
+                4.0 * log2_stages(n) + 0.02 * (n - 1.0 - log2_stages(n)) + 2.0 * r.tickets(n, true);
             assert!((m.stages(n, false) - want).abs() < 1e-12, "{n}");
         }
     }

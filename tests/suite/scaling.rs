@@ -114,7 +114,7 @@ fn the_model_counts_a_batched_runs_calls() {
             .model(&r.scene, r.resolution, &r.exchange)
             .expect("a batched model of the run's scene");
         let replay = m.replay.as_ref().expect("batched runs are replayed");
-        let predicted = m.calls + replay.tickets(r.ranks as f64);
+        let predicted = m.calls + replay.tickets(r.ranks as f64, r.pooled);
         let measured = r.calls.iter().sum::<f64>() / r.calls.len() as f64;
         assert!(
             (predicted / measured - 1.0).abs() < 0.01,
