@@ -52,6 +52,10 @@ fn row(name: &str, r: &Report) -> String {
 
 /// Runs the benchmark.
 pub fn run(args: BenchArgs) -> Result<()> {
+    // The timings are written last: a bad place fails now, not after them.
+    if let Some(path) = &args.json {
+        output::check_writable(path)?;
+    }
     let gpu = Gpu::new()?;
     println!(
         "device: {}, hemisphere {}\n",

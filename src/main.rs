@@ -747,6 +747,23 @@ fn output_paths(args: &RenderArgs) -> OutputPaths {
     }
 }
 
+/// Where `args`' solve saves its state.
+fn checkpoint_path(args: &RenderArgs) -> PathBuf {
+    args.checkpoint.clone().unwrap_or_else(|| {
+        args.out_dir
+            .join(format!("{}.ckpt", output_stem(&args.scene)))
+    })
+}
+
+/// Rank 0's check, before the solve, that every output of `args` and its
+/// saved state can be written: a bad place is found in a second, not after
+/// hours of solving whose results it would lose.
+fn check_outputs(args: &RenderArgs) -> Result<()> {
+    output_paths(args).check(args.width != 0)?;
+    radiosity::output::check_writable(&checkpoint_path(args))?;
+    Ok(())
+}
+
 /// The render options of `args`, with `interrupt` to stop the solve.
 fn render_options(
     args: &RenderArgs,
@@ -766,10 +783,7 @@ fn render_options(
     opts.tile = args.tile;
     opts.exchange = args.exchange;
     opts.checkpoint = Some(CheckpointPlan {
-        path: args.checkpoint.clone().unwrap_or_else(|| {
-            args.out_dir
-                .join(format!("{}.ckpt", output_stem(&args.scene)))
-        }),
+        path: checkpoint_path(args),
         every: args
             .checkpoint_every
             .map(std::time::Duration::from_secs_f32),
@@ -820,6 +834,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
             Ok(s)
         })
         .map_err(anyhow::Error::from)
+        .and_then(|s| {
+            if rank == 0 {
+                check_outputs(&args)?;
+            }
+            Ok(s)
+        })
         .and_then(|s| Ok((s, Gpu::new()?)))
         .map_err(|e| format!("{e:#}"));
     let load_time = t.elapsed();

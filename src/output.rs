@@ -46,18 +46,53 @@ fn err(path: &Path, e: impl std::fmt::Display) -> OutputError {
     }
 }
 
-/// Writes `bytes` to `path` atomically, creating parent directories.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
-    let dir = match path.parent() {
+/// The directory `path` is written in (`.` for a bare file name).
+fn directory_of(path: &Path) -> &Path {
+    match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
-    };
+    }
+}
+
+/// Creates `path`'s directory and its parents as needed. Where a file
+/// stands in the way, the error names it: `create_dir_all` only says
+/// "File exists".
+fn make_directory(path: &Path) -> Result<&Path, OutputError> {
+    let dir = directory_of(path);
+    if let Some(file) = dir.ancestors().find(|a| a.is_file()) {
+        return Err(err(
+            path,
+            format!("'{}' is a file, not a directory", file.display()),
+        ));
+    }
     std::fs::create_dir_all(dir).map_err(|e| err(path, e))?;
-    let mut tmp = tempfile::Builder::new()
+    Ok(dir)
+}
+
+/// A new temporary file beside `path` (deleted when dropped).
+fn temporary_beside(path: &Path) -> Result<tempfile::NamedTempFile, OutputError> {
+    tempfile::Builder::new()
         .prefix(".radiosity-")
         .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(|e| err(path, e))?;
+        .tempfile_in(make_directory(path)?)
+        .map_err(|e| err(path, e))
+}
+
+/// Checks, before any work, that [`write_atomic`] will be able to write
+/// `path`: its directory exists or can be made, takes a new file, and
+/// `path` is not a directory. A render checks every output this way, so a
+/// mistyped or read-only place fails at once, not after a long solve whose
+/// results it would lose. (Creates the directory, as writing would.)
+pub fn check_writable(path: &Path) -> Result<(), OutputError> {
+    if path.is_dir() {
+        return Err(err(path, "it is a directory"));
+    }
+    temporary_beside(path).map(drop)
+}
+
+/// Writes `bytes` to `path` atomically, creating parent directories.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    let mut tmp = temporary_beside(path)?;
     tmp.write_all(bytes).map_err(|e| err(path, e))?;
     tmp.as_file().sync_all().map_err(|e| err(path, e))?;
     // Temporary files are private (0600); results are ordinary files.

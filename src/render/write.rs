@@ -23,6 +23,21 @@ pub struct OutputPaths {
     pub report: PathBuf,
 }
 
+impl OutputPaths {
+    /// Checks that every output can be written (see
+    /// [`output::check_writable`]), the image's PNG preview included, when
+    /// `image` says there will be one.
+    pub fn check(&self, image: bool) -> Result<(), OutputError> {
+        let exr = self.image.as_ref().filter(|_| image);
+        let png = exr.map(|p| p.with_extension("png"));
+        exr.into_iter()
+            .chain(&png)
+            .chain(&self.bake)
+            .chain(std::iter::once(&self.report))
+            .try_for_each(|p| output::check_writable(p))
+    }
+}
+
 /// What was written.
 #[derive(Clone, Debug)]
 pub struct Written {

@@ -310,3 +310,37 @@ fn a_world_of_one_under_a_launcher_of_several_is_an_error() {
         "{stderr}"
     );
 }
+
+#[test]
+fn an_output_that_cannot_be_written_fails_before_the_solve() {
+    // A file where a directory should be, and a directory where a file
+    // should be: the error names them at once (before, the solve ran and
+    // its results were lost at the end, with "File exists" for a reason).
+    let dir = tempfile::tempdir().expect("temp dir");
+    let file = dir.path().join("not-a-dir");
+    std::fs::write(&file, b"x").expect("write");
+    let under = |name: &str| file.join(name).to_string_lossy().into_owned();
+    let named = format!("'{}' is a file, not a directory", file.display());
+    for flag in ["--report", "--image", "--checkpoint", "--bake"] {
+        expect_error(&["render", "cornell", flag, &under("out")], &named);
+    }
+    let here = dir.path().to_string_lossy().into_owned();
+    expect_error(
+        &["render", "cornell", "--report", &here],
+        "it is a directory",
+    );
+    // Nothing was written where the outputs could go.
+    assert_eq!(std::fs::read_dir(dir.path()).expect("list").count(), 1);
+    // No image (--width 0) needs no place for one.
+    let out = Command::new(env!("CARGO_BIN_EXE_radiosity"))
+        .args(["render", "cornell", "--width", "0", "--max-shots", "2"])
+        .arg("--image")
+        .arg(under("x.exr"))
+        .arg("--out-dir")
+        .arg(dir.path().join("out"))
+        .output()
+        .expect("run radiosity");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(dir.path().join("out").join("cornell.json").is_file());
+}
