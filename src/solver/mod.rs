@@ -249,8 +249,11 @@ pub struct Solver<'m> {
     /// Per patch, its area: the scans of every shot read this, not the
     /// patch records (Sponza: 13 MB a scan instead of 32).
     patch_area: Vec<f64>,
-    /// Per element, what a shot's update reads of it (see [`Receiving`]).
+    /// Per element, what a shot's update reads of it (see [`Receiving`]);
+    /// only this rank's elements' are set.
     receiving: Vec<Receiving>,
+    /// Per element (every rank's), its patch: who owns it.
+    element_patch: Vec<u32>,
     /// Which rank owns which patch (`ranks` of them).
     owners: Owners,
     /// The vote for the next shooter, kept up to date (see [`vote`]); a
@@ -262,7 +265,7 @@ pub struct Solver<'m> {
 /// on thousands of elements, and reading these from the element and patch
 /// records (120 and 80 bytes) was a cache miss apiece, half the update's
 /// time in a default render. The same values, so the same bits.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, bytemuck::Zeroable)]
 struct Receiving {
     reflectance: [f64; 3],
     area: f64,
@@ -273,32 +276,46 @@ struct Receiving {
 
 /// What a solver keeps of each element, read in one pass over the
 /// elements (120-byte records: four passes were most of a solver's set-up,
-/// which every rank repeats): each element's exitance and `Receiving`,
-/// and over the elements that take the ambient term their area and
-/// area-weighted mean reflectance per channel (summed in element order).
+/// which every rank repeats): this rank's elements' exitance (twice: B and
+/// dB) and `Receiving`, every element's patch, and over the elements that
+/// take the ambient term their area and area-weighted mean reflectance
+/// per channel (summed in element order).
 struct PerElement {
     exitance: Vec<[f64; 3]>,
+    element_unshot: Vec<[f64; 3]>,
     receiving: Vec<Receiving>,
+    element_patch: Vec<u32>,
     mean_reflectance: [f64; 3],
     ambient_area: f64,
 }
 
 impl PerElement {
-    fn of(mesh: &Mesh) -> Self {
+    /// Rank `rank`'s (of `owners`) per-element arrays of `mesh`. The other
+    /// ranks' elements stay zero and are never read: their pages, runs of
+    /// patches dealt to other ranks, are never touched (the arrays start
+    /// as zeroed memory), which was most of the set-up every rank repeated.
+    fn of(mesh: &Mesh, owners: Owners, rank: usize) -> Self {
         let n = mesh.elements.len();
-        let (mut exitance, mut receiving) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        let mut exitance = vec![[0.0; 3]; n];
+        let mut element_unshot = vec![[0.0; 3]; n];
+        let mut receiving: Vec<Receiving> = bytemuck::zeroed_vec(n);
+        let mut element_patch = Vec::with_capacity(n);
         // The area starts where `Iterator::sum` starts (its zero's sign),
         // so it is the sum the solver took before, bit for bit.
         let (mut weighted, mut area) = ([0.0; 3], std::iter::empty::<f64>().sum::<f64>());
-        for e in &mesh.elements {
+        for (j, e) in mesh.elements.iter().enumerate() {
             let polygon = &mesh.polygons[e.polygon as usize];
-            exitance.push(polygon.exitance);
-            receiving.push(Receiving {
-                reflectance: e.reflectance,
-                area: e.area,
-                patch_share: patch_share(mesh, e),
-                patch: e.patch,
-            });
+            element_patch.push(e.patch);
+            if owners.of(e.patch) == rank {
+                exitance[j] = polygon.exitance;
+                element_unshot[j] = polygon.exitance;
+                receiving[j] = Receiving {
+                    reflectance: e.reflectance,
+                    area: e.area,
+                    patch_share: patch_share(mesh, e),
+                    patch: e.patch,
+                };
+            }
             if takes_ambient(mesh, e) {
                 area += e.area;
                 for (w, rho) in weighted.iter_mut().zip(e.reflectance) {
@@ -313,7 +330,9 @@ impl PerElement {
         };
         Self {
             exitance,
+            element_unshot,
             receiving,
+            element_patch,
             mean_reflectance,
             ambient_area: area,
         }
@@ -358,12 +377,15 @@ impl<'m> Solver<'m> {
 
     /// The share of rank `rank` of `ranks` (it holds every patch but updates only its own).
     pub fn partitioned(mesh: &'m Mesh, rank: usize, ranks: usize) -> Self {
+        let owners = Owners::new(mesh.patches.len(), ranks);
         let PerElement {
             exitance: radiosity,
+            element_unshot,
             receiving,
+            element_patch,
             mean_reflectance,
             ambient_area,
-        } = PerElement::of(mesh);
+        } = PerElement::of(mesh, owners, rank);
         let unshot: Vec<[f64; 3]> = mesh
             .patches
             .iter()
@@ -374,8 +396,8 @@ impl<'m> Solver<'m> {
             mesh,
             rank,
             ranks: ranks.max(1),
-            owners: Owners::new(mesh.patches.len(), ranks),
-            element_unshot: radiosity.clone(),
+            owners,
+            element_unshot,
             radiosity,
             unshot,
             emitted_power,
@@ -394,6 +416,7 @@ impl<'m> Solver<'m> {
             direct_known: true,
             patch_area: mesh.patches.iter().map(|p| p.area).collect(),
             receiving,
+            element_patch,
             vote: Default::default(),
         };
         solver.receive_lights();
@@ -415,11 +438,16 @@ impl<'m> Solver<'m> {
             let rho = e.reflectance;
             let share = patch_share(mesh, e);
             let (lights, sky) = (field.direct[j], field.sky[j]);
+            // Every patch's store, but only this rank's elements (the
+            // others' are never read here).
+            let own = self.owners.of(e.patch) == self.rank;
             for c in 0..3 {
                 let d = rho[c] * (lights[c] + sky[c]);
-                self.direct[j][c] += rho[c] * lights[c];
-                self.radiosity[j][c] += d;
-                self.element_unshot[j][c] += d;
+                if own {
+                    self.direct[j][c] += rho[c] * lights[c];
+                    self.radiosity[j][c] += d;
+                    self.element_unshot[j][c] += d;
+                }
                 self.unshot[e.patch as usize][c] += d * share;
             }
         }
@@ -467,7 +495,7 @@ impl<'m> Solver<'m> {
 
     /// The rank that updates element `element` (its patch's owner).
     pub fn element_rank(&self, element: u32) -> usize {
-        self.owners.of(self.receiving[element as usize].patch)
+        self.owners.of(self.element_patch[element as usize])
     }
 
     fn own_patches(&self) -> impl Iterator<Item = usize> {
@@ -838,10 +866,11 @@ impl<'m> Solver<'m> {
 
             form_factor_sum += t.form_factor;
             let j = t.element as usize;
-            let el = self.receiving[j];
-            if owners.of(el.patch) != rank {
+            // Other ranks' elements are not set in `receiving`.
+            if owners.of(self.element_patch[j]) != rank {
                 continue;
             }
+            let el = self.receiving[j];
             let (l, d) = landing_share(t, area, emitted);
             landed = (landed.0 + l, landed.1 + d);
             Self::touch(vote, rank, owners, el.patch as usize);
