@@ -331,7 +331,8 @@ impl Transport {
         } = plan;
         let mut offsets = Vec::with_capacity(count + 1);
         offsets.push(0);
-        let mut landings = Vec::new();
+        // Sized once: grown row by row it was copied a dozen times.
+        let mut landings = Vec::with_capacity(rows.iter().map(|r| r.hits.len()).sum());
         let mut back = Vec::with_capacity(count);
         let mut area = Vec::with_capacity(count);
         let mut reflectance = Vec::with_capacity(count);
