@@ -439,17 +439,7 @@ impl Transport {
             if threads <= 1 {
                 gather(0, &mut landing);
             } else {
-                crate::parallel::scope(|scope| {
-                    let mut parts = landing.chunks_mut(chunk).enumerate();
-                    let first = parts.next();
-                    for (k, part) in parts {
-                        let gather = &gather;
-                        scope.spawn(move |_| gather(k * chunk, part));
-                    }
-                    if let Some((_, part)) = first {
-                        gather(0, part);
-                    }
-                });
+                crate::parallel::each(landing.chunks_mut(chunk), |k, part| gather(k * chunk, part));
             }
             let mut flight = 0.0;
             for p in 0..n {

@@ -367,21 +367,7 @@ fn on_patch_runs<T: Send>(
         cuts.push(at);
     }
     cuts.push(counts.len());
-    let run = &run;
-    let mut out: Vec<Option<T>> = cuts.windows(2).map(|_| None).collect();
-    crate::parallel::scope(|scope| {
-        let mut runs = cuts.windows(2).zip(out.iter_mut());
-        let first = runs.next();
-        for (w, slot) in runs {
-            scope.spawn(move |_| *slot = Some(run(&counts[w[0]..w[1]])));
-        }
-        // The first run on this thread.
-        if let Some((w, slot)) = first {
-            *slot = Some(run(&counts[w[0]..w[1]]));
-        }
-    });
-    // Every slot is filled (a worker's panic resumes here first).
-    out.into_iter().flatten().collect()
+    crate::parallel::each(cuts.windows(2), |_, w| run(&counts[w[0]..w[1]]))
 }
 
 /// What a hybrid row needs of its shooter patch.

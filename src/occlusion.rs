@@ -166,25 +166,11 @@ impl OcclusionMap {
                 .map(|item| part.add(&piece(item)))
                 .sum::<usize>()
         };
-        let parts: Vec<_> = self
+        let parts = self
             .depth
             .chunks_mut(band * cols)
-            .zip(self.coarse.chunks_mut(band * tiles(cols)))
-            .collect();
-        let mut held = vec![0usize; parts.len()];
-        crate::parallel::scope(|scope| {
-            let mut bands = parts.into_iter().zip(held.iter_mut()).enumerate();
-            let first = bands.next();
-            for (k, (part, out)) in bands {
-                let add = &add;
-                scope.spawn(move |_| *out = add(k, part));
-            }
-            // The first band on this thread.
-            if let Some((k, (part, out))) = first {
-                *out = add(k, part);
-            }
-        });
-        held.iter().sum()
+            .zip(self.coarse.chunks_mut(band * tiles(cols)));
+        crate::parallel::each(parts, add).iter().sum()
     }
 
     /// How many cell centres `rect` holds (what drawing it costs).

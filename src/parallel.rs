@@ -225,6 +225,28 @@ pub fn scope<'scope, R>(op: impl FnOnce(&rayon_core::Scope<'scope>) -> R) -> R {
     rayon_core::in_place_scope(op)
 }
 
+/// `work(k, part)` for every part, the first on this thread and the rest
+/// on the worker threads ([`scope`]); the results in part order (a
+/// worker's panic resumes here).
+pub fn each<P: Send, T: Send>(
+    parts: impl ExactSizeIterator<Item = P>,
+    work: impl Fn(usize, P) -> T + Sync,
+) -> Vec<T> {
+    let mut out: Vec<Option<T>> = (0..parts.len()).map(|_| None).collect();
+    scope(|s| {
+        let work = &work;
+        let mut jobs = parts.zip(out.iter_mut()).enumerate();
+        let first = jobs.next();
+        for (k, (part, slot)) in jobs {
+            s.spawn(move |_| *slot = Some(work(k, part)));
+        }
+        if let Some((k, (part, slot))) = first {
+            *slot = Some(work(k, part));
+        }
+    });
+    out.into_iter().flatten().collect()
+}
+
 /// The ranks mpirun started on this host (Open MPI's
 /// `OMPI_COMM_WORLD_LOCAL_SIZE`; 1 outside mpirun).
 pub fn ranks_on_this_host() -> usize {

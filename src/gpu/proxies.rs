@@ -557,22 +557,7 @@ impl Proxies {
         }
         bounds.push(self.polygons.len());
         bounds.dedup();
-        let run = &run;
-        let mut out: Vec<Option<T>> = bounds.windows(2).map(|_| None).collect();
-        crate::parallel::scope(|scope| {
-            let mut runs = bounds.windows(2).zip(out.iter_mut());
-            let first = runs.next();
-            for (w, slot) in runs {
-                let (lo, hi) = (w[0], w[1]);
-                scope.spawn(move |_| *slot = Some(run(lo, hi)));
-            }
-            // The first run on this thread.
-            if let Some((w, slot)) = first {
-                *slot = Some(run(w[0], w[1]));
-            }
-        });
-        // Every slot is filled (a worker's panic resumes here first).
-        out.into_iter().flatten().collect()
+        crate::parallel::each(bounds.windows(2), |_, w| run(w[0], w[1]))
     }
 
     /// Pushes the rectangles of `poly`'s proxies (see [`push_piece`]);

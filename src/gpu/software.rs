@@ -479,20 +479,9 @@ impl Software {
             .into_iter()
             .map(|b| (b, counts.next(), seen.next()))
             .collect();
-        if let Some((first, rest)) = work.split_first_mut() {
-            crate::parallel::scope(|s| {
-                for (k, (band, counts, seen)) in rest.iter_mut().enumerate() {
-                    let run = &run;
-                    s.spawn(move |_| run(k + 1, band, counts.as_deref_mut(), seen.as_deref_mut()));
-                }
-                run(
-                    0,
-                    &mut first.0,
-                    first.1.as_deref_mut(),
-                    first.2.as_deref_mut(),
-                );
-            });
-        }
+        crate::parallel::each(work.iter_mut(), |k, (band, counts, seen)| {
+            run(k, band, counts.as_deref_mut(), seen.as_deref_mut())
+        });
         drop(work);
         if let Some(out) = coverage {
             self.gather(instances, (threads, packing), out);
