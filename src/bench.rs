@@ -5,7 +5,7 @@ use crate::SolveArgs;
 use anyhow::Result;
 use clap::Args;
 use radiosity::gpu::Gpu;
-use radiosity::render::render;
+use radiosity::render::render_ranks;
 use radiosity::report::Report;
 use radiosity::{output, scene};
 use std::path::PathBuf;
@@ -75,7 +75,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         // It times shots that draw: weak shooters along the transport (by
         // default in big meshes) only when asked for.
         opts.transport_below.get_or_insert(0.0);
-        let r = render(&gpu, &scene, &opts, t.elapsed(), &mut |_| {})?;
+        let ranks = args.solve.ranks as usize;
+        let r = render_ranks(&gpu, &scene, &opts, ranks, t.elapsed(), &mut |_| {})?;
         println!("{}", row(name, &r.report));
         reports.push(r.report);
     }
@@ -84,7 +85,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let mut opts = args.solve.options();
         opts.width = 0;
         opts.stop.threshold = args.converge;
-        let r = render(&gpu, &scene, &opts, Duration::ZERO, &mut |_| {})?;
+        let ranks = args.solve.ranks as usize;
+        let r = render_ranks(&gpu, &scene, &opts, ranks, Duration::ZERO, &mut |_| {})?;
         println!(
             "\ncornell to unshot fraction {:.0e}: {} shots, {:.2} s solve ({:.2} s with setup)",
             args.converge,

@@ -4,8 +4,8 @@
 
 use std::any::Any;
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Barrier, Mutex};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, RwLock};
 
 /// Bytes this rank sent and received in exchanges, summed over calls, and
 /// what the calls cost.
@@ -45,11 +45,36 @@ impl Traffic {
     }
 }
 
-/// CPU seconds this process (all its threads, the GPU driver's included)
-/// has used so far.
+/// CPU seconds this rank has used so far: its process's (all its threads,
+/// the GPU driver's included), or, for a rank that is a thread of a
+/// process holding several ([`ThreadComm::ranks`]), its thread's.
 pub fn process_cpu_seconds() -> f64 {
-    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+    let clock = if RANK_THREAD.get().is_some() {
+        rustix::time::ClockId::ThreadCPUTime
+    } else {
+        rustix::time::ClockId::ProcessCPUTime
+    };
+    let t = rustix::time::clock_gettime(clock);
     t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}
+
+/// What a rank that is a thread of this process knows of itself
+/// ([`ThreadComm::ranks`]): the cores it may use and its rank.
+#[derive(Clone, Copy)]
+struct RankThread {
+    cores: usize,
+    rank: usize,
+}
+
+thread_local! {
+    static RANK_THREAD: Cell<Option<RankThread>> = const { Cell::new(None) };
+}
+
+/// Whether this thread is a rank other than 0 of a process holding
+/// several: such a rank logs warnings and errors only, as one under
+/// mpirun does (the binary's logger asks).
+pub fn quiet_rank() -> bool {
+    RANK_THREAD.get().is_some_and(|r| r.rank > 0)
 }
 
 /// A span of this process's CPU time, less what collective calls used in it.
@@ -195,6 +220,9 @@ impl Collectives for Single {
 /// devices do (`launch::share_cores_between_ranks`), so unbound ranks do
 /// not each spawn a worker for every core of the host.
 pub fn cores() -> usize {
+    if let Some(n) = RANK_THREAD.get() {
+        return n.cores;
+    }
     static CORES: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
     *CORES.get_or_init(|| {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -502,70 +530,230 @@ pub struct ThreadComm {
     next_pool: Cell<u64>,
 }
 
+/// Each rank thread's cores: the process's own cores cut into `ranks`
+/// equal runs, as `mpirun --bind-to core` binds processes (a thread left to
+/// wander between cores was 6-10 % slower; the scheduler moved it off its
+/// caches). None where the ranks outnumber the cores or the mask cannot
+/// be read.
+fn rank_cores(ranks: usize) -> Vec<rustix::thread::CpuSet> {
+    use rustix::thread::{sched_getaffinity, CpuSet};
+    let Ok(mine) = sched_getaffinity(None) else {
+        return Vec::new();
+    };
+    let cpus: Vec<usize> = (0..CpuSet::MAX_CPU).filter(|&c| mine.is_set(c)).collect();
+    let each = cpus.len() / ranks.max(1);
+    if each == 0 {
+        return Vec::new();
+    }
+    cpus.chunks(each)
+        .take(ranks)
+        .map(|run| {
+            let mut set = CpuSet::new();
+            run.iter().for_each(|&c| set.set(c));
+            set
+        })
+        .collect()
+}
+
 /// What each rank put down for the collective under way.
-type Slots = Vec<Option<Box<dyn Any + Send>>>;
+type Slots = Vec<Option<Box<dyn Any + Send + Sync>>>;
 
 struct Meeting {
     size: usize,
-    slots: Mutex<Slots>,
-    barrier: Barrier,
+    slots: RwLock<Slots>,
+    /// Ranks arrived at the barrier under way and its generation.
+    arrived: Mutex<(usize, u64)>,
+    turned: Condvar,
+    /// A rank failed (an error or a panic): the others leave at their
+    /// next meeting instead of waiting for it forever.
+    failed: AtomicBool,
     tickets: AtomicU64,
+}
+
+/// Unwinds a rank whose peer failed (see [`Meeting::failed`]); it carries
+/// no message (the failed rank's is the one to tell).
+struct PeerFailed;
+
+impl Meeting {
+    fn new(size: usize) -> Self {
+        Self {
+            size,
+            slots: RwLock::new((0..size).map(|_| None).collect()),
+            arrived: Mutex::new((0, 0)),
+            turned: Condvar::new(),
+            failed: AtomicBool::new(false),
+            tickets: AtomicU64::new(0),
+        }
+    }
+
+    /// Waits for every rank (a barrier), or unwinds where one failed.
+    fn wait(&self) {
+        let mut state = self.arrived.lock().unwrap_or_else(|p| p.into_inner());
+        let generation = state.1;
+        state.0 += 1;
+        if state.0 == self.size {
+            *state = (0, generation + 1);
+            self.turned.notify_all();
+            return;
+        }
+        while state.1 == generation {
+            if self.failed.load(Ordering::Acquire) {
+                drop(state);
+                // `resume_unwind` runs no panic hook: nothing is printed.
+                std::panic::resume_unwind(Box::new(PeerFailed));
+            }
+            state = self.turned.wait(state).unwrap_or_else(|p| p.into_inner());
+        }
+    }
+
+    /// Marks a rank failed and wakes every waiting one.
+    fn fail(&self) {
+        self.failed.store(true, Ordering::Release);
+        let _held = self.arrived.lock().unwrap_or_else(|p| p.into_inner());
+        self.turned.notify_all();
+    }
 }
 
 impl ThreadComm {
     /// Runs `f` on `ranks` threads, each with its rank's communicator, and
     /// returns their results in rank order. A panic on any rank panics here.
     pub fn run<T: Send>(ranks: usize, f: impl Fn(&ThreadComm) -> T + Sync) -> Vec<T> {
-        let shared = Arc::new(Meeting {
-            size: ranks,
-            slots: Mutex::new((0..ranks).map(|_| None).collect()),
-            barrier: Barrier::new(ranks),
-            tickets: AtomicU64::new(0),
-        });
+        let outcomes = Self::spawn(ranks, None, |_| false, f);
+        // A rank's own panic first, not the others' unwinding after it.
+        let mut ended = None;
+        let mut results = Vec::with_capacity(outcomes.len());
+        for out in outcomes {
+            match out {
+                Ok(t) => results.push(t),
+                Err(p) if p.is::<PeerFailed>() => ended = Some(p),
+                Err(p) => std::panic::resume_unwind(p),
+            }
+        }
+        if let Some(p) = ended {
+            std::panic::resume_unwind(p);
+        }
+        results
+    }
+
+    /// `f` on `ranks` threads, each with its communicator and, where
+    /// `cores` is given, that many cores of its own (bound to them where
+    /// the process has enough). A rank that panics, or whose result
+    /// `failed` says failed, ends every other rank at its next collective
+    /// call (they unwind with [`PeerFailed`]).
+    fn spawn<T: Send>(
+        ranks: usize,
+        cores: Option<usize>,
+        failed: impl Fn(&T) -> bool + Sync,
+        f: impl Fn(&ThreadComm) -> T + Sync,
+    ) -> Vec<std::thread::Result<T>> {
+        let shared = Arc::new(Meeting::new(ranks));
+        let places = if cores.is_some() {
+            rank_cores(ranks)
+        } else {
+            Vec::new()
+        };
         std::thread::scope(|s| {
             let handles: Vec<_> = (0..ranks)
                 .map(|rank| {
-                    let comm = ThreadComm {
-                        rank,
-                        shared: shared.clone(),
-                        traffic: Cell::default(),
-                        next_pool: Cell::default(),
-                    };
-                    let f = &f;
-                    s.spawn(move || f(&comm))
+                    let (shared, f, failed, places) = (shared.clone(), &f, &failed, &places);
+                    s.spawn(move || {
+                        if let Some(set) = places.get(rank) {
+                            // Only time depends on it: a rank left unbound still runs.
+                            let _ = rustix::thread::sched_setaffinity(None, set);
+                        }
+                        if let Some(cores) = cores {
+                            RANK_THREAD.set(Some(RankThread { cores, rank }));
+                        }
+                        let comm = ThreadComm {
+                            rank,
+                            shared: shared.clone(),
+                            traffic: Cell::default(),
+                            next_pool: Cell::default(),
+                        };
+                        let out =
+                            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&comm)));
+                        if out.as_ref().is_ok_and(|t| !failed(t)) {
+                            return out;
+                        }
+                        shared.fail();
+                        out
+                    })
                 })
                 .collect();
             handles
                 .into_iter()
-                .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .map(|h| h.join().unwrap_or_else(Err))
                 .collect()
         })
     }
 
-    /// Every rank's `mine`, in rank order.
-    fn meet<T: Clone + Send + 'static>(&self, mine: T) -> Vec<T> {
-        self.slots()[self.rank] = Some(Box::new(mine));
-        self.shared.barrier.wait();
-        let all = self
-            .slots()
-            .iter()
-            .map(|s| {
-                s.as_ref()
-                    .and_then(|b| b.downcast_ref::<T>())
-                    .cloned()
-                    .expect("every rank makes the same collective calls")
-            })
-            .collect();
-        // Nobody writes the next call's slot before everyone has read this one.
-        self.shared.barrier.wait();
-        all
+    /// Runs `f` as `ranks` ranks, each a thread of this process with its
+    /// share of the cores ([`cores`] divided between them, at least one
+    /// each, each bound to its own as `mpirun --bind-to core` binds
+    /// processes): what `mpirun -n ranks` does, on one machine without
+    /// MPI. Returns rank 0's result, or the first failure: a rank that
+    /// returns an error or panics ends every other rank at its next
+    /// collective call (a panic resumes here).
+    pub fn ranks<T: Send, E: Send>(
+        ranks: usize,
+        f: impl Fn(&ThreadComm) -> Result<T, E> + Sync,
+    ) -> Result<T, E> {
+        let ranks = ranks.max(1);
+        let each = (cores() / ranks).max(1);
+        // The worker threads start now, sized for the whole process (a
+        // rank thread would size them for its own share).
+        scope(|_| {});
+        let outcomes = Self::spawn(ranks, Some(each), Result::is_err, f);
+        // A real failure before the ranks it ended (which unwound quietly),
+        // then rank 0's result.
+        let mut outcomes = outcomes.into_iter();
+        let zero = outcomes.next();
+        let mut panicked = None;
+        for out in outcomes {
+            match out {
+                Ok(Ok(_)) => {}
+                Ok(Err(e)) => return Err(e),
+                Err(p) if p.is::<PeerFailed>() => {}
+                Err(p) => panicked = panicked.or(Some(p)),
+            }
+        }
+        match zero {
+            Some(Ok(result)) => match (result, panicked) {
+                (Err(e), _) => Err(e),
+                (Ok(_), Some(p)) => std::panic::resume_unwind(p),
+                (Ok(t), None) => Ok(t),
+            },
+            Some(Err(p)) => std::panic::resume_unwind(panicked.unwrap_or(p)),
+            None => std::panic::resume_unwind(panicked.unwrap_or_else(|| Box::new(PeerFailed))),
+        }
     }
 
-    fn slots(&self) -> std::sync::MutexGuard<'_, Slots> {
-        self.shared
-            .slots
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    /// Every rank's `mine`, in rank order.
+    fn meet<T: Clone + Send + Sync + 'static>(&self, mine: T) -> Vec<T> {
+        self.meet_with(mine, |all| all.iter().map(|&t| t.clone()).collect())
+    }
+
+    /// `read` of every rank's `mine`, in rank order, while they lie there
+    /// (so a rank copies only what it takes: an all-to-all's column).
+    fn meet_with<T: Send + Sync + 'static, R>(&self, mine: T, read: impl FnOnce(&[&T]) -> R) -> R {
+        self.shared.slots.write().unwrap_or_else(|p| p.into_inner())[self.rank] =
+            Some(Box::new(mine));
+        self.shared.wait();
+        let out = {
+            let slots = self.shared.slots.read().unwrap_or_else(|p| p.into_inner());
+            let all: Vec<&T> = slots
+                .iter()
+                .map(|s| {
+                    s.as_ref()
+                        .and_then(|b| b.downcast_ref::<T>())
+                        .expect("every rank makes the same collective calls")
+                })
+                .collect();
+            read(&all)
+        };
+        // Nobody writes the next call's slot before everyone has read this one.
+        self.shared.wait();
+        out
     }
 
     fn count(&self, sent: usize, received: usize) {
@@ -606,29 +794,51 @@ impl Collectives for ThreadComm {
         self.count(8 * data.len(), 8 * data.len());
     }
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
-        let all = self.meet(outgoing.to_vec());
-        let incoming: Vec<(u32, u64)> = all
-            .iter()
-            .flat_map(|from| from[self.rank].iter().copied())
-            .collect();
+        let me = self.rank;
+        let incoming: Vec<(u32, u64)> = self.meet_with(outgoing.to_vec(), |all| {
+            all.iter()
+                .flat_map(|from| from[me].iter().copied())
+                .collect()
+        });
         let n = self.size();
-        let own_out = outgoing[self.rank].len();
+        let own = outgoing[me].len();
         let out: usize = outgoing.iter().map(Vec::len).sum();
         self.count(
-            12 * (out - own_out) + 4 * n,
-            12 * (incoming.len() - all[self.rank][self.rank].len()) + 4 * n,
+            12 * (out - own) + 4 * n,
+            12 * (incoming.len() - own) + 4 * n,
         );
         incoming
     }
     fn all_to_all_u32(&self, outgoing: &[Vec<u32>]) -> Vec<Vec<u32>> {
-        let all = self.meet(outgoing.to_vec());
-        let incoming: Vec<Vec<u32>> = all.iter().map(|from| from[self.rank].clone()).collect();
+        let me = self.rank;
+        let incoming: Vec<Vec<u32>> = self.meet_with(outgoing.to_vec(), |all| {
+            all.iter().map(|from| from[me].clone()).collect()
+        });
         let words = |v: &[Vec<u32>]| v.iter().map(Vec::len).sum::<usize>();
         self.count(
-            4 * (words(outgoing) - outgoing[self.rank].len()),
-            4 * (words(&incoming) - incoming[self.rank].len()),
+            4 * (words(outgoing) - outgoing[me].len()),
+            4 * (words(&incoming) - incoming[me].len()),
         );
         incoming
+    }
+    fn all_to_all_u32_into(&self, outgoing: &[Vec<u32>], incoming: &mut Vec<u32>) -> Vec<usize> {
+        let me = self.rank;
+        incoming.clear();
+        let starts = self.meet_with(outgoing.to_vec(), |all| {
+            let mut starts = Vec::with_capacity(all.len() + 1);
+            starts.push(0);
+            for from in all {
+                incoming.extend_from_slice(&from[me]);
+                starts.push(incoming.len());
+            }
+            starts
+        });
+        let words: usize = outgoing.iter().map(Vec::len).sum();
+        self.count(
+            4 * (words - outgoing[me].len()),
+            4 * (incoming.len() - outgoing[me].len()),
+        );
+        starts
     }
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
         let all = self.meet(local.to_vec());
@@ -689,6 +899,52 @@ pub fn rank_grid(n: usize) -> (u32, u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ranks_in_threads_meet_and_give_rank_zeros_result() {
+        let got = ThreadComm::ranks(3, |c| {
+            // Each rank has its share of the cores, at least one.
+            assert_eq!(
+                cores(),
+                (std::thread::available_parallelism().map_or(1, |n| n.get()) / 3).max(1)
+            );
+            let all = c.all_gather_f64(&[c.rank() as f64]);
+            let back =
+                c.all_to_all_u32(&[vec![c.rank() as u32], vec![10 + c.rank() as u32], vec![]]);
+            Ok::<_, String>((all, back))
+        });
+        let (all, back) = got.expect("no rank fails");
+        assert_eq!(all, vec![0.0, 1.0, 2.0]);
+        assert_eq!(back, vec![vec![0], vec![1], vec![2]]);
+        // Outside a rank thread the process's cores again.
+        assert!(RANK_THREAD.get().is_none());
+    }
+
+    #[test]
+    fn a_rank_that_fails_ends_the_others_with_its_error() {
+        // Rank 1 fails before a collective the others wait in: they must
+        // not wait for ever, and its error is the one returned.
+        let got: Result<(), String> = ThreadComm::ranks(3, |c| {
+            if c.rank() == 1 {
+                return Err("rank 1 failed".into());
+            }
+            c.all_gather_f64(&[1.0]);
+            Ok(())
+        });
+        assert_eq!(got, Err("rank 1 failed".to_string()));
+        // A panic is resumed as itself, not as the others' unwinding.
+        let panicked = std::panic::catch_unwind(|| {
+            ThreadComm::ranks(2, |c| {
+                if c.rank() == 0 {
+                    panic!("rank 0 broke");
+                }
+                c.all_gather_f64(&[1.0]);
+                Ok::<_, ()>(())
+            })
+        });
+        let message = panicked.expect_err("the panic comes back");
+        assert_eq!(message.downcast_ref::<&str>(), Some(&"rank 0 broke"));
+    }
 
     #[test]
     fn rows_go_where_they_cost_least_and_balance() {

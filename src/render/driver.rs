@@ -11,7 +11,7 @@ use crate::checkpoint::Header;
 use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
 use crate::mesh::Mesh;
-use crate::parallel::{Collectives, Exchange, Single, Traffic};
+use crate::parallel::{Collectives, Exchange, Single, ThreadComm, Traffic};
 use crate::render::image::{solution_image, view_for};
 use crate::report::{
     self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
@@ -49,6 +49,32 @@ pub fn render(
     // With one rank this process is rank 0, which always gets the result.
     render_on(gpu, scene, opts, &single, load_time, progress)?
         .ok_or_else(|| RenderError::Settings("no result on rank 0".into()))
+}
+
+/// [`render`] on `ranks` ranks that are threads of this process
+/// ([`ThreadComm::ranks`]), each with its share of the cores: the same
+/// numbers as `mpirun -n ranks` gives (and, with `--batch`, as one rank),
+/// without MPI. Only rank 0 reports `progress`.
+pub fn render_ranks(
+    gpu: &Gpu,
+    scene: &Scene,
+    opts: &RenderOptions,
+    ranks: usize,
+    load_time: Duration,
+    progress: &mut (dyn FnMut(&Progress) + Send),
+) -> Result<Rendered, RenderError> {
+    if ranks <= 1 {
+        return render(gpu, scene, opts, load_time, progress);
+    }
+    let progress = std::sync::Mutex::new(progress);
+    let rendered = ThreadComm::ranks(ranks, |comm| {
+        if comm.rank() > 0 {
+            return render_on(gpu, scene, opts, comm, load_time, &mut |_| {});
+        }
+        let mut shown = progress.lock().unwrap_or_else(|p| p.into_inner());
+        render_on(gpu, scene, opts, comm, load_time, &mut |p| shown(p))
+    })?;
+    rendered.ok_or_else(|| RenderError::Settings("no result on rank 0".into()))
 }
 
 /// The mesh to solve: a checkpoint's (whose fingerprint must match), or

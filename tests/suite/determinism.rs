@@ -444,3 +444,49 @@ fn radiosity_on(one_core: bool) -> std::process::Command {
         std::process::Command::new(bin)
     }
 }
+
+/// Ranks that are threads of this process (`--ranks`): the numbers one
+/// rank gives, batched and unbatched (the hemisphere split over the ranks),
+/// image included.
+#[test]
+fn ranks_in_one_process_give_one_ranks_numbers() {
+    let scene = radiosity::scene::open("cornell").expect("built-in scene");
+    for batch in [1, 6] {
+        let mut opts = RenderOptions {
+            width: 48,
+            batch,
+            ..RenderOptions::default()
+        };
+        opts.stop.max_shots = 30;
+        let one = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+        for ranks in [2, 3] {
+            let many = radiosity::render::render_ranks(
+                gpu(),
+                &scene,
+                &opts,
+                ranks,
+                Duration::ZERO,
+                &mut |_| {},
+            )
+            .expect("render on ranks");
+            let what = format!("batch {batch}, {ranks} ranks");
+            assert_eq!(many.report.counts.ranks, ranks, "{what}");
+            assert_eq!(one.report.shots, many.report.shots, "{what}");
+            assert_eq!(one.report.surfaces, many.report.surfaces, "{what}");
+            assert!(
+                one.radiosity == many.radiosity,
+                "{what}: radiosities differ"
+            );
+            let (a, b) = (
+                one.image.as_ref().expect("image"),
+                many.image.expect("image"),
+            );
+            assert!(
+                a.2.iter()
+                    .zip(&b.2)
+                    .all(|(p, q)| p.map(f32::to_bits) == q.map(f32::to_bits)),
+                "{what}: image pixels differ"
+            );
+        }
+    }
+}

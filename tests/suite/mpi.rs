@@ -217,6 +217,37 @@ fn bytes_exchanged_match_the_formulas() {
 }
 
 #[test]
+fn ranks_in_threads_under_mpirun_are_refused_with_a_reason() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let out = Command::new("mpirun")
+        .args(["--oversubscribe", "-n", "2"])
+        .arg(env!("CARGO_BIN_EXE_radiosity"))
+        .args([
+            "render",
+            "cornell",
+            "--width",
+            "0",
+            "--max-shots",
+            "5",
+            "--ranks",
+            "2",
+        ])
+        .arg("--out-dir")
+        .arg(dir.path())
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .env("OMPI_MCA_btl", "self,vader,tcp")
+        .output()
+        .expect("mpirun (install openmpi-bin)");
+    assert!(!out.status.success(), "--ranks 2 on 2 MPI ranks ran");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--ranks 2 under mpirun (2 ranks)"),
+        "no reason given:\n{err}"
+    );
+}
+
+#[test]
 fn a_failure_on_one_rank_ends_every_rank_with_a_message_from_rank_zero() {
     let dir = tempfile::tempdir().expect("temp dir");
     let bin = env!("CARGO_BIN_EXE_radiosity");
