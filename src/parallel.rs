@@ -775,7 +775,9 @@ impl Collectives for ThreadComm {
         self.shared.size
     }
     fn all_gather_f64(&self, local: &[f64]) -> Vec<f64> {
-        self.meet(local.to_vec()).concat()
+        self.meet_with(local.to_vec(), |all| {
+            all.iter().flat_map(|v| v.iter().copied()).collect()
+        })
     }
     fn all_gather_u32(&self, local: &[u32], _lengths: Option<&[usize]>) -> Vec<Vec<u32>> {
         let all = self.meet(local.to_vec());
@@ -787,10 +789,11 @@ impl Collectives for ThreadComm {
         all
     }
     fn reduce_broadcast_sum(&self, data: &mut [u64]) {
-        let all = self.meet(data.to_vec());
-        for (i, d) in data.iter_mut().enumerate() {
-            *d = all.iter().fold(0u64, |s, v| s.wrapping_add(v[i]));
-        }
+        self.meet_with(data.to_vec(), |all| {
+            for (i, d) in data.iter_mut().enumerate() {
+                *d = all.iter().fold(0u64, |s, v| s.wrapping_add(v[i]));
+            }
+        });
         self.count(8 * data.len(), 8 * data.len());
     }
     fn all_to_all_pairs(&self, outgoing: &[Vec<(u32, u64)>]) -> Vec<(u32, u64)> {
@@ -841,8 +844,11 @@ impl Collectives for ThreadComm {
         starts
     }
     fn gather_f64(&self, local: &[f64]) -> Option<Vec<Vec<f64>>> {
-        let all = self.meet(local.to_vec());
-        (self.rank == 0).then_some(all)
+        // Only rank 0 copies what it gathers.
+        let root = self.rank == 0;
+        self.meet_with(local.to_vec(), |all| {
+            root.then(|| all.iter().map(|&v| v.clone()).collect())
+        })
     }
     fn all_ok(&self, ok: Result<(), String>) -> Result<(), Vec<(usize, String)>> {
         let all = self.meet(ok.err());
