@@ -17,7 +17,7 @@ use clap::Args;
 use radiosity::gpu::Gpu;
 use radiosity::hemisphere::Resolution;
 use radiosity::output;
-use radiosity::render::{render, FormFactorMethod, Projection, RenderOptions};
+use radiosity::render::{render, render_ranks, FormFactorMethod, Projection, RenderOptions};
 use radiosity::report::Surface;
 use radiosity::scene::{self, GltfSurface, Scene};
 use radiosity::settings::AmbientTerm;
@@ -324,7 +324,18 @@ fn run_curve(
     label: String,
     reference: &[Surface],
 ) -> Result<Curve> {
-    let r = render(gpu, scene, o, Duration::ZERO, &mut |_| {})?;
+    run_curve_on(gpu, scene, (o, 1), label, reference)
+}
+
+/// [`run_curve`] on `ranks` ranks that are threads of this process.
+fn run_curve_on(
+    gpu: &Gpu,
+    scene: &Scene,
+    (o, ranks): (&RenderOptions, usize),
+    label: String,
+    reference: &[Surface],
+) -> Result<Curve> {
+    let r = render_ranks(gpu, scene, o, ranks, Duration::ZERO, &mut |_| {})?;
     let points = r
         .report
         .convergence
@@ -851,6 +862,16 @@ fn solver_curves(
         eprintln!("accuracy: {} hybrid, every shot fine", scene.name);
         let label = "hybrid 128x512, every shot at 128x512 (--coarse-below 0)".to_string();
         curves.push(run_curve(gpu, scene, &o, label, reference)?);
+    }
+    {
+        // Batches of shooters from one state, on two ranks of this process
+        // (`--batch 64 --ranks 2`): what the time bought is charted against
+        // what the batches cost in accuracy a shot.
+        let mut o = base.clone();
+        o.batch = 64;
+        eprintln!("accuracy: {} hybrid, batches of 64 on 2 ranks", scene.name);
+        let label = "hybrid 128x512, batches of 64 on 2 ranks in one process (--batch 64 --ranks 2)";
+        curves.push(run_curve_on(gpu, scene, (&o, 2), label.to_string(), reference)?);
     }
     {
         // Overshooting (Feda & Purgathofer 1992) against none.
