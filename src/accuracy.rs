@@ -870,8 +870,15 @@ fn solver_curves(
         let mut o = base.clone();
         o.batch = 64;
         eprintln!("accuracy: {} hybrid, batches of 64 on 2 ranks", scene.name);
-        let label = "hybrid 128x512, batches of 64 on 2 ranks in one process (--batch 64 --ranks 2)";
-        curves.push(run_curve_on(gpu, scene, (&o, 2), label.to_string(), reference)?);
+        let label =
+            "hybrid 128x512, batches of 64 on 2 ranks in one process (--batch 64 --ranks 2)";
+        curves.push(run_curve_on(
+            gpu,
+            scene,
+            (&o, 2),
+            label.to_string(),
+            reference,
+        )?);
     }
     {
         // Overshooting (Feda & Purgathofer 1992) against none.
