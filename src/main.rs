@@ -223,7 +223,8 @@ pub struct SolveArgs {
     deal_rows: radiosity::settings::DealRows,
     /// The memory each rank aims to stay within, GB: the form-factor row
     /// cache takes only what the scene, the mesh and the drawing leave of it
-    /// (at most 1 GiB a rank). It changes no number, only the time.
+    /// (at most 1 GiB a rank; ranks of `--ranks` each count their share of
+    /// the process). It changes no number, only the time.
     #[arg(long, default_value_t = radiosity::settings::DEFAULT_MEMORY_BUDGET as f32 / 1e9, value_parser = positive)]
     memory: f32,
     /// Do not split hybrid shots: by default, when a receiver near the

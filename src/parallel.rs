@@ -64,10 +64,18 @@ pub fn process_cpu_seconds() -> f64 {
 struct RankThread {
     cores: usize,
     rank: usize,
+    ranks: usize,
 }
 
 thread_local! {
     static RANK_THREAD: Cell<Option<RankThread>> = const { Cell::new(None) };
+}
+
+/// The ranks this process holds: those of `--ranks` inside one of them
+/// ([`ThreadComm::ranks`]), else 1. What a rank may take of the process's
+/// resident memory is its share (see `render::source`'s row cache budget).
+pub fn ranks_in_this_process() -> usize {
+    RANK_THREAD.get().map_or(1, |r| r.ranks)
 }
 
 /// Whether this thread is a rank other than 0 of a process holding
@@ -662,7 +670,7 @@ impl ThreadComm {
                             let _ = rustix::thread::sched_setaffinity(None, set);
                         }
                         if let Some(cores) = cores {
-                            RANK_THREAD.set(Some(RankThread { cores, rank }));
+                            RANK_THREAD.set(Some(RankThread { cores, rank, ranks }));
                         }
                         let comm = ThreadComm {
                             rank,
@@ -914,6 +922,7 @@ mod tests {
                 cores(),
                 (std::thread::available_parallelism().map_or(1, |n| n.get()) / 3).max(1)
             );
+            assert_eq!(ranks_in_this_process(), 3);
             let all = c.all_gather_f64(&[c.rank() as f64]);
             let back =
                 c.all_to_all_u32(&[vec![c.rank() as u32], vec![10 + c.rank() as u32], vec![]]);
@@ -924,6 +933,7 @@ mod tests {
         assert_eq!(back, vec![vec![0], vec![1], vec![2]]);
         // Outside a rank thread the process's cores again.
         assert!(RANK_THREAD.get().is_none());
+        assert_eq!(ranks_in_this_process(), 1);
     }
 
     #[test]

@@ -702,7 +702,9 @@ impl<'a> GpuFormFactors<'a> {
 /// budget leaves (see [`crate::render::cache::cache_budget`]), so that every
 /// rank keeps or drops a row alike.
 fn cache_budget(opts: &RenderOptions, comm: &dyn Collectives) -> u64 {
-    let resident = crate::report::resident_bytes();
+    // Ranks that are threads of one process share its resident set: each
+    // counts its share against its own budget (`--memory` is a rank's).
+    let resident = crate::report::resident_bytes() / parallel::ranks_in_this_process() as u64;
     let own = crate::render::cache::cache_budget(opts.memory_budget, resident);
     let least = if comm.size() == 1 {
         own
