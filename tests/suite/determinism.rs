@@ -447,14 +447,21 @@ fn radiosity_on(one_core: bool) -> std::process::Command {
 
 /// Ranks that are threads of this process (`--ranks`): the numbers one
 /// rank gives, batched and unbatched (the hemisphere split over the ranks),
-/// image included.
+/// image included, drawn on the CPU and by the device (which the ranks
+/// share).
 #[test]
 fn ranks_in_one_process_give_one_ranks_numbers() {
+    use radiosity::settings::Rasteriser;
     let scene = radiosity::scene::open("cornell").expect("built-in scene");
-    for batch in [1, 6] {
+    for (batch, rasteriser) in [
+        (1, Rasteriser::Auto),
+        (6, Rasteriser::Auto),
+        (6, Rasteriser::Device),
+    ] {
         let mut opts = RenderOptions {
             width: 48,
             batch,
+            rasteriser,
             ..RenderOptions::default()
         };
         opts.stop.max_shots = 30;
@@ -469,7 +476,7 @@ fn ranks_in_one_process_give_one_ranks_numbers() {
                 &mut |_| {},
             )
             .expect("render on ranks");
-            let what = format!("batch {batch}, {ranks} ranks");
+            let what = format!("batch {batch}, {rasteriser:?}, {ranks} ranks");
             assert_eq!(many.report.counts.ranks, ranks, "{what}");
             assert_eq!(one.report.shots, many.report.shots, "{what}");
             assert_eq!(one.report.surfaces, many.report.surfaces, "{what}");
