@@ -584,7 +584,7 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
 }
 
 /// Flags the fuzzer passes, with odd values.
-const FUZZ_FLAGS: [&str; 23] = [
+const FUZZ_FLAGS: [&str; 24] = [
     "--resolution",
     "--threshold",
     "--max-shots",
@@ -608,6 +608,7 @@ const FUZZ_FLAGS: [&str; 23] = [
     "--coarse-below",
     "--overshoot",
     "--batch",
+    "--ranks",
 ];
 /// The values it gives them.
 const FUZZ_VALUES: [&str; 19] = [
