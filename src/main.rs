@@ -269,10 +269,11 @@ pub struct SolveArgs {
     batch: u32,
     /// Ranks to run as threads of this one process, each with its share of
     /// the cores: what `mpirun -n RANKS` does, without MPI, and the same
-    /// numbers (with --batch, the same as one rank's). With --batch 64, two
-    /// ranks on two cores shoot about 1.3-1.5x faster than one rank using
-    /// both (README "Ranks in one process"). Under mpirun each process is
-    /// one rank: leave this at 1 there.
+    /// numbers (with --batch, the same as one rank's). With --batch 16 or
+    /// more, two ranks on two cores shoot about 1.3-1.5x faster in big
+    /// scenes than one rank using both (README "Ranks in one process");
+    /// without --batch they split each hemisphere, which is slower. Under
+    /// mpirun each process is one rank: leave this at 1 there.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=256))]
     pub ranks: u32,
 }

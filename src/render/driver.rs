@@ -66,6 +66,12 @@ pub fn render_ranks(
     if ranks <= 1 {
         return render(gpu, scene, opts, load_time, progress);
     }
+    if opts.batch <= 1 {
+        // Not an error (the same numbers as one rank), but rarely wanted.
+        log::warn!(
+            "{ranks} ranks with --batch 1 split each shot's hemisphere between them, which on one machine is slower than one rank; --batch 16 or more gives each rank whole shots (README \"Ranks in one process\")"
+        );
+    }
     let progress = std::sync::Mutex::new(progress);
     let rendered = ThreadComm::ranks(ranks, |comm| {
         if comm.rank() > 0 {
