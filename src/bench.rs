@@ -57,8 +57,15 @@ pub fn run(args: BenchArgs) -> Result<()> {
         output::check_writable(path)?;
     }
     let gpu = Gpu::new()?;
+    // Ranks of this process and batches change what a shot's time means
+    // (a batch's time over its rows; the phase columns are rank 0's).
+    let ranks = match (args.solve.ranks, args.solve.batch) {
+        (1, 1) => String::new(),
+        (1, b) => format!(", batches of {b}"),
+        (r, b) => format!(", {r} ranks in this process, batches of {b} (phase columns: rank 0's)"),
+    };
     println!(
-        "device: {}, hemisphere {}\n",
+        "device: {}, hemisphere {}{ranks}\n",
         gpu.describe(),
         args.solve.resolution
     );

@@ -266,7 +266,7 @@ pub struct SolveArgs {
     /// rows go to their elements' owners; the numbers depend on BATCH, never
     /// on the rank count. See README "Ranks".
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
-    batch: u32,
+    pub batch: u32,
     /// Ranks to run as threads of this one process, each with its share of
     /// the cores: what `mpirun -n RANKS` does, without MPI, and the same
     /// numbers (with --batch, the same as one rank's). With --batch 16 or
