@@ -65,6 +65,8 @@ struct RankThread {
     cores: usize,
     rank: usize,
     ranks: usize,
+    /// The whole process's cores.
+    process: usize,
 }
 
 thread_local! {
@@ -163,6 +165,25 @@ pub trait Collectives {
     fn traffic(&self) -> Traffic;
     /// Ends every rank now (after an error that only this rank saw).
     fn abort(&self, code: i32) -> !;
+    /// The ranks as threads of this process, where they are (see
+    /// [`built_once`]); `None` for processes, which share no memory.
+    fn threads(&self) -> Option<&ThreadComm> {
+        None
+    }
+}
+
+/// `build()`, the same on every rank (a mesh), made once where the ranks
+/// are threads of one process: rank 0 builds it with every core of the
+/// process while the others wait, and each takes a copy. Ranks that are
+/// processes (MPI) each build their own. Every rank calls it alike.
+pub fn built_once<T: Clone + Send + Sync + 'static>(
+    comm: &dyn Collectives,
+    build: impl FnOnce() -> T,
+) -> T {
+    match comm.threads() {
+        Some(t) if t.size() > 1 => t.copy_of_rank_zeros(build),
+        _ => build(),
+    }
 }
 
 /// One process: every collective is the identity, and nothing travels.
@@ -626,7 +647,7 @@ impl ThreadComm {
     /// Runs `f` on `ranks` threads, each with its rank's communicator, and
     /// returns their results in rank order. A panic on any rank panics here.
     pub fn run<T: Send>(ranks: usize, f: impl Fn(&ThreadComm) -> T + Sync) -> Vec<T> {
-        let outcomes = Self::spawn(ranks, None, |_| false, f);
+        let outcomes = Self::spawn(ranks, (None, 0), |_| false, f);
         // A rank's own panic first, not the others' unwinding after it.
         let mut ended = None;
         let mut results = Vec::with_capacity(outcomes.len());
@@ -650,7 +671,7 @@ impl ThreadComm {
     /// call (they unwind with [`PeerFailed`]).
     fn spawn<T: Send>(
         ranks: usize,
-        cores: Option<usize>,
+        (cores, process): (Option<usize>, usize),
         failed: impl Fn(&T) -> bool + Sync,
         f: impl Fn(&ThreadComm) -> T + Sync,
     ) -> Vec<std::thread::Result<T>> {
@@ -670,7 +691,12 @@ impl ThreadComm {
                             let _ = rustix::thread::sched_setaffinity(None, set);
                         }
                         if let Some(cores) = cores {
-                            RANK_THREAD.set(Some(RankThread { cores, rank, ranks }));
+                            RANK_THREAD.set(Some(RankThread {
+                                cores,
+                                rank,
+                                ranks,
+                                process,
+                            }));
                         }
                         let comm = ThreadComm {
                             rank,
@@ -707,11 +733,12 @@ impl ThreadComm {
         f: impl Fn(&ThreadComm) -> Result<T, E> + Sync,
     ) -> Result<T, E> {
         let ranks = ranks.max(1);
-        let each = (cores() / ranks).max(1);
+        let process = cores();
+        let each = (process / ranks).max(1);
         // The worker threads start now, sized for the whole process (a
         // rank thread would size them for its own share).
         scope(|_| {});
-        let outcomes = Self::spawn(ranks, Some(each), Result::is_err, f);
+        let outcomes = Self::spawn(ranks, (Some(each), process), Result::is_err, f);
         // A real failure before the ranks it ended (which unwound quietly),
         // then rank 0's result.
         let mut outcomes = outcomes.into_iter();
@@ -734,6 +761,29 @@ impl ThreadComm {
             Some(Err(p)) => std::panic::resume_unwind(panicked.unwrap_or(p)),
             None => std::panic::resume_unwind(panicked.unwrap_or_else(|| Box::new(PeerFailed))),
         }
+    }
+
+    /// See [`built_once`]: rank 0 builds (its share of the cores raised
+    /// to the whole process's while the others wait idle), every rank
+    /// takes a copy.
+    fn copy_of_rank_zeros<T: Clone + Send + Sync + 'static>(&self, build: impl FnOnce() -> T) -> T {
+        let mine = (self.rank == 0).then(|| {
+            let own = RANK_THREAD.get();
+            if let Some(r) = own {
+                RANK_THREAD.set(Some(RankThread {
+                    cores: r.process,
+                    ..r
+                }));
+            }
+            let built = Arc::new(build());
+            RANK_THREAD.set(own);
+            built
+        });
+        let copy = self.meet_with(mine, |all| {
+            all.first().and_then(|zero| zero.as_deref()).cloned()
+        });
+        // Rank 0 always puts its result down, and every rank makes this call.
+        copy.unwrap_or_else(|| panic!("rank {} found nothing from rank 0", self.rank))
     }
 
     /// Every rank's `mine`, in rank order.
@@ -883,6 +933,9 @@ impl Collectives for ThreadComm {
     fn abort(&self, code: i32) -> ! {
         panic!("rank {} aborted the run with code {code}", self.rank)
     }
+    fn threads(&self) -> Option<&ThreadComm> {
+        Some(self)
+    }
 }
 
 /// How the ranks exchange form factors each shot (DESIGN.md section 3).
@@ -934,6 +987,26 @@ mod tests {
         // Outside a rank thread the process's cores again.
         assert!(RANK_THREAD.get().is_none());
         assert_eq!(ranks_in_this_process(), 1);
+    }
+
+    #[test]
+    fn what_ranks_in_threads_build_once_is_built_once_with_every_core() {
+        let builds = AtomicU64::new(0);
+        let got = ThreadComm::ranks(3, |c| {
+            let value = built_once(c, || {
+                builds.fetch_add(1, Ordering::Relaxed);
+                // Rank 0 builds with the process's cores, not its share.
+                (c.rank(), cores())
+            });
+            Ok::<_, ()>((value, cores()))
+        });
+        let ((builder, cores_building), cores_after) = got.expect("no rank fails");
+        assert_eq!(builds.load(Ordering::Relaxed), 1);
+        assert_eq!(builder, 0);
+        assert_eq!(cores_building, cores());
+        assert_eq!(cores_after, (cores() / 3).max(1));
+        // One process alone builds it itself.
+        assert_eq!(built_once(&Single::default(), || 7), 7);
     }
 
     #[test]

@@ -88,7 +88,9 @@ pub fn refined_mesh_shown(
     // polygons refined since.
     let mut kept = None;
     for pass in 0..levels {
-        let mut mesh = Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref());
+        let mut mesh = crate::parallel::built_once(comm, || {
+            Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
+        });
         if pass == 0 {
             summary.start = [mesh.patches.len(), mesh.elements.len()];
         }
@@ -174,8 +176,11 @@ pub fn refined_mesh_shown(
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
     summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
     summary.shading_polygons = shading.iter().filter(|&&x| x).count() as u32;
-    let mesh =
-        last.unwrap_or_else(|| Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref()));
+    let mesh = last.unwrap_or_else(|| {
+        crate::parallel::built_once(comm, || {
+            Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
+        })
+    });
     summary.end = [mesh.patches.len(), mesh.elements.len()];
     Ok(Refined {
         mesh,
