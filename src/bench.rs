@@ -59,13 +59,14 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let gpu = Gpu::new()?;
     // Ranks of this process and batches change what a shot's time means
     // (a batch's time over its rows; the phase columns are rank 0's).
-    let ranks = match (args.solve.ranks, args.solve.batch) {
+    let ranks = args.solve.ranks as usize;
+    let mode = match (args.solve.ranks, args.solve.batch) {
         (1, 1) => String::new(),
         (1, b) => format!(", batches of {b}"),
         (r, b) => format!(", {r} ranks in this process, batches of {b} (phase columns: rank 0's)"),
     };
     println!(
-        "device: {}, hemisphere {}{ranks}\n",
+        "device: {}, hemisphere {}{mode}\n",
         gpu.describe(),
         args.solve.resolution
     );
@@ -82,7 +83,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         // It times shots that draw: weak shooters along the transport (by
         // default in big meshes) only when asked for.
         opts.transport_below.get_or_insert(0.0);
-        let ranks = args.solve.ranks as usize;
         let r = render_ranks(&gpu, &scene, &opts, ranks, t.elapsed(), &mut |_| {})?;
         println!("{}", row(name, &r.report));
         reports.push(r.report);
@@ -92,7 +92,6 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let mut opts = args.solve.options();
         opts.width = 0;
         opts.stop.threshold = args.converge;
-        let ranks = args.solve.ranks as usize;
         let r = render_ranks(&gpu, &scene, &opts, ranks, Duration::ZERO, &mut |_| {})?;
         println!(
             "\ncornell to unshot fraction {:.0e}: {} shots, {:.2} s solve ({:.2} s with setup)",
