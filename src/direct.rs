@@ -98,7 +98,7 @@ struct Pool {
     /// ray toward it (a pixel's or an element's points are near each other
     /// and mostly shadowed alike; see `Bvh::occluded_hinted`, which gives
     /// the same answer whatever the hint).
-    hints: Vec<Option<u32>>,
+    hints: Vec<crate::raytrace::Hints>,
 }
 
 impl Pool {
@@ -107,7 +107,7 @@ impl Pool {
             lights: [0.0; 3],
             unoccluded: vec![[0.0; 3]; emitters],
             rays: vec![[0.0; 2]; emitters],
-            hints: vec![None; lights + emitters],
+            hints: vec![[None; crate::raytrace::RECENT_HINTS]; lights + emitters],
         }
     }
 
@@ -235,7 +235,7 @@ impl<'a> DirectLight<'a> {
         polygon: u32,
         rng: &mut Rng,
         strata: Strata,
-        hint: &mut Option<u32>,
+        hints: &mut crate::raytrace::Hints,
     ) -> (f64, f64) {
         let (mut all, mut seen) = (0.0f64, 0.0f64);
         let g = strata.grid as f32;
@@ -255,7 +255,7 @@ impl<'a> DirectLight<'a> {
             all += w;
             if !self
                 .bvh
-                .occluded_hinted(origin, d, 0.0, 1.0, [polygon, e.polygon], hint)
+                .occluded_recent(origin, d, 0.0, 1.0, [polygon, e.polygon], hints)
             {
                 seen += w;
             }

@@ -19,7 +19,7 @@
 
 use crate::fuzz::Rng;
 use crate::mesh::Mesh;
-use crate::raytrace::Bvh;
+use crate::raytrace::{Bvh, Hints, RECENT_HINTS};
 use crate::sampling::{in_parallel, point_in, unit};
 use crate::scene::{Light, LightKind};
 use glam::Vec3;
@@ -99,8 +99,8 @@ impl LightField {
 
 /// Irradiance (W/m^2 per channel) from `light` at `x` on polygon `polygon`
 /// (normal `n`), with one shadow ray from `x + n eps` (0 where anything but
-/// `polygon` blocks it). The ray tries first the leaf `hint` that stopped
-/// the last one (see [`Bvh::occluded_hinted`]: the same answer, sooner
+/// `polygon` blocks it). The ray tries first the leaves `hints` that stopped
+/// recent ones (see [`Bvh::occluded_recent`]: the same answer, sooner
 /// where neighbouring points are shadowed by the same occluder).
 pub fn irradiance(
     light: &Light,
@@ -109,7 +109,7 @@ pub fn irradiance(
     n: Vec3,
     polygon: u32,
     eps: f32,
-    hint: &mut Option<u32>,
+    hints: &mut Hints,
 ) -> [f64; 3] {
     let origin = x + n * eps;
     let skip = [polygon, polygon];
@@ -117,7 +117,7 @@ pub fn irradiance(
         LightKind::Directional => {
             let toward = -light.direction;
             let cos = n.dot(toward);
-            if cos <= 0.0 || bvh.occluded_hinted(origin, toward, 0.0, f32::INFINITY, skip, hint) {
+            if cos <= 0.0 || bvh.occluded_recent(origin, toward, 0.0, f32::INFINITY, skip, hints) {
                 return [0.0; 3];
             }
             f64::from(cos)
@@ -131,7 +131,7 @@ pub fn irradiance(
             }
             let unit_d = d.normalize();
             let falloff = light.falloff(-unit_d);
-            if falloff <= 0.0 || bvh.occluded_hinted(origin, d, 0.0, 1.0, skip, hint) {
+            if falloff <= 0.0 || bvh.occluded_recent(origin, d, 0.0, 1.0, skip, hints) {
                 return [0.0; 3];
             }
             falloff * f64::from(cos) / (r2 * r2.sqrt())
@@ -143,7 +143,7 @@ pub fn irradiance(
 /// The share of the cosine-weighted hemisphere over `n` at `x` that leaves
 /// the scene, from shadow rays along the cells `first..first+side` (each
 /// axis) of a `grid` x `grid` stratification (one jittered direction a
-/// cell), each trying first the leaf that stopped the last (`hint`).
+/// cell), each trying first the leaves that stopped recent ones (`hints`).
 #[allow(clippy::too_many_arguments)]
 fn sky_share(
     bvh: &Bvh,
@@ -153,7 +153,7 @@ fn sky_share(
     eps: f32,
     cells: Cells,
     rng: &mut Rng,
-    hint: &mut Option<u32>,
+    hints: &mut Hints,
 ) -> f64 {
     let origin = x + n * eps;
     let (t, b) = frame(n);
@@ -165,7 +165,7 @@ fn sky_share(
         let (r, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
         let d = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt();
         all += 1;
-        if !bvh.occluded_hinted(origin, d, 0.0, f32::INFINITY, [polygon, polygon], hint) {
+        if !bvh.occluded_recent(origin, d, 0.0, f32::INFINITY, [polygon, polygon], hints) {
             open += 1;
         }
     }
@@ -237,10 +237,10 @@ pub fn element_field_reusing(
         let mut rng = Rng(0x119b_7000_0000 ^ (u64::from(e.polygon) << 32) ^ local);
         let (side, rays) = (ELEMENT_POINTS, SKY_RAYS);
         let (mut direct, mut parallel, mut open, mut weight) = ([0.0; 3], 0.0, 0.0, 0.0);
-        // The leaf that stopped each light's last ray, and the sky's: an
-        // element's points are mostly shadowed by the same occluders.
-        let mut hints = vec![None; lights.len()];
-        let mut sky_hint = None;
+        // The leaves that stopped each light's recent rays, and the sky's:
+        // an element's points are mostly shadowed by the same few occluders.
+        let mut hints = vec![[None; RECENT_HINTS]; lights.len()];
+        let mut sky_hints = [None; RECENT_HINTS];
         for q in 0..side * side {
             let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
             let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;
@@ -261,7 +261,7 @@ pub fn element_field_reusing(
                     first: [q % side * rays, q / side * rays],
                     side: rays,
                 };
-                open += sky_share(bvh, x, n, e.polygon, eps, cells, &mut rng, &mut sky_hint) * jac;
+                open += sky_share(bvh, x, n, e.polygon, eps, cells, &mut rng, &mut sky_hints) * jac;
             }
             weight += jac;
         }

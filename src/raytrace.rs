@@ -63,6 +63,14 @@ struct Packed {
 /// nodes; a fifth fewer on classroom-c3, a third on the 4096-cube room).
 const HINT_LEVELS: usize = 4;
 
+/// How many recent occluders a run of shadow rays keeps as hints (see
+/// [`Bvh::occluded_recent`]): rays from one element's points, or to
+/// neighbouring patches, meet a handful of occluders.
+pub const RECENT_HINTS: usize = 4;
+
+/// The recent occluders' leaves, the latest first ([`Bvh::occluded_recent`]).
+pub type Hints = [Option<u32>; RECENT_HINTS];
+
 /// Marks a wide node's child that is a leaf of the binary hierarchy.
 const LEAF_BIT: u32 = 1 << 31;
 
@@ -482,13 +490,34 @@ impl Bvh {
         skip: [u32; 2],
         hint: &mut Option<u32>,
     ) -> bool {
+        self.occluded_recent(origin, dir, t_min, t_max, skip, std::slice::from_mut(hint))
+    }
+
+    /// [`Bvh::occluded_hinted`] with several hints, the latest first:
+    /// every hint's leaf is tried before the subtree above the first, and
+    /// the leaf that occluded this ray moves to the front (the others
+    /// shifting back, the last dropped). The answer is `occluded`'s
+    /// whatever the hints.
+    pub fn occluded_recent(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        skip: [u32; 2],
+        recent: &mut [Option<u32>],
+    ) -> bool {
         let inv = dir.recip();
         let ray = WideRay::new(origin, dir, t_min, t_max);
-        // The hint names a packed leaf; its box is its binary leaf's.
-        if let Some(leaf) = hint.and_then(|h| self.packed.get(h as usize)) {
+        // A hint names a packed leaf; its box is its binary leaf's.
+        for i in 0..recent.len() {
+            let Some(leaf) = recent[i].and_then(|h| self.packed.get(h as usize)) else {
+                break;
+            };
             if slab(&self.nodes[leaf.node as usize], origin, inv, t_min, t_max).is_some()
                 && ray.blocked_by(leaf, skip)
             {
+                recent[..=i].rotate_right(1);
                 return true;
             }
         }
@@ -498,11 +527,14 @@ impl Bvh {
         if slab(root, origin, inv, t_min, t_max).is_none() {
             return false;
         }
+        let first = recent.first().copied().flatten();
+        let mut hint = first;
         let mut clear = NO_CHILD;
-        // The hint's leaf and the wide node holding it (none: the root is that leaf).
-        let held = hint
+        // The first hint's leaf and the wide node holding it (none: the root is that leaf).
+        let held = first
             .and_then(|h| Some((h, *self.leaf_up.get(h as usize)?)))
             .filter(|&(_, up)| up != NO_CHILD);
+        let mut blocked = false;
         if let Some((leaf, up)) = held {
             let mut at = up;
             for _ in 1..HINT_LEVELS {
@@ -512,12 +544,15 @@ impl Bvh {
                 }
             }
             // The hint's own leaf was just tested.
-            if self.any_hit(&ray, at, LEAF_BIT | leaf, skip, hint) {
-                return true;
-            }
+            blocked = self.any_hit(&ray, at, LEAF_BIT | leaf, skip, &mut hint);
             clear = at;
         }
-        self.any_hit(&ray, self.root, clear, skip, hint)
+        blocked = blocked || self.any_hit(&ray, self.root, clear, skip, &mut hint);
+        if blocked && !recent.is_empty() {
+            recent.rotate_right(1);
+            recent[0] = hint;
+        }
+        blocked
     }
 
     /// Whether a triangle below `start` (a wide node, or a packed leaf
@@ -904,7 +939,8 @@ mod tests {
         let mut unit = || unit(&mut rng);
         let bvh = Bvh::new(&polys);
         let mut hint = None;
-        let (mut hidden, mut hinted) = (0, 0);
+        let mut recent = [None; RECENT_HINTS];
+        let (mut hidden, mut hinted, mut by_recent) = (0, 0, 0);
         for i in 0..4000 {
             let o = Vec3::new(unit() * 0.2, unit() * 0.2, 0.0);
             let to = Vec3::new(
@@ -925,11 +961,35 @@ mod tests {
             assert_eq!(got, want, "segment {i}");
             hidden += want as u32;
             hinted += (want && hint == before && before.is_some()) as u32;
+            // Several recent leaves: the same verdict, the occluder first.
+            let was = recent;
+            let got = bvh.occluded_recent(o, to - o, 0.0, 1.0, skip, &mut recent);
+            assert_eq!(got, want, "segment {i}, recent hints");
+            if want {
+                let leaf = recent[0].expect("an occluder's leaf");
+                assert!(bvh.packed[leaf as usize]
+                    .polygon
+                    .iter()
+                    .any(|&p| !skip.contains(&p)));
+                by_recent += was.contains(&Some(leaf)) as u32;
+                // The others are the earlier hints in order, less the one moved up.
+                let rest: Vec<_> = was.iter().filter(|&&h| h != Some(leaf)).collect();
+                assert!(
+                    recent[1..].iter().zip(rest).all(|(a, b)| a == b),
+                    "segment {i}"
+                );
+            } else {
+                assert_eq!(recent, was, "segment {i}: a clear ray keeps the hints");
+            }
         }
         assert!(hidden > 1000, "the scene hides {hidden} of 4000 segments");
         assert!(
             hinted > hidden / 4,
             "the hint answered {hinted} of {hidden}"
+        );
+        assert!(
+            by_recent > hinted,
+            "the recent leaves answered {by_recent} of {hidden}, the last alone {hinted}"
         );
     }
 
