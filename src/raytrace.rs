@@ -596,8 +596,15 @@ impl Bvh {
                     n += 1;
                 }
             }
-            // Pushed farthest first, so the nearest is walked first.
-            kids[..n].sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+            // Pushed farthest first, so the nearest is walked first (at
+            // most four: sorted in place, no call).
+            for i in 1..n {
+                let mut j = i;
+                while j > 0 && kids[j - 1].1.total_cmp(&kids[j].1).is_lt() {
+                    kids.swap(j - 1, j);
+                    j -= 1;
+                }
+            }
             for &(child, _) in &kids[..n] {
                 if top < stack.len() {
                     stack[top] = child;
@@ -702,12 +709,14 @@ impl WideRay {
     /// mask: the same arithmetic a lane; an axis with a NaN bounds nothing,
     /// the rest are exact minima and maxima, whatever their order), with
     /// the entry distance a lane.
+    #[inline(always)]
     fn entries(&self, wide: &Wide) -> (u32, Vec4) {
         let (passed, near) = self.boxes(wide);
         (passed.bitmask(), near)
     }
 
     /// Which boxes pass, and where the ray enters each.
+    #[inline(always)]
     fn boxes(&self, wide: &Wide) -> (BVec4A, Vec4) {
         let (mut near, mut far) = (self.t_min, self.t_max);
         for axis in 0..3 {
