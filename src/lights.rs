@@ -272,8 +272,17 @@ pub fn element_field_reusing(
             out.2 = parallel / weight;
         }
     };
+    let started = std::time::Instant::now();
     let mut values = vec![([0.0; 3], [0.0; 3], 0.0); mesh.elements.len()];
     in_parallel(&mut values, work);
+    // The field is most of a big sunlit scene's mesh time: say what it cost.
+    log::debug!(
+        "light field: {} elements, {} lights{}, {:.2} s",
+        mesh.elements.len(),
+        lights.len(),
+        if sky.is_some() { " and the sky" } else { "" },
+        started.elapsed().as_secs_f64()
+    );
     // Point and spot lights emit their whole power whatever they meet;
     // directional lights and the sky emit what they deliver (their power
     // depends on what they fall on).
