@@ -332,6 +332,7 @@ pub enum SceneError {
 pub fn open(name_or_path: &str) -> Result<Scene, SceneError> {
     let mut scene = open_as_authored(name_or_path)?;
     let extent = scene.extent();
+    let started = std::time::Instant::now();
     let (polygons, split) = contact::split_at_contacts(std::mem::take(&mut scene.polygons), extent);
     scene.polygons = polygons;
     if split > 0 {
@@ -340,6 +341,7 @@ pub fn open(name_or_path: &str) -> Result<Scene, SceneError> {
             scene.name
         );
     }
+    log::debug!("contact split: {:.2} s", started.elapsed().as_secs_f64());
     Ok(scene)
 }
 
