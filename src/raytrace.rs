@@ -98,10 +98,19 @@ pub struct Bvh {
     /// Where the walks start: wide node 0, or the packed root when the
     /// root is a leaf (`NO_CHILD` when there are no triangles).
     root: u32,
+    /// The most entries a walk's stack can hold: three pending siblings a
+    /// wide level and the deepest node's four children.
+    stack_bound: usize,
 }
 
 /// Triangles per leaf, at most.
 const LEAF: usize = 4;
+
+/// A walk's stack where [`Bvh::stack_bound`] allows (every scene here; a
+/// fresh stack is filled at each walk, and filling 256 entries cost a few
+/// per cent of Sponza's light field), and where it does not.
+const SHORT_STACK: usize = 64;
+const LONG_STACK: usize = 256;
 
 /// Bins per axis of the surface area heuristic's split search.
 const SAH_BINS: usize = 16;
@@ -140,6 +149,7 @@ impl Bvh {
             leaf_up: Vec::new(),
             wide_up: Vec::new(),
             root: NO_CHILD,
+            stack_bound: 1,
         };
         if !bvh.tris.is_empty() {
             bvh.nodes.push(Node {
@@ -154,6 +164,17 @@ impl Bvh {
             } else {
                 bvh.pack(0, NO_CHILD)
             };
+            // A wide node comes after its parent.
+            let mut levels = vec![0usize; bvh.wide.len()];
+            for w in 0..bvh.wide.len() {
+                let up = bvh.wide_up[w];
+                levels[w] = if up == NO_CHILD {
+                    1
+                } else {
+                    levels[up as usize] + 1
+                };
+            }
+            bvh.stack_bound = 3 * levels.iter().max().copied().unwrap_or(0) + 1;
             // Every walk reads the packed copies; only the tests' binary
             // reference walk reads these (Sponza: 22 MB).
             if !cfg!(test) {
@@ -397,13 +418,29 @@ impl Bvh {
         t_max: f32,
         behind: f32,
     ) -> Option<Hit> {
+        if self.stack_bound <= SHORT_STACK {
+            self.nearest_facing_in::<SHORT_STACK>(origin, dir, t_min, t_max, behind)
+        } else {
+            self.nearest_facing_in::<LONG_STACK>(origin, dir, t_min, t_max, behind)
+        }
+    }
+
+    /// [`Bvh::nearest_facing`] with a stack of `N` entries.
+    fn nearest_facing_in<const N: usize>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        behind: f32,
+    ) -> Option<Hit> {
         slab(self.nodes.first()?, origin, dir.recip(), t_min, t_max)?;
         let mut ray = WideRay::new(origin, dir, t_min, t_max);
         let mut best: Option<(f32, Hit)> = None;
         let mut reach = t_max;
         // Each entry keeps the distance at which the ray enters its box: a
         // box entered beyond the reach now would fail its test again.
-        let mut stack = [(self.root, f32::NEG_INFINITY); 256];
+        let mut stack = [(self.root, f32::NEG_INFINITY); N];
         let mut top = 1;
         while top > 0 {
             top -= 1;
@@ -570,7 +607,24 @@ impl Bvh {
         skip: [u32; 2],
         hint: &mut Option<u32>,
     ) -> bool {
-        let mut stack = [start; 256];
+        if self.stack_bound <= SHORT_STACK {
+            self.any_hit_in::<SHORT_STACK>(ray, start, clear, skip, hint)
+        } else {
+            self.any_hit_in::<LONG_STACK>(ray, start, clear, skip, hint)
+        }
+    }
+
+    /// [`Bvh::any_hit`] with a stack of `N` entries.
+    #[inline(always)]
+    fn any_hit_in<const N: usize>(
+        &self,
+        ray: &WideRay,
+        start: u32,
+        clear: u32,
+        skip: [u32; 2],
+        hint: &mut Option<u32>,
+    ) -> bool {
+        let mut stack = [start; N];
         let mut top = 1;
         while top > 0 {
             top -= 1;
