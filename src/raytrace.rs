@@ -418,29 +418,20 @@ impl Bvh {
         t_max: f32,
         behind: f32,
     ) -> Option<Hit> {
-        if self.stack_bound <= SHORT_STACK {
-            self.nearest_facing_in::<SHORT_STACK>(origin, dir, t_min, t_max, behind)
-        } else {
-            self.nearest_facing_in::<LONG_STACK>(origin, dir, t_min, t_max, behind)
-        }
-    }
-
-    /// [`Bvh::nearest_facing`] with a stack of `N` entries.
-    fn nearest_facing_in<const N: usize>(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t_min: f32,
-        t_max: f32,
-        behind: f32,
-    ) -> Option<Hit> {
         slab(self.nodes.first()?, origin, dir.recip(), t_min, t_max)?;
         let mut ray = WideRay::new(origin, dir, t_min, t_max);
         let mut best: Option<(f32, Hit)> = None;
         let mut reach = t_max;
         // Each entry keeps the distance at which the ray enters its box: a
         // box entered beyond the reach now would fail its test again.
-        let mut stack = [(self.root, f32::NEG_INFINITY); N];
+        let (mut short, mut long);
+        let stack: &mut [(u32, f32)] = if self.stack_bound <= SHORT_STACK {
+            short = [(self.root, f32::NEG_INFINITY); SHORT_STACK];
+            &mut short
+        } else {
+            long = [(self.root, f32::NEG_INFINITY); LONG_STACK];
+            &mut long
+        };
         let mut top = 1;
         while top > 0 {
             top -= 1;
@@ -607,24 +598,14 @@ impl Bvh {
         skip: [u32; 2],
         hint: &mut Option<u32>,
     ) -> bool {
-        if self.stack_bound <= SHORT_STACK {
-            self.any_hit_in::<SHORT_STACK>(ray, start, clear, skip, hint)
+        let (mut short, mut long);
+        let stack: &mut [u32] = if self.stack_bound <= SHORT_STACK {
+            short = [start; SHORT_STACK];
+            &mut short
         } else {
-            self.any_hit_in::<LONG_STACK>(ray, start, clear, skip, hint)
-        }
-    }
-
-    /// [`Bvh::any_hit`] with a stack of `N` entries.
-    #[inline(always)]
-    fn any_hit_in<const N: usize>(
-        &self,
-        ray: &WideRay,
-        start: u32,
-        clear: u32,
-        skip: [u32; 2],
-        hint: &mut Option<u32>,
-    ) -> bool {
-        let mut stack = [start; N];
+            long = [start; LONG_STACK];
+            &mut long
+        };
         let mut top = 1;
         while top > 0 {
             top -= 1;
