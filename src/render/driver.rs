@@ -209,6 +209,12 @@ fn final_solve<'m>(
     let stats = shoot_until(mesh, opts, 0.0, comm, source, solver, &mut hooks)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
+    // Left out of the solve's time, so say it where it can be seen.
+    log::debug!(
+        "convergence trace: {} points, {:.2} s",
+        trace.points.len(),
+        trace.spent.as_secs_f64()
+    );
     Ok(Solved {
         stats,
         trace,
