@@ -35,12 +35,13 @@ fn row(name: &str, r: &Report) -> String {
     let t = &r.timings;
     let per = |s: f64| s / r.shots.max(1) as f64 * 1e3;
     format!(
-        "| {name} | {} | {} | {} | {} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+        "| {name} | {} | {} | {} | {} | {:.2} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
         r.counts.polygons,
         r.counts.patches,
         r.counts.elements,
         r.shots,
         t.median_shot_ms,
+        t.mean_shot_ms,
         r.shots as f64 / t.solve.max(1e-9),
         per(t.bounds),
         per(t.rasterise),
@@ -70,8 +71,8 @@ pub fn run(args: BenchArgs) -> Result<()> {
         gpu.describe(),
         args.solve.resolution
     );
-    println!("| scene | polygons | patches | elements | shots | median shot ms | shots/s | bounds ms | raster ms | readback ms | sum F ms | update ms |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| scene | polygons | patches | elements | shots | median shot ms | mean shot ms | shots/s | bounds ms | raster ms | readback ms | sum F ms | update ms |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut reports = Vec::new();
     for name in &args.scenes {
         let t = Instant::now();

@@ -207,6 +207,13 @@ pub struct SolveArgs {
     /// results are identical, only the time changes.
     #[arg(long)]
     no_occlusion_cull: bool,
+    /// Draw every row in the shot that takes it. By default a solve of one
+    /// process on two cores or more draws, one row on each core, the rows
+    /// of the shooters likely to shoot next (the runners-up of the vote)
+    /// while the shot is under way, and a shot whose row is ready takes it.
+    /// The results are identical, only the time changes.
+    #[arg(long)]
+    no_look_ahead: bool,
     /// Whether the ranks of an MPI run deal the polygons' bounds between
     /// them: each bounds every N-th block of polygons for the whole
     /// hemisphere and sends each piece to its tile's owner, instead of every
@@ -300,6 +307,7 @@ impl SolveArgs {
             },
             raster_pieces: self.raster_pieces,
             occlusion_cull: !self.no_occlusion_cull,
+            look_ahead: !self.no_look_ahead,
             deal_bounds: self.deal_bounds,
             deal_rows: self.deal_rows,
             projection: self.projection,

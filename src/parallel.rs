@@ -259,6 +259,33 @@ pub fn cores() -> usize {
     })
 }
 
+/// Runs `f` with this thread's share of the cores set to `n` (what
+/// [`cores`] answers here, so its forks split `n` ways), then restores the
+/// share it had. A thread that draws rows beside another
+/// (`render::ahead`) takes one core, as a rank of `--ranks` takes its own.
+pub fn with_cores<R>(n: usize, f: impl FnOnce() -> R) -> R {
+    let own = RANK_THREAD.get();
+    let process = own.map_or_else(cores, |r| r.process);
+    RANK_THREAD.set(Some(match own {
+        Some(r) => RankThread { cores: n.max(1), ..r },
+        None => RankThread {
+            cores: n.max(1),
+            rank: 0,
+            ranks: 1,
+            process,
+        },
+    }));
+    // Restored on unwinding too: the thread may go on after a caught panic.
+    struct Restore(Option<RankThread>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            RANK_THREAD.set(self.0);
+        }
+    }
+    let _restore = Restore(own);
+    f()
+}
+
 /// Runs `op` on this thread with a scope whose spawned work runs on the
 /// process's worker threads ([`cores`] less one of them, started at the
 /// first call; this thread is the other), as `std::thread::scope` does

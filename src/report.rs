@@ -314,8 +314,13 @@ pub struct Timings {
     pub ambient: f64,
     /// Rendering and writing the image.
     pub image: f64,
-    /// Median milliseconds per shot.
+    /// Median milliseconds per shot of the final solve.
     pub median_shot_ms: f64,
+    /// Mean milliseconds per shot of the final solve: where rows are drawn
+    /// ahead (`render::ahead`) a shot whose row is ready takes little and
+    /// one that draws takes a row's time, so the mean, not the median,
+    /// says what a shot costs.
+    pub mean_shot_ms: f64,
 }
 
 /// How the solve was spread over ranks, and what that cost.

@@ -206,7 +206,7 @@ fn final_solve<'m>(
     let ambient = t.elapsed().as_secs_f64();
     // Its gather is not a form-factor exchange: the report's bytes leave it out.
     let ambient_traffic = comm.traffic().since(before);
-    let stats = shoot_until(mesh, opts, 0.0, comm, source, solver, &mut hooks)?;
+    let stats = shoot_until(mesh, opts, 0.0, comm, source, solver, &mut hooks, true)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
     // Left out of the solve's time, so say it where it can be seen.
@@ -541,6 +541,8 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.sum_form_factors = t.sum.as_secs_f64();
     timings.far_receivers = t.far.as_secs_f64();
     timings.far_receivers_ahead = t.far_ahead.as_secs_f64();
+    let total: Duration = stats.shot_times.iter().sum();
+    timings.mean_shot_ms = total.as_secs_f64() * 1e3 / stats.shot_times.len().max(1) as f64;
     let mut shot_times = stats.shot_times.clone();
     shot_times.sort();
     timings.median_shot_ms = shot_times

@@ -9,11 +9,13 @@
 //!   tiers and the three form-factor exchanges (no GPU; unit-tested);
 //! - [`source`]: the GPU form-factor source that joins them per shot;
 //! - [`shoot`]: the shooting loop and the one collective before each shot;
+//! - [`ahead`]: rows of the likely next shooters drawn beside the shot;
 //! - [`trace`], [`hooks`]: the convergence trace, progress and checkpoints;
 //! - [`passes`]: refinement by need (coarse solves that choose the mesh);
 //! - [`image`]: the camera image (interpolated solution, traced direct light);
 //! - [`driver`]: the render itself, the gather to rank 0 and the report.
 
+pub mod ahead;
 pub mod cache;
 pub mod driver;
 pub mod exchange;

@@ -43,6 +43,10 @@ pub struct RenderOptions {
     /// hide in every rank's tiles (`crate::occlusion`; the same bits
     /// either way).
     pub occlusion_cull: bool,
+    /// Whether a solve of one process on two cores or more draws the rows
+    /// of the shooters likely next beside the shot (`render::ahead`; the
+    /// same bits either way).
+    pub look_ahead: bool,
     /// Whether the ranks of a run deal the polygons' bounds between them
     /// (`gpu::Scatter`; the same bits either way).
     pub deal_bounds: DealBounds,
@@ -132,6 +136,7 @@ impl Default for RenderOptions {
             mesh: MeshSettings::default(),
             raster_pieces: DEFAULT_RASTER_PIECES,
             occlusion_cull: true,
+            look_ahead: true,
             deal_bounds: DealBounds::Auto,
             deal_rows: crate::settings::DealRows::Pool,
             projection: Projection::Exact,
@@ -261,6 +266,10 @@ pub enum RenderError {
     /// to the wrong rank, or one missing): a bug, reported, not a hang.
     #[error("split shot of shooter {0}: {1}")]
     SplitShot(u32, String),
+    /// A row drawn ahead (`render::ahead`) never came: a bug, reported,
+    /// not a hang.
+    #[error("the row of shooter {0} drawn ahead: {1}")]
+    DrawnAhead(u32, String),
     /// The scene cannot be rendered as it is (nothing lights it).
     #[error(transparent)]
     Scene(#[from] crate::scene::SceneError),

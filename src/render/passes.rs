@@ -357,6 +357,7 @@ fn one_pass(
         &mut source,
         &mut solver,
         &mut hooks,
+        false,
     )?;
     let seconds = started
         .elapsed()

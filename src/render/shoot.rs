@@ -4,6 +4,7 @@
 //! cache and whether to save or stop; so every rank makes the same decision
 //! at the same shot.
 
+use super::ahead::{Ahead, RUNNERS_UP};
 use super::options::{RenderError, RenderOptions};
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::mesh::Mesh;
@@ -266,6 +267,18 @@ impl<'m> ShotLoop<'m> {
         solver: &mut Solver<'s>,
         hooks: &mut dyn LoopHooks<'s>,
     ) -> Result<Step, RenderError> {
+        self.step_drawing(source, solver, hooks, None)
+    }
+
+    /// As [`ShotLoop::step`], with rows drawn ahead on `ahead`'s helper
+    /// where given (one shot a step; see `render::ahead`).
+    fn step_drawing<'s>(
+        &mut self,
+        source: &mut GpuFormFactors,
+        solver: &mut Solver<'s>,
+        hooks: &mut dyn LoopHooks<'s>,
+        ahead: Option<&Ahead>,
+    ) -> Result<Step, RenderError> {
         let shot_start = Instant::now();
         let votes = self.vote(source, solver, hooks);
         if let Some(power) = self.last_power.take() {
@@ -318,7 +331,7 @@ impl<'m> ShotLoop<'m> {
         if source.by_transport(best.power) && !solver.overshoot() {
             self.join_group(solver, &best, &mut region);
         }
-        let shot = self.shoot(source, solver, &best, &region)?;
+        let shot = self.shoot(source, solver, (&best, &region), ahead)?;
         self.stats.shot_times.push(shot_start.elapsed());
         hooks.after_shot(solver, unshot_fraction);
         Ok(Step::Shot(shot))
@@ -350,7 +363,7 @@ impl<'m> ShotLoop<'m> {
             let best = chosen[0];
             let mut region = self.region(solver, &best, ambient);
             self.join_group(solver, &best, &mut region);
-            let shot = self.shoot(source, solver, &best, &region)?;
+            let shot = self.shoot(source, solver, (&best, &region), None)?;
             self.stats.shot_times.push(shot_start.elapsed());
             hooks.after_shot(solver, unshot_fraction);
             return Ok(Step::Shot(shot));
@@ -770,10 +783,16 @@ impl<'m> ShotLoop<'m> {
         &mut self,
         source: &mut GpuFormFactors,
         solver: &mut Solver,
-        best: &Candidate,
-        region: &ShotRegion,
+        (best, region): (&Candidate, &ShotRegion),
+        ahead: Option<&Ahead>,
     ) -> Result<Shot, RenderError> {
-        source.form_factors(best.patch, region, &mut self.ff)?;
+        match ahead {
+            Some(ahead) => {
+                let next = runners_up(source, solver, best.patch);
+                ahead.form_factors(source, (best.patch, region), &next, &mut self.ff)?;
+            }
+            None => source.form_factors(best.patch, region, &mut self.ff)?,
+        }
         let t = Instant::now();
         let cpu = crate::parallel::CpuSpan::start(self.comm);
         let shot = solver.shoot_candidate(best, region, &self.ff);
@@ -979,7 +998,9 @@ fn unpack_rows<'w>(
 /// Shoots until the loop stops (see [`ShotLoop`]), as `opts` says: its
 /// stop rule, its batch and how a batch's rows are dealt. The final solve
 /// and the refinement passes both shoot here (with `source` from
-/// [`GpuFormFactors::for_solve`]).
+/// [`GpuFormFactors::for_solve`]); `ahead`: whether rows may be drawn
+/// ahead where [`Ahead::applies`] (the final solve; a pass measures the
+/// penumbrae of the rows its source draws, so it draws each in its shot).
 pub fn shoot_until<'m>(
     mesh: &'m Mesh,
     opts: &RenderOptions,
@@ -988,12 +1009,40 @@ pub fn shoot_until<'m>(
     source: &mut GpuFormFactors,
     solver: &mut Solver<'m>,
     hooks: &mut dyn LoopHooks<'m>,
+    ahead: bool,
 ) -> Result<LoopStats, RenderError> {
     let mut shots = ShotLoop::new(mesh, comm, opts.stop, floor)
         .batched(opts.batch)
         .dealing_rows(opts.deal_rows);
-    while let Step::Shot(_) = shots.step(source, solver, hooks)? {}
+    if ahead && Ahead::applies(opts, comm.size()) {
+        Ahead::run(opts, source, |ahead, source| {
+            while let Step::Shot(_) = shots.step_drawing(source, solver, hooks, Some(ahead))? {}
+            Ok(())
+        })?;
+    } else {
+        while let Step::Shot(_) = shots.step(source, solver, hooks)? {}
+    }
     Ok(shots.stats)
+}
+
+/// The rows wanted after `shooter`'s: those of the vote's runners-up that
+/// would draw (most likely first), keyed as their shots would key them.
+fn runners_up(
+    source: &GpuFormFactors,
+    solver: &Solver,
+    shooter: u32,
+) -> Vec<(crate::render::cache::RowKey, glam::Vec3)> {
+    solver
+        .local_top(RUNNERS_UP + 1)
+        .into_iter()
+        .filter(|c| c.patch != shooter)
+        .take(RUNNERS_UP)
+        .filter_map(|c| {
+            source
+                .drawn_key(c.patch, c.centre, c.power)
+                .map(|key| (key, c.centre))
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use crate::settings::{FormFactorMethod, Projection, Rasteriser};
 use crate::solver::{FormFactorSource, ShotRegion, Transfer};
 use std::time::{Duration, Instant};
 
+mod drawn;
 mod far;
 mod split;
 
@@ -193,6 +194,9 @@ pub struct GpuFormFactors<'a> {
     max_patch_radius: f32,
     /// Whether this run's ranks deal the polygons' bounds (the same on every rank).
     deal: bool,
+    /// The scene's extent the rasterisers were built for (a sibling source
+    /// is built alike: see `render::ahead`).
+    extent: f32,
 }
 
 impl<'a> GpuFormFactors<'a> {
@@ -280,6 +284,7 @@ impl<'a> GpuFormFactors<'a> {
             sort_keys: Vec::new(),
             sorted: Vec::new(),
             deal: opts.deal_bounds.deals(n, mesh.polygons.len()),
+            extent,
         })
     }
 
@@ -881,14 +886,35 @@ impl FormFactorSource for GpuFormFactors<'_> {
         region: &ShotRegion,
         out: &mut Vec<Transfer>,
     ) -> Result<(), RenderError> {
+        self.form_factors_by(shooter, region, out, |source, key, centre| {
+            let (row, exchange) = source.own_row(key, centre)?;
+            Ok((row, exchange, Duration::ZERO))
+        })
+    }
+}
+
+impl GpuFormFactors<'_> {
+    /// As [`FormFactorSource::form_factors`], except that a row to draw
+    /// comes from `row` (given this source, the row's key and centre; it
+    /// returns the row, the time spent in exchanges and the time spent on
+    /// other rows meanwhile, left out of this one's summing): `render::ahead`
+    /// hands over rows drawn beside the shot. Transport and cached rows,
+    /// the cache's offer and the timings are as ever.
+    pub(super) fn form_factors_by(
+        &mut self,
+        shooter: u32,
+        region: &ShotRegion,
+        out: &mut Vec<Transfer>,
+        row: impl FnOnce(&mut Self, RowKey, glam::Vec3) -> Result<(Row, Duration, Duration), RenderError>,
+    ) -> Result<(), RenderError> {
         let start = Instant::now();
         let cpu = parallel::CpuSpan::start(self.comm);
-        let Some((key, tier)) = self.fresh_key(shooter, region, out, (start, cpu)) else {
+        let Some((key, _)) = self.fresh_key(shooter, region, out, (start, cpu)) else {
             return Ok(());
         };
         let before = self.timings.drawing();
-        let (row, exchange) = self.fresh_row(shooter, region.centre, tier)?;
-        self.take_row(key, row, region, out, (start, cpu, before, exchange));
+        let (row, exchange, aside) = row(self, key, region.centre)?;
+        self.take_row(key, row, region, out, (start, cpu, before, exchange), aside);
         Ok(())
     }
 }
@@ -934,6 +960,7 @@ impl GpuFormFactors<'_> {
         region: &ShotRegion,
         out: &mut Vec<Transfer>,
         (start, cpu, before, exchange): (Instant, parallel::CpuSpan, Duration, Duration),
+        aside: Duration,
     ) {
         row.combine(region, out);
         self.last_blocked = back_share(self.mesh, key.patch, &row, region);
@@ -945,7 +972,7 @@ impl GpuFormFactors<'_> {
         let total = start.elapsed();
         let drawn = self.timings.drawing() - before;
         self.timings.exchange += exchange;
-        self.timings.sum += total.saturating_sub(exchange + drawn);
+        self.timings.sum += total.saturating_sub(exchange + drawn + aside);
         self.busy.push((total - exchange).as_secs_f64());
         self.busy_cpu.push(cpu.own(self.comm));
     }

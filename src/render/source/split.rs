@@ -131,7 +131,7 @@ pub(super) struct Pending {
 
 impl GpuFormFactors<'_> {
     /// The tier the shot of `shooter` over `region` draws in.
-    pub(super) fn tier_of(&self, shooter: u32, region: &ShotRegion) -> usize {
+    pub fn tier_of(&self, shooter: u32, region: &ShotRegion) -> usize {
         let polygon = self.mesh.patches[shooter as usize].polygon as usize;
         self.choice
             .tier_for(region.power, self.mesh.polygons[polygon].emits())
@@ -184,7 +184,7 @@ impl GpuFormFactors<'_> {
         } else {
             self.fresh_row(shooter, region.centre, tier)?
         };
-        self.take_row(key, row, region, out, (start, cpu, before, exchange));
+        self.take_row(key, row, region, out, (start, cpu, before, exchange), Duration::ZERO);
         Ok(Started::Row)
     }
 
@@ -264,7 +264,7 @@ impl GpuFormFactors<'_> {
         }
         let (row, exchange) = self.finish_split(split, &views);
         let before = self.timings.drawing();
-        self.take_row(key, row, region, out, (start, cpu, before, exchange));
+        self.take_row(key, row, region, out, (start, cpu, before, exchange), Duration::ZERO);
         if let (Some(b), Some(c)) = (self.busy.last_mut(), self.busy_cpu.last_mut()) {
             *b += busy.as_secs_f64();
             *c += busy_cpu;
