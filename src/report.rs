@@ -316,6 +316,9 @@ pub struct Timings {
     pub image: f64,
     /// Median milliseconds per shot of the final solve.
     pub median_shot_ms: f64,
+    /// Shots of the final solve whose row was drawn ahead, beside an
+    /// earlier shot (`render::ahead`).
+    pub drawn_ahead_shots: u64,
     /// Mean milliseconds per shot of the final solve: where rows are drawn
     /// ahead (`render::ahead`) a shot whose row is ready takes little and
     /// one that draws takes a row's time, so the mean, not the median,

@@ -136,7 +136,7 @@ impl Ahead {
     ) -> Result<T, RenderError> {
         let ahead = Ahead::default();
         let parts = source.parts();
-        let (out, helper) = std::thread::scope(|s| {
+        let (out, helper, ready) = std::thread::scope(|s| {
             let helper = s.spawn(|| ahead.helper(opts, parts));
             let out = parallel::with_cores(1, || solve(&ahead, source));
             let counts = {
@@ -153,12 +153,13 @@ impl Ahead {
                 counts.ahead,
                 counts.dropped
             );
-            (out, helper.join())
+            (out, helper.join(), counts.ready + counts.waited)
         });
         match helper {
             Ok(times) => source.absorb(&times),
             Err(panic) => std::panic::resume_unwind(panic),
         }
+        source.timings.drawn_ahead += ready;
         out
     }
 

@@ -535,6 +535,7 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
     timings.split_shots = t.split;
     timings.coarse_shots = t.coarse;
     timings.transport_shots = t.transported;
+    timings.drawn_ahead_shots = t.drawn_ahead;
     timings.rasterise = t.rasterise.as_secs_f64();
     timings.read_back = t.read_back.as_secs_f64();
     timings.exchange = t.exchange.as_secs_f64();

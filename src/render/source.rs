@@ -73,6 +73,9 @@ pub struct PhaseTimes {
     pub transported: u64,
     /// The row cache a rank may hold, bytes (what its memory budget left).
     pub cache_budget: u64,
+    /// Shots whose row was drawn ahead, beside an earlier shot
+    /// (`render::ahead`).
+    pub drawn_ahead: u64,
 }
 
 impl PhaseTimes {

@@ -357,6 +357,44 @@ fn the_occlusion_cull_changes_no_number() {
 }
 
 #[test]
+fn rows_drawn_ahead_change_no_number() {
+    // On two cores or more, the final solve draws the rows of the vote's
+    // runners-up beside the shot, and a shot whose row is ready takes it: a
+    // row depends only on its shooter, centre and tier, so every number is
+    // the one drawing each row in its shot gives. Default settings (the row
+    // cache, the coarse tier, split shots), cluttered and plain scenes.
+    for name in ["cubes-4", "family-many-2", "family-stacked-5"] {
+        let scene = radiosity::scene::open(name).expect("built-in scene");
+        let mut opts = RenderOptions {
+            width: 0,
+            ..RenderOptions::default()
+        };
+        opts.stop.max_shots = 200;
+        let run = |opts: &RenderOptions| {
+            render(gpu(), &scene, opts, Duration::ZERO, &mut |_| {}).expect("render")
+        };
+        let ahead = run(&opts);
+        opts.look_ahead = false;
+        let own = run(&opts);
+        if radiosity::parallel::cores() >= 2 {
+            assert!(
+                ahead.report.timings.drawn_ahead_shots > 20,
+                "{name}: {} shots took a row drawn ahead",
+                ahead.report.timings.drawn_ahead_shots
+            );
+        }
+        assert_eq!(own.report.timings.drawn_ahead_shots, 0);
+        assert!(
+            ahead.radiosity == own.radiosity,
+            "{name}: radiosities differ with rows drawn ahead"
+        );
+        assert_eq!(ahead.report.surfaces, own.report.surfaces, "{name}");
+        assert_eq!(ahead.report.energy, own.report.energy, "{name}");
+        assert_eq!(ahead.report.shots, own.report.shots, "{name}");
+    }
+}
+
+#[test]
 fn the_contact_split_is_the_same_on_one_core_and_on_every_core() {
     // Each polygon's pieces are found on every core and joined in order:
     // the scene as loaded (the classroom's desks and chairs stand on its
