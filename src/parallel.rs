@@ -267,7 +267,10 @@ pub fn with_cores<R>(n: usize, f: impl FnOnce() -> R) -> R {
     let own = RANK_THREAD.get();
     let process = own.map_or_else(cores, |r| r.process);
     RANK_THREAD.set(Some(match own {
-        Some(r) => RankThread { cores: n.max(1), ..r },
+        Some(r) => RankThread {
+            cores: n.max(1),
+            ..r
+        },
         None => RankThread {
             cores: n.max(1),
             rank: 0,

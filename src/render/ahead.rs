@@ -14,6 +14,8 @@
 //!
 //! The shot loop's thread draws too: it draws its own row when nobody has
 //! started it, and while the helper thread draws it, the next wanted row.
+//! Whether drawing ahead pays is measured as the solve goes ([`Probe`]):
+//! in a big scene it did not.
 
 use super::cache::RowKey;
 use super::options::{RenderError, RenderOptions};
@@ -40,6 +42,86 @@ const WAIT_LIMIT: Duration = Duration::from_secs(600);
 
 /// A row someone wants drawn: its key and its hemisphere's centre.
 type Want = (RowKey, glam::Vec3);
+
+/// Shots a probe window lasts.
+const WINDOW: u32 = 32;
+
+/// Windows the measured choice holds before it measures again.
+const HOLD: u32 = 16;
+
+/// Whether drawing ahead pays, measured: in a big scene two rows drawn at
+/// once each miss the cache the other fills, and a row split between the
+/// cores was faster (Sponza's solve 3.8 s against 5.6 s drawing ahead).
+/// Windows of [`WINDOW`] shots alternate, drawing ahead, each row in its
+/// shot, in its shot, ahead (the cost of shots drifts as the solve goes,
+/// and the order cancels a steady drift); the faster way holds for
+/// [`HOLD`] windows, then both are measured again. Only time depends on
+/// it: the rows are the same either way.
+#[derive(Debug)]
+struct Probe {
+    /// Windows done in this cycle (probing: 0-3; then holding).
+    window: u32,
+    /// Shots into the current window and when it began.
+    shots: u32,
+    began: Option<std::time::Instant>,
+    /// The probe's time drawing ahead and drawing in the shot.
+    spent: [Duration; 2],
+    /// The way chosen after the probe.
+    chosen: bool,
+}
+
+impl Default for Probe {
+    fn default() -> Self {
+        Self {
+            window: 0,
+            shots: 0,
+            began: None,
+            spent: [Duration::ZERO; 2],
+            chosen: true,
+        }
+    }
+}
+
+impl Probe {
+    /// Notes a shot starting; returns whether it draws ahead.
+    fn shot(&mut self) -> bool {
+        let now = std::time::Instant::now();
+        let began = *self.began.get_or_insert(now);
+        if self.shots == WINDOW {
+            let ahead = self.ahead();
+            if self.window < 4 {
+                self.spent[usize::from(!ahead)] += now - began;
+            }
+            self.window += 1;
+            if self.window == 4 {
+                self.chosen = self.spent[0] <= self.spent[1];
+                log::debug!(
+                    "drawing ahead: {:?} against {:?} drawing each row in its shot; {}",
+                    self.spent[0],
+                    self.spent[1],
+                    if self.chosen { "ahead" } else { "in the shot" }
+                );
+            }
+            if self.window == 4 + HOLD {
+                self.window = 0;
+                self.spent = [Duration::ZERO; 2];
+            }
+            self.shots = 0;
+            self.began = Some(now);
+        }
+        self.shots += 1;
+        self.ahead()
+    }
+
+    /// Whether the current window draws ahead.
+    fn ahead(&self) -> bool {
+        match self.window {
+            0 | 3 => true,
+            1 | 2 => false,
+            _ => self.chosen,
+        }
+    }
+}
 
 /// What the shot loop and the helper share.
 #[derive(Default)]
@@ -111,6 +193,7 @@ impl Board {
 pub struct Ahead {
     board: Mutex<Board>,
     turn: Condvar,
+    probe: Mutex<Probe>,
 }
 
 impl Ahead {
@@ -125,7 +208,7 @@ impl Ahead {
             && parallel::cores() >= 2
     }
 
-    /// Runs `solve` (the shot loop, on this thread, with one core) beside
+    /// Runs `solve` (the shot loop, on this thread) beside
     /// a helper thread that draws wanted rows with a source of its own (one
     /// process, one core, built like `source`); returns what `solve` does,
     /// the helper's phase times added to `source`'s.
@@ -138,7 +221,7 @@ impl Ahead {
         let parts = source.parts();
         let (out, helper, ready) = std::thread::scope(|s| {
             let helper = s.spawn(|| ahead.helper(opts, parts));
-            let out = parallel::with_cores(1, || solve(&ahead, source));
+            let out = solve(&ahead, source);
             let counts = {
                 let mut board = ahead.lock();
                 board.stop = true;
@@ -161,6 +244,17 @@ impl Ahead {
         }
         source.timings.drawn_ahead += ready;
         out
+    }
+
+    /// The cores the shot loop's thread may fork onto now: one while the
+    /// helper draws, else every core (a weak shot along the transport and
+    /// its landing, while nothing is drawn ahead, keep both cores).
+    pub fn cores_now(&self) -> usize {
+        if self.lock().busy.is_empty() {
+            parallel::cores()
+        } else {
+            1
+        }
     }
 
     fn lock(&self) -> MutexGuard<'_, Board> {
@@ -226,14 +320,17 @@ impl Ahead {
         next: &[Want],
         out: &mut Vec<Transfer>,
     ) -> Result<(), RenderError> {
+        let ahead = self.probe.lock().unwrap_or_else(|e| e.into_inner()).shot();
         source.form_factors_by(shooter, region, out, |source, key, centre| {
             {
                 let mut board = self.lock();
                 board.wanted.clear();
-                board.wanted.push((key, centre));
-                board
-                    .wanted
-                    .extend(next.iter().filter(|(k, _)| *k != key).copied());
+                if ahead {
+                    board.wanted.push((key, centre));
+                    board
+                        .wanted
+                        .extend(next.iter().filter(|(k, _)| *k != key).copied());
+                }
                 board.prune();
             }
             self.turn.notify_all();
@@ -267,13 +364,15 @@ impl Ahead {
                 board.wanted.retain(|(k, _)| *k != key);
                 board.counts.own += 1;
                 drop(board);
-                let (row, exchange) = source.own_row(key, centre)?;
+                // One core each while the helper draws beside it.
+                let cores = self.cores_now();
+                let (row, exchange) = parallel::with_cores(cores, || source.own_row(key, centre))?;
                 return Ok((row, exchange, aside));
             }
             if let Some((k, c)) = board.claim() {
                 drop(board);
                 let start = std::time::Instant::now();
-                let row = source.draw_row(k, c);
+                let row = parallel::with_cores(1, || source.draw_row(k, c));
                 aside += start.elapsed();
                 board = self.lock();
                 board.finish(k, row);

@@ -795,7 +795,9 @@ impl<'m> ShotLoop<'m> {
         }
         let t = Instant::now();
         let cpu = crate::parallel::CpuSpan::start(self.comm);
-        let shot = solver.shoot_candidate(best, region, &self.ff);
+        let cores = ahead.map_or_else(crate::parallel::cores, Ahead::cores_now);
+        let shot =
+            crate::parallel::with_cores(cores, || solver.shoot_candidate(best, region, &self.ff));
         let dt = t.elapsed();
         if let Some(b) = source.busy_cpu.last_mut() {
             *b += cpu.own(self.comm);

@@ -908,7 +908,11 @@ impl GpuFormFactors<'_> {
         shooter: u32,
         region: &ShotRegion,
         out: &mut Vec<Transfer>,
-        row: impl FnOnce(&mut Self, RowKey, glam::Vec3) -> Result<(Row, Duration, Duration), RenderError>,
+        row: impl FnOnce(
+            &mut Self,
+            RowKey,
+            glam::Vec3,
+        ) -> Result<(Row, Duration, Duration), RenderError>,
     ) -> Result<(), RenderError> {
         let start = Instant::now();
         let cpu = parallel::CpuSpan::start(self.comm);
