@@ -206,7 +206,7 @@ fn final_solve<'m>(
     let ambient = t.elapsed().as_secs_f64();
     // Its gather is not a form-factor exchange: the report's bytes leave it out.
     let ambient_traffic = comm.traffic().since(before);
-    let stats = shoot_until(mesh, opts, 0.0, comm, source, solver, &mut hooks, true)?;
+    let stats = shoot_until(mesh, opts, (0.0, true), comm, source, solver, &mut hooks)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
     // Left out of the solve's time, so say it where it can be seen.

@@ -352,12 +352,11 @@ fn one_pass(
     let stats = shoot_until(
         mesh,
         opts,
-        floor,
+        (floor, false),
         comm,
         &mut source,
         &mut solver,
         &mut hooks,
-        false,
     )?;
     let seconds = started
         .elapsed()

@@ -1000,18 +1000,17 @@ fn unpack_rows<'w>(
 /// Shoots until the loop stops (see [`ShotLoop`]), as `opts` says: its
 /// stop rule, its batch and how a batch's rows are dealt. The final solve
 /// and the refinement passes both shoot here (with `source` from
-/// [`GpuFormFactors::for_solve`]); `ahead`: whether rows may be drawn
+/// [`GpuFormFactors::for_solve`]), shooting no shooter below `floor`; `ahead`: whether rows may be drawn
 /// ahead where [`Ahead::applies`] (the final solve; a pass measures the
 /// penumbrae of the rows its source draws, so it draws each in its shot).
 pub fn shoot_until<'m>(
     mesh: &'m Mesh,
     opts: &RenderOptions,
-    floor: f64,
+    (floor, ahead): (f64, bool),
     comm: &dyn Collectives,
     source: &mut GpuFormFactors,
     solver: &mut Solver<'m>,
     hooks: &mut dyn LoopHooks<'m>,
-    ahead: bool,
 ) -> Result<LoopStats, RenderError> {
     let mut shots = ShotLoop::new(mesh, comm, opts.stop, floor)
         .batched(opts.batch)
