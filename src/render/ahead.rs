@@ -311,21 +311,22 @@ impl Ahead {
     /// [`crate::solver::FormFactorSource::form_factors`] gives them: a row
     /// to draw is taken drawn when it is, drawn here when nobody has
     /// started it, or waited for while this thread draws the next wanted
-    /// row. `next` are the rows wanted after it (the runners-up's, most
+    /// row. `next` gives the rows wanted after it (the runners-up's, most
     /// likely first).
     pub fn form_factors(
         &self,
         source: &mut GpuFormFactors,
         (shooter, region): (u32, &ShotRegion),
-        next: &[Want],
+        next: impl FnOnce(&GpuFormFactors) -> Vec<Want>,
         out: &mut Vec<Transfer>,
     ) -> Result<(), RenderError> {
         let ahead = self.probe.lock().unwrap_or_else(|e| e.into_inner()).shot();
         source.form_factors_by(shooter, region, out, |source, key, centre| {
+            let next = ahead.then(|| next(source));
             {
                 let mut board = self.lock();
                 board.wanted.clear();
-                if ahead {
+                if let Some(next) = next {
                     board.wanted.push((key, centre));
                     board
                         .wanted

@@ -788,8 +788,9 @@ impl<'m> ShotLoop<'m> {
     ) -> Result<Shot, RenderError> {
         match ahead {
             Some(ahead) => {
-                let next = runners_up(source, solver, best.patch);
-                ahead.form_factors(source, (best.patch, region), &next, &mut self.ff)?;
+                // Asked only of a shot that draws, while drawing ahead.
+                let next = |source: &GpuFormFactors| runners_up(source, solver, best.patch);
+                ahead.form_factors(source, (best.patch, region), next, &mut self.ff)?;
             }
             None => source.form_factors(best.patch, region, &mut self.ff)?,
         }

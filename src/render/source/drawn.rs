@@ -29,11 +29,7 @@ impl<'a> GpuFormFactors<'a> {
         if self.choice.by_transport(power) {
             return None;
         }
-        let polygon = self.mesh.patches[shooter as usize].polygon as usize;
-        let tier = self
-            .choice
-            .tier_for(power, self.mesh.polygons[polygon].emits());
-        let key = RowKey::new(shooter, centre, tier);
+        let key = RowKey::new(shooter, centre, self.tier_at(shooter, power));
         self.cache.get(&key).is_none().then_some(key)
     }
 

@@ -131,10 +131,15 @@ pub(super) struct Pending {
 
 impl GpuFormFactors<'_> {
     /// The tier the shot of `shooter` over `region` draws in.
-    pub fn tier_of(&self, shooter: u32, region: &ShotRegion) -> usize {
+    pub(super) fn tier_of(&self, shooter: u32, region: &ShotRegion) -> usize {
+        self.tier_at(shooter, region.power)
+    }
+
+    /// The tier a shot of `shooter` with unshot power `power` draws in.
+    pub(super) fn tier_at(&self, shooter: u32, power: f64) -> usize {
         let polygon = self.mesh.patches[shooter as usize].polygon as usize;
         self.choice
-            .tier_for(region.power, self.mesh.polygons[polygon].emits())
+            .tier_for(power, self.mesh.polygons[polygon].emits())
     }
 
     /// What one group of a split shot of `shooter` over `region` costs, in
