@@ -8,12 +8,15 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
-use super::proxies::{in_view, Agree, Instance, Lookup, Ownership, Proxies, Scatter, TilePlace};
+use super::proxies::{
+    in_view, Agree, Instance, Lookup, Ownership, Proxies, ProxyShapes, Scatter, TilePlace,
+};
 use super::target::RenderTarget;
 use super::GpuError;
 use crate::hemisphere::{Resolution, TileLayout, EMPTY};
 use crate::mesh::{Mesh, ShooterFrame};
 use bytemuck::{Pod, Zeroable};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// The WGSL source of the hemisphere pipeline.
@@ -160,6 +163,20 @@ impl HemisphereRasterizer {
         pieces: u32,
         extent: f32,
     ) -> Result<Self, GpuError> {
+        let shapes = Arc::new(ProxyShapes::build(mesh, pieces));
+        Self::sharing(device, mesh, res, shapes, extent)
+    }
+
+    /// As [`HemisphereRasterizer::new`], drawing `shapes`: built for `mesh`
+    /// by [`ProxyShapes::build`], or another rasteriser's of the same mesh
+    /// ([`HemisphereRasterizer::shapes`]), which spares building them again.
+    pub fn sharing(
+        device: &wgpu::Device,
+        mesh: &Mesh,
+        res: Resolution,
+        shapes: Arc<ProxyShapes>,
+        extent: f32,
+    ) -> Result<Self, GpuError> {
         let limits = device.limits();
         let most = limits.max_texture_dimension_2d;
         if res.cols > most || res.rows > most {
@@ -167,7 +184,7 @@ impl HemisphereRasterizer {
                 "hemisphere {res} exceeds the texture limit {most}"
             )));
         }
-        let proxies = Proxies::build(mesh, pieces);
+        let proxies = Proxies::sharing(shapes);
         let proxy_count = proxies.corners.len();
         let max_instances = 2 * proxy_count.max(1) as u64;
         let instance_bytes = max_instances * std::mem::size_of::<Instance>() as u64;
@@ -376,6 +393,12 @@ impl HemisphereRasterizer {
     /// skip what they already hide (the same rectangles either way).
     pub fn set_bounds_threads(&mut self, threads: usize) {
         self.proxies.max_threads = threads;
+    }
+
+    /// The proxies this rasteriser draws, to share with another of the
+    /// same mesh ([`HemisphereRasterizer::sharing`]).
+    pub fn shapes(&self) -> Arc<ProxyShapes> {
+        Arc::clone(self.proxies.shapes())
     }
 
     /// Whether the exact projection's cells are drawn on the CPU

@@ -7,7 +7,7 @@
 mod hemisphere;
 mod proxies;
 mod software;
-pub use proxies::{Agree, Scatter};
+pub use proxies::{Agree, ProxyShapes, Scatter};
 mod target;
 mod view;
 

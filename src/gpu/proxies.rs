@@ -8,7 +8,8 @@ use crate::mesh::{Mesh, ShooterFrame};
 use crate::occlusion::{OcclusionMap, Piece};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
-use std::ops::Range;
+use std::ops::{Deref, Range};
+use std::sync::Arc;
 
 /// One rectangle to draw, with what the fragment test needs (see the shader's `Rect`).
 #[repr(C)]
@@ -108,8 +109,11 @@ impl Lookup {
 
 /// Every polygon's rasterisation proxies: quad polygons as at most
 /// `pieces` x `pieces` pieces (the fragment shader finds the element), or
-/// every element on its own (0, and triangles).
-pub(super) struct Proxies {
+/// every element on its own (0, and triangles). Read-only once built, so
+/// the tiers of a source and a sibling source drawing rows ahead share one
+/// ([`Proxies::shapes`]): Sponza's are 1.2 M proxies, built in about a
+/// second each.
+pub struct ProxyShapes {
     /// Corners of every proxy (world space).
     pub(super) corners: Vec<[Vec3; 4]>,
     /// Element each proxy belongs to (the polygon's first element for a piece of a quad grid).
@@ -123,6 +127,20 @@ pub(super) struct Proxies {
     pub(super) blocks: Vec<(Vec3, f32)>,
     /// A bounding sphere of each of the mesh's solids.
     solid_spheres: Vec<(Vec3, f32)>,
+    /// The `pieces` they were built with.
+    pieces: u32,
+}
+
+impl ProxyShapes {
+    /// The `pieces` these proxies were built with (see [`ProxyShapes`]).
+    pub fn pieces(&self) -> u32 {
+        self.pieces
+    }
+}
+
+/// A rasteriser's proxies: the shared shapes, and how its shots walk them.
+pub(super) struct Proxies {
+    shapes: Arc<ProxyShapes>,
     /// Whether a whole hemisphere culled on one process walks the blocks
     /// nearest first ([`Proxies::visit_near_first`]); `None`: on one
     /// thread only. Tests set it to compare both walks.
@@ -166,9 +184,39 @@ fn grown(centre: Vec3, radius: f32) -> (Vec3, f32) {
     )
 }
 
+impl Deref for Proxies {
+    type Target = ProxyShapes;
+
+    fn deref(&self) -> &ProxyShapes {
+        &self.shapes
+    }
+}
+
 impl Proxies {
     /// The proxies of `mesh` (see [`super::HemisphereRasterizer::new`]).
+    #[cfg(test)]
     pub(super) fn build(mesh: &Mesh, pieces: u32) -> Self {
+        Self::sharing(Arc::new(ProxyShapes::build(mesh, pieces)))
+    }
+
+    /// A rasteriser's walk over `shapes`.
+    pub(super) fn sharing(shapes: Arc<ProxyShapes>) -> Self {
+        Self {
+            shapes,
+            near_first: None,
+            max_threads: usize::MAX,
+        }
+    }
+
+    /// The shapes, to share with another rasteriser of the same mesh.
+    pub(super) fn shapes(&self) -> &Arc<ProxyShapes> {
+        &self.shapes
+    }
+}
+
+impl ProxyShapes {
+    /// The proxies of `mesh` (see [`super::HemisphereRasterizer::new`]).
+    pub fn build(mesh: &Mesh, pieces: u32) -> Self {
         let mut corners = Vec::new();
         let mut element = Vec::new();
         let mut quads = Vec::new();
@@ -238,11 +286,12 @@ impl Proxies {
             quads,
             polygons,
             blocks,
-            near_first: None,
-            max_threads: usize::MAX,
+            pieces,
         }
     }
+}
 
+impl Proxies {
     /// Whether no polygon of block `b` can be drawn by this shot on this
     /// rank: the block's sphere is wholly behind the shooter's plane, wholly
     /// beyond its reach, or (over several ranks) shows in none of this
@@ -1439,8 +1488,9 @@ mod tests {
         let scene = crate::scene::open("cubes-8").expect("built-in scene");
         let mesh = Mesh::build(&scene, &crate::mesh::MeshSettings::default());
         let proxies = Proxies::build(&mesh, 4);
-        let mut never = Proxies::build(&mesh, 4);
-        never.blocks.iter_mut().for_each(|b| b.1 = f32::INFINITY);
+        let mut shapes = ProxyShapes::build(&mesh, 4);
+        shapes.blocks.iter_mut().for_each(|b| b.1 = f32::INFINITY);
+        let never = Proxies::sharing(Arc::new(shapes));
         let res = Resolution {
             rows: 128,
             cols: 512,

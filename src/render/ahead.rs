@@ -262,11 +262,7 @@ impl Ahead {
     }
 
     /// The helper: draws wanted rows until the loop is over.
-    fn helper(
-        &self,
-        opts: &RenderOptions,
-        (gpu, mesh, extent): (&crate::gpu::Gpu, &crate::mesh::Mesh, f32),
-    ) -> PhaseTimes {
+    fn helper(&self, opts: &RenderOptions, parts: super::source::Parts<'_>) -> PhaseTimes {
         // Marks the helper gone however it leaves, so the loop never waits
         // on a row nobody draws.
         struct Gone<'b>(&'b Ahead);
@@ -281,8 +277,15 @@ impl Ahead {
         let _gone = Gone(self);
         parallel::with_cores(1, || {
             let one = Single::default();
-            let mut source = match GpuFormFactors::new(gpu, mesh, opts, &one, extent) {
-                Ok(source) => source,
+            let built = std::time::Instant::now();
+            let mut source = match GpuFormFactors::sibling(parts, opts, &one) {
+                Ok(source) => {
+                    log::debug!(
+                        "drawing ahead: the helper's source built in {:?}",
+                        built.elapsed()
+                    );
+                    source
+                }
                 Err(e) => {
                     log::warn!("drawing rows ahead: {e}; drawing each row in its shot");
                     return PhaseTimes::default();

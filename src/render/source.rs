@@ -8,15 +8,17 @@ use super::exchange::Exchanger;
 use super::options::{RenderError, RenderOptions};
 use super::tiers::{layout_for, TierCells, TierChoice};
 use crate::formfactor::{self, Row};
-use crate::gpu::{self, Gpu, GpuError, HemisphereRasterizer};
+use crate::gpu::{self, Gpu, GpuError, HemisphereRasterizer, ProxyShapes};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, EMPTY, FIXED_ONE};
 use crate::mesh::{Mesh, ShooterFrame};
 use crate::parallel::{self, Collectives, Single};
 use crate::settings::{FormFactorMethod, Projection, Rasteriser};
 use crate::solver::{FormFactorSource, ShotRegion, Transfer};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod drawn;
+pub(in crate::render) use drawn::Parts;
 mod far;
 mod split;
 
@@ -96,16 +98,16 @@ struct Tier {
 impl Tier {
     /// Uploads the mesh and builds the pipelines for resolution `res`.
     fn new(
-        gpu: &Gpu,
-        mesh: &Mesh,
+        (gpu, mesh): (&Gpu, &Mesh),
         opts: &RenderOptions,
         res: Resolution,
         ranks: usize,
         extent: f32,
+        shapes: &Arc<ProxyShapes>,
     ) -> Result<Self, RenderError> {
         let layout = layout_for(opts, res, ranks)?;
-        let mut raster =
-            HemisphereRasterizer::new(&gpu.device, mesh, res, opts.raster_pieces, extent)?;
+        let shapes = Arc::clone(shapes);
+        let mut raster = HemisphereRasterizer::sharing(&gpu.device, mesh, res, shapes, extent)?;
         if opts.projection == Projection::Tessellated {
             raster.use_tessellation(&gpu.device, opts.tessellation_tolerance)?;
         }
@@ -121,6 +123,18 @@ impl Tier {
             far_way: far::FarWay::default(),
         })
     }
+}
+
+/// What sibling sources of one mesh and one set of options share, read-only:
+/// built once, not once a tier and once a source (Sponza's proxies took
+/// about a second each, which the rows drawn ahead paid beside the first
+/// shots).
+#[derive(Clone)]
+pub(in crate::render) struct Shared {
+    /// Every tier's rasterisation proxies.
+    shapes: Arc<ProxyShapes>,
+    /// The receivers as hybrid rows read them.
+    receivers: Arc<formfactor::ReceiverTable>,
 }
 
 /// A cached row's cost against a fresh fine one (a rank combines it with
@@ -177,7 +191,7 @@ pub struct GpuFormFactors<'a> {
     seen: Vec<bool>,
     /// The receivers as hybrid rows and the marking of patches seen read
     /// them (compact: see [`formfactor::ReceiverTable`]).
-    receivers: formfactor::ReceiverTable,
+    receivers: Arc<formfactor::ReceiverTable>,
     /// What the far receivers' scan reads of each of this rank's patches,
     /// contiguous (see [`FarPatch`]).
     far_patches: Vec<FarPatch>,
@@ -229,10 +243,26 @@ impl<'a> GpuFormFactors<'a> {
         comm: &'a dyn Collectives,
         extent: f32,
     ) -> Result<Self, RenderError> {
+        let shared = Shared {
+            shapes: Arc::new(ProxyShapes::build(mesh, opts.raster_pieces)),
+            receivers: Arc::new(formfactor::ReceiverTable::new(mesh)),
+        };
+        Self::sharing((gpu, mesh), opts, comm, extent, shared)
+    }
+
+    /// As [`GpuFormFactors::new`], with what another source of the same
+    /// mesh and options shares (see [`Shared`]).
+    fn sharing(
+        (gpu, mesh): (&'a Gpu, &'a Mesh),
+        opts: &RenderOptions,
+        comm: &'a dyn Collectives,
+        extent: f32,
+        shared: Shared,
+    ) -> Result<Self, RenderError> {
         let n = comm.size();
         let tiers = TierChoice::resolutions(opts)
             .into_iter()
-            .map(|res| Tier::new(gpu, mesh, opts, res, n, extent))
+            .map(|res| Tier::new((gpu, mesh), opts, res, n, extent, &shared.shapes))
             .collect::<Result<Vec<_>, _>>()?;
         let patches = mesh.elements.iter().map(|e| e.patch);
         // Every rank has the same options, so all or none meet in the collective.
@@ -274,7 +304,7 @@ impl<'a> GpuFormFactors<'a> {
             cache: RowCache::for_ranks(opts.cache_rows, per_rank_cache, n),
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
-            receivers: formfactor::ReceiverTable::new(mesh),
+            receivers: shared.receivers,
             far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh
                 .patches

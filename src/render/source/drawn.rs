@@ -2,19 +2,53 @@
 //! drawing at all, a row drawn whole by a source of one process, and the
 //! timings of a source that drew beside this one.
 
-use super::{GpuFormFactors, PhaseTimes};
+use super::{GpuFormFactors, PhaseTimes, Shared};
 use crate::formfactor::Row;
 use crate::gpu::Gpu;
 use crate::mesh::Mesh;
+use crate::parallel::Single;
 use crate::render::cache::RowKey;
-use crate::render::options::RenderError;
+use crate::render::options::{RenderError, RenderOptions};
+use std::sync::Arc;
 use std::time::Instant;
 
+/// What a sibling source is built from (see [`GpuFormFactors::parts`]).
+pub(in crate::render) struct Parts<'a> {
+    gpu: &'a Gpu,
+    mesh: &'a Mesh,
+    extent: f32,
+    shared: Shared,
+}
+
 impl<'a> GpuFormFactors<'a> {
-    /// What a sibling source needs to be built alike (see
-    /// [`GpuFormFactors::new`]): the device, the mesh and the scene's extent.
-    pub(in crate::render) fn parts(&self) -> (&'a Gpu, &'a Mesh, f32) {
-        (self.gpu, self.mesh, self.extent)
+    /// What a sibling source needs to be built alike
+    /// ([`GpuFormFactors::sibling`]).
+    pub(in crate::render) fn parts(&self) -> Parts<'a> {
+        Parts {
+            gpu: self.gpu,
+            mesh: self.mesh,
+            extent: self.extent,
+            shared: Shared {
+                shapes: self.tiers[0].raster.shapes(),
+                receivers: Arc::clone(&self.receivers),
+            },
+        }
+    }
+
+    /// A source of one process (`one`) built like the one `parts` came
+    /// from, sharing its read-only parts.
+    pub(in crate::render) fn sibling(
+        parts: Parts<'a>,
+        opts: &RenderOptions,
+        one: &'a Single,
+    ) -> Result<Self, RenderError> {
+        Self::sharing(
+            (parts.gpu, parts.mesh),
+            opts,
+            one,
+            parts.extent,
+            parts.shared,
+        )
     }
 
     /// The key of the row a shot of `shooter` at `centre` with unshot power
