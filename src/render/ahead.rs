@@ -46,20 +46,31 @@ type Want = (RowKey, glam::Vec3);
 /// Shots a probe window lasts.
 const WINDOW: u32 = 32;
 
+/// Whether each probe window draws ahead, after one window of warm-up:
+/// ABBA BAAB, which cancels a steady drift of the shots' cost and a
+/// curving one.
+const PROBE: [bool; 8] = [true, false, false, true, false, true, true, false];
+
 /// Windows the measured choice holds before it measures again.
 const HOLD: u32 = 16;
 
-/// Whether drawing ahead pays, measured: in a big scene two rows drawn at
-/// once each miss the cache the other fills, and a row split between the
-/// cores was faster (Sponza's solve 3.8 s against 5.6 s drawing ahead).
-/// Windows of [`WINDOW`] shots alternate, drawing ahead, each row in its
-/// shot, in its shot, ahead (the cost of shots drifts as the solve goes,
-/// and the order cancels a steady drift); the faster way holds for
-/// [`HOLD`] windows, then both are measured again. Only time depends on
-/// it: the rows are the same either way.
+/// Whether drawing ahead pays, measured as the solve goes: rows drawn
+/// ahead for a runner-up that does not shoot next are lost, and in a big
+/// scene, whose rows cost much and whose vote is less sure, the loss can
+/// outweigh the gain (Sponza's solve, to 1e-2: 3.8-4.1 s drawing every row
+/// ahead, 3.4-3.6 s each in its shot; the 4096-cube room 9.8-10.1 ms a
+/// shot ahead against 12.8-14.8 ms). A cycle is one window of warm-up
+/// in the way held so far (a switch of ways, or the solve's start, costs
+/// the window after it: its shots are the solve's first, or the rows
+/// drawn ahead are still being taken), then the [`PROBE`] windows, whose
+/// sums are compared; the faster way holds for [`HOLD`] windows. A
+/// window's cost varies with its shooters by half or more, so one window
+/// a way was not enough (the first measure chose each row in its shot in
+/// the 4096-cube room, 30 % slower). Only time depends on it: the rows are
+/// the same either way.
 #[derive(Debug)]
 struct Probe {
-    /// Windows done in this cycle (probing: 0-3; then holding).
+    /// Windows done in this cycle (0: warm-up; 1..=8: probing; then holding).
     window: u32,
     /// Shots into the current window and when it began.
     shots: u32,
@@ -83,26 +94,35 @@ impl Default for Probe {
 }
 
 impl Probe {
+    /// Windows a cycle lasts.
+    const CYCLE: u32 = 1 + PROBE.len() as u32 + HOLD;
+
     /// Notes a shot starting; returns whether it draws ahead.
     fn shot(&mut self) -> bool {
-        let now = std::time::Instant::now();
+        self.shot_at(std::time::Instant::now())
+    }
+
+    /// [`Probe::shot`], the shot starting at `now`.
+    fn shot_at(&mut self, now: std::time::Instant) -> bool {
         let began = *self.began.get_or_insert(now);
         if self.shots == WINDOW {
             let ahead = self.ahead();
-            if self.window < 4 {
-                self.spent[usize::from(!ahead)] += now - began;
+            let took = now - began;
+            log::trace!("window {}: {took:?} {}", self.window, way(ahead));
+            if self.probing() {
+                self.spent[usize::from(!ahead)] += took;
             }
             self.window += 1;
-            if self.window == 4 {
+            if self.window == 1 + PROBE.len() as u32 {
                 self.chosen = self.spent[0] <= self.spent[1];
                 log::debug!(
                     "drawing ahead: {:?} against {:?} drawing each row in its shot; {}",
                     self.spent[0],
                     self.spent[1],
-                    if self.chosen { "ahead" } else { "in the shot" }
+                    way(self.chosen)
                 );
             }
-            if self.window == 4 + HOLD {
+            if self.window == Self::CYCLE {
                 self.window = 0;
                 self.spent = [Duration::ZERO; 2];
             }
@@ -113,13 +133,27 @@ impl Probe {
         self.ahead()
     }
 
+    /// Whether the current window is one of the probe's.
+    fn probing(&self) -> bool {
+        (1..=PROBE.len() as u32).contains(&self.window)
+    }
+
     /// Whether the current window draws ahead.
     fn ahead(&self) -> bool {
-        match self.window {
-            0 | 3 => true,
-            1 | 2 => false,
-            _ => self.chosen,
+        if self.probing() {
+            PROBE[self.window as usize - 1]
+        } else {
+            self.chosen
         }
+    }
+}
+
+/// A way of drawing, in words.
+fn way(ahead: bool) -> &'static str {
+    if ahead {
+        "ahead"
+    } else {
+        "in the shot"
     }
 }
 
@@ -396,5 +430,74 @@ impl Ahead {
                 ));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Instant;
+
+    /// Runs `shots` shots through `probe` from `at`, each costing what
+    /// `cost` says of its way and its index; returns the ways taken.
+    fn run(
+        probe: &mut Probe,
+        at: &mut Instant,
+        shots: u32,
+        cost: impl Fn(bool, u32) -> Duration,
+    ) -> Vec<bool> {
+        (0..shots)
+            .map(|k| {
+                let ahead = probe.shot_at(*at);
+                *at += cost(ahead, k);
+                ahead
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_probe_chooses_the_faster_way_whatever_the_first_window_costs() {
+        let probe_shots = (1 + PROBE.len() as u32) * WINDOW;
+        for ahead_faster in [true, false] {
+            let mut probe = Probe::default();
+            let mut at = Instant::now();
+            // The solve's first shots cost 20x (the warm-up window, drawn
+            // ahead), and the shots' cost drifts up as the solve goes; the
+            // faster way is 20 % faster.
+            let ways = run(&mut probe, &mut at, probe_shots + 3 * WINDOW, |ahead, k| {
+                let base = if k < WINDOW { 20_000 } else { 1_000 + k };
+                let slow = if ahead == ahead_faster { 1.0 } else { 1.25 };
+                Duration::from_micros((base as f64 * slow) as u64)
+            });
+            assert!(ways[..WINDOW as usize].iter().all(|&a| a), "warm-up ahead");
+            let probed: Vec<bool> = ways[WINDOW as usize..probe_shots as usize]
+                .chunks(WINDOW as usize)
+                .map(|w| w[0])
+                .collect();
+            assert_eq!(probed, PROBE, "the probe's windows");
+            assert!(
+                ways[probe_shots as usize + 1..]
+                    .iter()
+                    .all(|&a| a == ahead_faster),
+                "held: the faster way (ahead faster: {ahead_faster})"
+            );
+        }
+    }
+
+    #[test]
+    fn the_probe_measures_again_after_holding() {
+        let mut probe = Probe::default();
+        let mut at = Instant::now();
+        let cycle = Probe::CYCLE * WINDOW;
+        // Drawing ahead is faster for a cycle, then slower.
+        let ways = run(&mut probe, &mut at, 2 * cycle + WINDOW, |ahead, k| {
+            let ahead_faster = k < cycle;
+            Duration::from_micros(if ahead == ahead_faster { 800 } else { 1_000 })
+        });
+        let held = |c: u32| ways[((c * Probe::CYCLE - 1) * WINDOW) as usize];
+        assert!(held(1), "first cycle holds drawing ahead");
+        assert!(!held(2), "second cycle holds each row in its shot");
+        // The second cycle's warm-up is in the way held before.
+        assert!(ways[cycle as usize], "warm-up in the way held");
     }
 }
