@@ -375,6 +375,18 @@ impl<'a> GpuFormFactors<'a> {
             .shooter_frame_at(shooter, centre)
             .within(reach)
             .keeping_near(keep);
+        if reach.is_infinite() {
+            // Read by scripts/bench-packets.sh, which casts these
+            // hemispheres' rays with Embree's ray packets.
+            log::trace!(
+                target: "radiosity::hemispheres",
+                "hemisphere {:?} {:?} {:?} {:?}",
+                frame.centre.to_array(),
+                frame.tangent.to_array(),
+                frame.bitangent.to_array(),
+                frame.normal.to_array()
+            );
+        }
         self.last_tier = tier;
         let layout = self.tiers[tier].cells.layout;
         let mut exchange = Duration::ZERO;
