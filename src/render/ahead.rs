@@ -43,7 +43,7 @@ const WAIT_LIMIT: Duration = Duration::from_secs(600);
 /// A row someone wants drawn: its key and its hemisphere's centre.
 type Want = (RowKey, glam::Vec3);
 
-/// Shots a probe window lasts.
+/// Shots a window lasts.
 const WINDOW: u32 = 32;
 
 /// Whether each probe window draws ahead, after one window of warm-up:
@@ -51,34 +51,44 @@ const WINDOW: u32 = 32;
 /// curving one.
 const PROBE: [bool; 8] = [true, false, false, true, false, true, true, false];
 
-/// Windows the measured choice holds before it measures again.
+/// Windows the measured choice holds before it measures again; doubled
+/// each time the probe agrees with the choice it held, up to [`MOST_HOLD`]
+/// (a probe spends half its shots the slower way).
 const HOLD: u32 = 16;
+const MOST_HOLD: u32 = 256;
 
 /// Whether drawing ahead pays, measured as the solve goes: rows drawn
 /// ahead for a runner-up that does not shoot next are lost, and in a big
-/// scene, whose rows cost much and whose vote is less sure, the loss can
-/// outweigh the gain (Sponza's solve, to 1e-2: 3.8-4.1 s drawing every row
-/// ahead, 3.4-3.6 s each in its shot; the 4096-cube room 9.8-10.1 ms a
-/// shot ahead against 12.8-14.8 ms). A cycle is one window of warm-up
-/// in the way held so far (a switch of ways, or the solve's start, costs
-/// the window after it: its shots are the solve's first, or the rows
-/// drawn ahead are still being taken), then the [`PROBE`] windows, whose
-/// sums are compared; the faster way holds for [`HOLD`] windows. A
-/// window's cost varies with its shooters by half or more, so one window
-/// a way was not enough (the first measure chose each row in its shot in
-/// the 4096-cube room, 30 % slower). Only time depends on it: the rows are
-/// the same either way.
+/// scene two rows drawn at once slow each other, so the loss can outweigh
+/// the gain (Sponza's first 128 shots, each way throughout: 4.07 s drawing
+/// ahead against 3.07 s; the 4096-cube room 9.8-10.1 ms a shot ahead
+/// against 12.8-14.8 ms). A cycle is one window of warm-up in the way
+/// held so far (a switch of ways, or the solve's start, costs the window
+/// after it: its shots are the solve's first, or rows drawn ahead are
+/// still being taken), then the [`PROBE`] windows, whose times are summed
+/// each way; the faster way holds for [`HOLD`] windows or more. A window's
+/// cost varies with its shooters by half or more: one window a way, the
+/// first counted, chose each row in its shot in the 4096-cube room, 30 %
+/// slower. Still fooled by a sudden drop: Sponza's shots cost a tenth
+/// after its first 130, so its probe measures ahead as faster, and its
+/// solve pays 0.3-0.8 s (README "Rows drawn ahead"). Windows of 16 shots,
+/// ABBA four times, measured the switches more than the ways. Only time
+/// depends on it: the rows are the same either way.
 #[derive(Debug)]
 struct Probe {
-    /// Windows done in this cycle (0: warm-up; 1..=8: probing; then holding).
+    /// Windows done in this cycle (0: warm-up; then probing until decided).
     window: u32,
     /// Shots into the current window and when it began.
     shots: u32,
     began: Option<std::time::Instant>,
     /// The probe's time drawing ahead and drawing in the shot.
     spent: [Duration; 2],
-    /// The way chosen after the probe.
+    /// The way chosen by the last probe.
     chosen: bool,
+    /// Once this cycle's probe has chosen: the window its hold ends at.
+    until: Option<u32>,
+    /// How long the last choice held; 0 before the first.
+    hold: u32,
 }
 
 impl Default for Probe {
@@ -89,14 +99,13 @@ impl Default for Probe {
             began: None,
             spent: [Duration::ZERO; 2],
             chosen: true,
+            until: None,
+            hold: 0,
         }
     }
 }
 
 impl Probe {
-    /// Windows a cycle lasts.
-    const CYCLE: u32 = 1 + PROBE.len() as u32 + HOLD;
-
     /// Notes a shot starting; returns whether it draws ahead.
     fn shot(&mut self) -> bool {
         self.shot_at(std::time::Instant::now())
@@ -113,18 +122,13 @@ impl Probe {
                 self.spent[usize::from(!ahead)] += took;
             }
             self.window += 1;
-            if self.window == 1 + PROBE.len() as u32 {
-                self.chosen = self.spent[0] <= self.spent[1];
-                log::debug!(
-                    "drawing ahead: {:?} against {:?} drawing each row in its shot; {}",
-                    self.spent[0],
-                    self.spent[1],
-                    way(self.chosen)
-                );
+            if self.until.is_none() && self.window == 1 + PROBE.len() as u32 {
+                self.decide();
             }
-            if self.window == Self::CYCLE {
+            if self.until == Some(self.window) {
                 self.window = 0;
                 self.spent = [Duration::ZERO; 2];
+                self.until = None;
             }
             self.shots = 0;
             self.began = Some(now);
@@ -133,9 +137,29 @@ impl Probe {
         self.ahead()
     }
 
+    /// Ends this cycle's probe: the faster way holds, longer when it is the
+    /// way held before.
+    fn decide(&mut self) {
+        let faster = self.spent[0] <= self.spent[1];
+        self.hold = if self.hold > 0 && faster == self.chosen {
+            (2 * self.hold).min(MOST_HOLD)
+        } else {
+            HOLD
+        };
+        self.chosen = faster;
+        self.until = Some(self.window + self.hold);
+        log::debug!(
+            "drawing ahead: {:?} against {:?} drawing each row in its shot; {} for {} windows",
+            self.spent[0],
+            self.spent[1],
+            way(self.chosen),
+            self.hold
+        );
+    }
+
     /// Whether the current window is one of the probe's.
     fn probing(&self) -> bool {
-        (1..=PROBE.len() as u32).contains(&self.window)
+        self.until.is_none() && self.window >= 1
     }
 
     /// Whether the current window draws ahead.
@@ -438,66 +462,81 @@ mod tests {
     use super::*;
     use std::time::Instant;
 
-    /// Runs `shots` shots through `probe` from `at`, each costing what
-    /// `cost` says of its way and its index; returns the ways taken.
-    fn run(
-        probe: &mut Probe,
-        at: &mut Instant,
-        shots: u32,
-        cost: impl Fn(bool, u32) -> Duration,
-    ) -> Vec<bool> {
-        (0..shots)
-            .map(|k| {
-                let ahead = probe.shot_at(*at);
-                *at += cost(ahead, k);
-                ahead
+    /// Runs `windows` windows of shots through a new probe, each shot
+    /// costing what `cost` says of its way and its window; returns each
+    /// window's way, checking that every shot of a window takes it.
+    fn run(windows: u32, cost: impl Fn(bool, u32) -> Duration) -> Vec<bool> {
+        let mut probe = Probe::default();
+        let mut at = Instant::now();
+        (0..windows)
+            .map(|w| {
+                let ways: Vec<bool> = (0..WINDOW)
+                    .map(|_| {
+                        let ahead = probe.shot_at(at);
+                        at += cost(ahead, w);
+                        ahead
+                    })
+                    .collect();
+                assert!(
+                    ways.iter().all(|&a| a == ways[0]),
+                    "window {w} changed ways"
+                );
+                ways[0]
             })
             .collect()
     }
 
+    /// A shot's time: `base` microseconds, `slow` times more the slower way.
+    fn shot(ahead: bool, ahead_faster: bool, base: f64, slow: f64) -> Duration {
+        let factor = if ahead == ahead_faster { 1.0 } else { slow };
+        Duration::from_micros((base * factor) as u64)
+    }
+
+    const P: usize = PROBE.len();
+
     #[test]
     fn the_probe_chooses_the_faster_way_whatever_the_first_window_costs() {
-        let probe_shots = (1 + PROBE.len() as u32) * WINDOW;
         for ahead_faster in [true, false] {
-            let mut probe = Probe::default();
-            let mut at = Instant::now();
-            // The solve's first shots cost 20x (the warm-up window, drawn
-            // ahead), and the shots' cost drifts up as the solve goes; the
-            // faster way is 20 % faster.
-            let ways = run(&mut probe, &mut at, probe_shots + 3 * WINDOW, |ahead, k| {
-                let base = if k < WINDOW { 20_000 } else { 1_000 + k };
-                let slow = if ahead == ahead_faster { 1.0 } else { 1.25 };
-                Duration::from_micros((base as f64 * slow) as u64)
+            // The solve's first window costs 20x (drawn ahead), and the
+            // shots' cost drifts up as the solve goes; the faster way is
+            // 10 % faster.
+            let ways = run(P as u32 + 6, |ahead, w| {
+                let base = if w == 0 {
+                    20_000.0
+                } else {
+                    1_000.0 + 10.0 * w as f64
+                };
+                shot(ahead, ahead_faster, base, 1.1)
             });
-            assert!(ways[..WINDOW as usize].iter().all(|&a| a), "warm-up ahead");
-            let probed: Vec<bool> = ways[WINDOW as usize..probe_shots as usize]
-                .chunks(WINDOW as usize)
-                .map(|w| w[0])
-                .collect();
-            assert_eq!(probed, PROBE, "the probe's windows");
+            assert!(ways[0], "the warm-up draws ahead");
+            assert_eq!(ways[1..=P], PROBE, "the probe's windows");
             assert!(
-                ways[probe_shots as usize + 1..]
-                    .iter()
-                    .all(|&a| a == ahead_faster),
+                ways[P + 1..].iter().all(|&a| a == ahead_faster),
                 "held: the faster way (ahead faster: {ahead_faster})"
             );
         }
     }
 
     #[test]
-    fn the_probe_measures_again_after_holding() {
-        let mut probe = Probe::default();
-        let mut at = Instant::now();
-        let cycle = Probe::CYCLE * WINDOW;
-        // Drawing ahead is faster for a cycle, then slower.
-        let ways = run(&mut probe, &mut at, 2 * cycle + WINDOW, |ahead, k| {
-            let ahead_faster = k < cycle;
-            Duration::from_micros(if ahead == ahead_faster { 800 } else { 1_000 })
+    fn the_probe_measures_again_after_holding_and_holds_longer_when_it_agrees() {
+        let hold = HOLD as usize;
+        let cycle = |warm: bool, hold: usize, held: bool| {
+            let mut c = vec![warm];
+            c.extend(PROBE);
+            c.extend(vec![held; hold]);
+            c
+        };
+        // Ahead holds, the probe agrees and it holds twice as long; then
+        // drawing ahead turns twice as slow: the next probe switches, and
+        // the one after agrees.
+        let mut want = cycle(true, hold, true);
+        want.extend(cycle(true, 2 * hold, true));
+        let switch = want.len() as u32;
+        want.extend(cycle(true, hold, false));
+        want.extend(cycle(false, 2 * hold, false));
+        let ways = run(want.len() as u32, |ahead, w| {
+            shot(ahead, w < switch, 1_000.0, 2.0)
         });
-        let held = |c: u32| ways[((c * Probe::CYCLE - 1) * WINDOW) as usize];
-        assert!(held(1), "first cycle holds drawing ahead");
-        assert!(!held(2), "second cycle holds each row in its shot");
-        // The second cycle's warm-up is in the way held before.
-        assert!(ways[cycle as usize], "warm-up in the way held");
+        assert_eq!(ways, want);
     }
 }
