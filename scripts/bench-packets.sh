@@ -13,17 +13,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
-extra=()
-for p in libembree-dev gcc libc6-dev; do
-  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || extra+=("$p")
-done
-if ((${#extra[@]})); then
-  echo "bench-packets: installing ${extra[*]}" >&2
-  sudo=""
-  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
-  $sudo apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${extra[@]}" >/dev/null
-fi
+install_missing libembree-dev gcc libc6-dev
 cargo build --release --locked --bin radiosity
 bin=target/release/radiosity
 SCENES=${SCENES:-"cubes-4 cubes-16"}
