@@ -192,6 +192,8 @@ pub struct GpuFormFactors<'a> {
     /// The receivers as hybrid rows and the marking of patches seen read
     /// them (compact: see [`formfactor::ReceiverTable`]).
     receivers: Arc<formfactor::ReceiverTable>,
+    /// Every tier's rasterisation proxies (shared with a sibling source).
+    shapes: Arc<ProxyShapes>,
     /// What the far receivers' scan reads of each of this rank's patches,
     /// contiguous (see [`FarPatch`]).
     far_patches: Vec<FarPatch>,
@@ -305,6 +307,7 @@ impl<'a> GpuFormFactors<'a> {
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
             receivers: shared.receivers,
+            shapes: shared.shapes,
             far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh
                 .patches

@@ -29,7 +29,7 @@ impl<'a> GpuFormFactors<'a> {
             mesh: self.mesh,
             extent: self.extent,
             shared: Shared {
-                shapes: self.tiers[0].raster.shapes(),
+                shapes: Arc::clone(&self.shapes),
                 receivers: Arc::clone(&self.receivers),
             },
         }
