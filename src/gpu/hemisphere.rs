@@ -167,9 +167,9 @@ impl HemisphereRasterizer {
         Self::sharing(device, mesh, res, shapes, extent)
     }
 
-    /// As [`HemisphereRasterizer::new`], drawing `shapes`: built for `mesh`
-    /// by [`ProxyShapes::build`], or another rasteriser's of the same mesh
-    /// ([`HemisphereRasterizer::shapes`]), which spares building them again.
+    /// As [`HemisphereRasterizer::new`], drawing `shapes`, built for `mesh`
+    /// by [`ProxyShapes::build`] and perhaps shared with other rasterisers
+    /// of the same mesh, which spares building them again.
     pub fn sharing(
         device: &wgpu::Device,
         mesh: &Mesh,
@@ -393,12 +393,6 @@ impl HemisphereRasterizer {
     /// skip what they already hide (the same rectangles either way).
     pub fn set_bounds_threads(&mut self, threads: usize) {
         self.proxies.max_threads = threads;
-    }
-
-    /// The proxies this rasteriser draws, to share with another of the
-    /// same mesh ([`HemisphereRasterizer::sharing`]).
-    pub fn shapes(&self) -> Arc<ProxyShapes> {
-        Arc::clone(self.proxies.shapes())
     }
 
     /// Whether the exact projection's cells are drawn on the CPU

@@ -111,8 +111,7 @@ impl Lookup {
 /// `pieces` x `pieces` pieces (the fragment shader finds the element), or
 /// every element on its own (0, and triangles). Read-only once built, so
 /// the tiers of a source and a sibling source drawing rows ahead share one
-/// ([`Proxies::shapes`]): Sponza's are 1.2 M proxies, built in about a
-/// second each.
+/// (`Arc`): Sponza's are 1.2 M proxies, built in about a second each.
 pub struct ProxyShapes {
     /// Corners of every proxy (world space).
     pub(super) corners: Vec<[Vec3; 4]>,
@@ -127,15 +126,6 @@ pub struct ProxyShapes {
     pub(super) blocks: Vec<(Vec3, f32)>,
     /// A bounding sphere of each of the mesh's solids.
     solid_spheres: Vec<(Vec3, f32)>,
-    /// The `pieces` they were built with.
-    pieces: u32,
-}
-
-impl ProxyShapes {
-    /// The `pieces` these proxies were built with (see [`ProxyShapes`]).
-    pub fn pieces(&self) -> u32 {
-        self.pieces
-    }
 }
 
 /// A rasteriser's proxies: the shared shapes, and how its shots walk them.
@@ -206,11 +196,6 @@ impl Proxies {
             near_first: None,
             max_threads: usize::MAX,
         }
-    }
-
-    /// The shapes, to share with another rasteriser of the same mesh.
-    pub(super) fn shapes(&self) -> &Arc<ProxyShapes> {
-        &self.shapes
     }
 }
 
@@ -286,7 +271,6 @@ impl ProxyShapes {
             quads,
             polygons,
             blocks,
-            pieces,
         }
     }
 }
