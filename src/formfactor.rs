@@ -61,6 +61,9 @@ pub struct ReceiverTable {
     normals: Vec<glam::Vec3>,
     /// Per patch, its elements' first and one-past-last index.
     patch_elements: Vec<[u32; 2]>,
+    /// Per element, its patch and polygon, apart: a shot asks them of the
+    /// elements its cells saw, in no order (a miss a 40-byte record).
+    owners: Vec<[u32; 2]>,
 }
 
 /// One element in a [`ReceiverTable`].
@@ -71,11 +74,10 @@ struct ReceiverElement {
     area: f64,
     /// The largest distance from its centre to a corner.
     radius: f64,
-    patch: u32,
 }
 
 impl ReceiverTable {
-    /// The table of `mesh` (40 bytes an element).
+    /// The table of `mesh` (32 bytes an element, and 8 in `owners`).
     pub fn new(mesh: &Mesh) -> Self {
         Self {
             elements: mesh
@@ -88,7 +90,6 @@ impl ReceiverTable {
                         polygon: e.polygon,
                         area: e.area,
                         radius: element_radius(e, centre.as_dvec3()),
-                        patch: e.patch,
                     }
                 })
                 .collect(),
@@ -98,12 +99,18 @@ impl ReceiverTable {
                 .iter()
                 .map(|p| [p.elements.start, p.elements.end])
                 .collect(),
+            owners: mesh.elements.iter().map(|e| [e.patch, e.polygon]).collect(),
         }
     }
 
     /// The patch of element `j`.
     pub fn patch(&self, j: u32) -> u32 {
-        self.elements[j as usize].patch
+        self.owners[j as usize][0]
+    }
+
+    /// The polygon of element `j`, if there is such an element.
+    pub fn polygon(&self, j: u32) -> Option<u32> {
+        self.owners.get(j as usize).map(|o| o[1])
     }
 
     /// The area of element `j` (the element record's).

@@ -98,6 +98,10 @@ pub struct Bvh {
     /// Where the walks start: wide node 0, or the packed root when the
     /// root is a leaf (`NO_CHILD` when there are no triangles).
     root: u32,
+    /// The first packed leaf holding each polygon's triangles (`NO_CHILD`
+    /// for a polygon without any): where a guessed occluder is tried
+    /// ([`Bvh::occluded_guided`]).
+    polygon_leaf: Vec<u32>,
     /// The most entries a walk's stack can hold: three pending siblings a
     /// wide level and the deepest node's four children.
     stack_bound: usize,
@@ -149,6 +153,7 @@ impl Bvh {
             leaf_up: Vec::new(),
             wide_up: Vec::new(),
             root: NO_CHILD,
+            polygon_leaf: Vec::new(),
             stack_bound: 1,
         };
         if !bvh.tris.is_empty() {
@@ -175,6 +180,14 @@ impl Bvh {
                 };
             }
             bvh.stack_bound = 3 * levels.iter().max().copied().unwrap_or(0) + 1;
+            bvh.polygon_leaf = vec![NO_CHILD; polygons.len()];
+            for (k, leaf) in bvh.packed.iter().enumerate() {
+                for &polygon in &leaf.polygon[..leaf.count as usize] {
+                    if let Some(first) = bvh.polygon_leaf.get_mut(polygon as usize) {
+                        *first = (*first).min(k as u32);
+                    }
+                }
+            }
             // Every walk reads the packed copies; only the tests' binary
             // reference walk reads these (Sponza: 22 MB).
             if !cfg!(test) {
@@ -535,6 +548,27 @@ impl Bvh {
         skip: [u32; 2],
         recent: &mut [Option<u32>],
     ) -> bool {
+        self.occluded_guided(origin, dir, t_min, t_max, skip, recent, || None)
+    }
+
+    /// [`Bvh::occluded_recent`], trying next, where the recent occluders
+    /// do not block the ray, a leaf of the polygon `guess` names (found
+    /// only then: the polygon a hemisphere cell beside the ray saw, which
+    /// costs a cell lookup), which becomes the latest hint if it blocks
+    /// and otherwise anchors the subtree tried before the rest. The answer
+    /// is `occluded`'s whatever the guess, as for any hint.
+    // The ray, its range and skips, the hints and the guess: all needed.
+    #[allow(clippy::too_many_arguments)]
+    pub fn occluded_guided(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        skip: [u32; 2],
+        recent: &mut [Option<u32>],
+        guess: impl FnOnce() -> Option<u32>,
+    ) -> bool {
         let inv = dir.recip();
         let ray = WideRay::new(origin, dir, t_min, t_max);
         // A hint names a packed leaf; its box is its binary leaf's.
@@ -555,7 +589,23 @@ impl Bvh {
         if slab(root, origin, inv, t_min, t_max).is_none() {
             return false;
         }
-        let first = recent.first().copied().flatten();
+        // The guessed polygon's leaf, unless a recent hint just failed there.
+        let guessed = guess()
+            .and_then(|polygon| self.polygon_leaf.get(polygon as usize).copied())
+            .filter(|&leaf| leaf != NO_CHILD && !recent.contains(&Some(leaf)));
+        if let Some(k) = guessed {
+            let leaf = &self.packed[k as usize];
+            if slab(&self.nodes[leaf.node as usize], origin, inv, t_min, t_max).is_some()
+                && ray.blocked_by(leaf, skip)
+            {
+                if !recent.is_empty() {
+                    recent.rotate_right(1);
+                    recent[0] = Some(k);
+                }
+                return true;
+            }
+        }
+        let first = guessed.or(recent.first().copied().flatten());
         let mut hint = first;
         let mut clear = NO_CHILD;
         // The first hint's leaf and the wide node holding it (none: the root is that leaf).
@@ -1035,6 +1085,62 @@ mod tests {
             by_recent > hinted,
             "the recent leaves answered {by_recent} of {hidden}, the last alone {hinted}"
         );
+    }
+
+    #[test]
+    fn a_guessed_occluder_changes_no_verdict_and_answers_when_right() {
+        // The segments of the hinted test, each with a guess: none, a
+        // polygon picked at random (often wrong, sometimes no polygon at
+        // all), or the nearest polygon the segment meets (right unless
+        // skipped). The verdict is the plain walk's every time; a right
+        // guess answers where the hint could not.
+        let mut rng = crate::fuzz::Rng(12);
+        let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
+        let mut unit = || unit(&mut rng);
+        let bvh = Bvh::new(&polys);
+        let mut hint = None;
+        let (mut hidden, mut by_guess) = (0, 0);
+        for i in 0..4000 {
+            let o = Vec3::new(unit() * 0.2, unit() * 0.2, 0.0);
+            let to = Vec3::new(
+                (i % 64) as f32 * 0.12 - 3.8 + unit() * 0.05,
+                (i / 64) as f32 * 0.12 - 3.8,
+                6.0,
+            );
+            let skip = [(i % 300) as u32, u32::MAX];
+            let want = bvh.occluded(o, to - o, 0.0, 1.0, skip);
+            let nearest = bvh.nearest(o, to - o, 0.0, 1.0).map(|h| h.polygon);
+            let guess = match i % 3 {
+                0 => None,
+                1 => Some((unit() * 400.0) as u32),
+                _ => nearest,
+            };
+            let before = hint;
+            let mut asked = false;
+            let got = bvh.occluded_guided(
+                o,
+                to - o,
+                0.0,
+                1.0,
+                skip,
+                std::slice::from_mut(&mut hint),
+                || {
+                    asked = true;
+                    guess
+                },
+            );
+            assert_eq!(got, want, "segment {i}, guess {guess:?}");
+            hidden += want as u32;
+            if want && asked && hint != before && guess == nearest && guess.is_some() {
+                // The guess's leaf became the hint.
+                let leaf = hint.expect("the occluder's leaf");
+                by_guess += bvh.packed[leaf as usize]
+                    .polygon
+                    .contains(&guess.unwrap_or(u32::MAX)) as u32;
+            }
+        }
+        assert!(hidden > 1000, "the scene hides {hidden} of 4000 segments");
+        assert!(by_guess > 100, "right guesses answered {by_guess} segments");
     }
 
     /// [`Bvh::nearest_facing`] by the binary walk (what nearest-hit rays

@@ -102,6 +102,42 @@ impl FarShot {
     }
 }
 
+/// What the hemisphere just drawn saw, by cell (one process drawing the
+/// whole hemisphere): a far receiver's ray that the recent occluders do
+/// not stop tries next the polygon the cell around it saw. Most such rays
+/// are stopped by it: a hidden patch that small lies behind what its cell
+/// shows. Only time is at stake (see [`Bvh::occluded_guided`]).
+///
+/// [`Bvh::occluded_guided`]: crate::raytrace::Bvh::occluded_guided
+struct Guide<'a> {
+    items: &'a [u32],
+    res: crate::hemisphere::Resolution,
+    /// The hemisphere's frame (its x, y and z axes).
+    axes: [glam::Vec3; 3],
+    receivers: &'a formfactor::ReceiverTable,
+}
+
+impl Guide<'_> {
+    /// The polygon the cell holding direction `d` (from the hemisphere's
+    /// centre) saw, if any.
+    fn polygon(&self, d: glam::Vec3) -> Option<u32> {
+        use crate::numeric::atan2_f32;
+        use std::f32::consts::{FRAC_PI_2, TAU};
+        let [x, y, z] = self.axes.map(|a| d.dot(a));
+        // `hemisphere::cell_coords` without its library calls (a guess
+        // needs no more than the cell).
+        let theta = atan2_f32(y, x);
+        let theta = if theta < 0.0 { theta + TAU } else { theta };
+        let phi = atan2_f32((x * x + y * y).sqrt(), z);
+        // Truncation saturates (a NaN gives 0): always a cell.
+        let col = ((theta / TAU * self.res.cols as f32) as usize).min(self.res.cols as usize - 1);
+        let row =
+            ((phi / FRAC_PI_2 * self.res.rows as f32) as usize).min(self.res.rows as usize - 1);
+        let item = *self.items.get(row * self.res.cols as usize + col)?;
+        self.receivers.polygon(item)
+    }
+}
+
 /// A far receiver whose centre the shooter's ray reached.
 #[derive(Clone, Copy)]
 pub(super) struct Clear {
@@ -119,7 +155,7 @@ fn centre_rays(
     mesh: &Mesh,
     part: &[FarPatch],
     shot: &FarShot,
-    seen: Option<&[bool]>,
+    (seen, guide): (Option<&[bool]>, Option<&Guide<'_>>),
     keep: &(impl Fn(u32) -> bool + Sync),
 ) -> Vec<Clear> {
     let sp = &mesh.patches[shot.shooter as usize];
@@ -151,13 +187,14 @@ fn centre_rays(
         // hidden, and a patch this small hidden at its centre is taken
         // as hidden whole.
         let to = fp.centre + rn * mesh.ray_offset - shot.origin;
-        if !mesh.occluders.occluded_hinted(
+        if !mesh.occluders.occluded_guided(
             shot.origin,
             to,
             0.0,
             1.0,
             [sp.polygon, fp.polygon],
-            &mut hint,
+            std::slice::from_mut(&mut hint),
+            || guide.and_then(|g| g.polygon(d)),
         ) {
             clear.push(Clear {
                 patch: fp.patch,
@@ -310,7 +347,7 @@ impl GpuFormFactors<'_> {
             let (scanned, shot) = (&mut scanned, &shot);
             s.spawn(move |_| {
                 let start = Instant::now();
-                let clear = centre_rays(mesh, patches, shot, None, &|_| true);
+                let clear = centre_rays(mesh, patches, shot, (None, None), &|_| true);
                 *scanned = Some((clear, start.elapsed()));
             });
             let drawn = self.hemisphere(shooter, centre, tier, f32::INFINITY);
@@ -354,10 +391,22 @@ impl GpuFormFactors<'_> {
         let shot = self.far_shot(shooter, centre, tier, within);
         self.mark_seen();
         let seen = &self.seen;
+        // The cells' items cover the whole hemisphere on one process
+        // drawing it in one tile.
+        let layout = self.tiers[tier].cells.layout;
+        let res = self.tiers[tier].cells.resolution;
+        let whole = self.comm.size() == 1 && layout.ranks() == 1 && self.items.len() == res.cells();
+        let frame = mesh.shooter_frame_at(shooter, centre);
+        let guide = whole.then(|| Guide {
+            items: &self.items,
+            res,
+            axes: [frame.tangent, frame.bitangent, frame.normal],
+            receivers: &self.receivers,
+        });
         let clear = match ahead {
             Some(clear) => clear,
             None => on_every_core(&self.far_patches, (PARALLEL_FAR, FAR_RUN), |part| {
-                centre_rays(mesh, part, &shot, Some(seen), &keep)
+                centre_rays(mesh, part, &shot, (Some(seen), guide.as_ref()), &keep)
             }),
         };
         // The elements the rays see, in patch order: a patch under a cell
