@@ -108,6 +108,16 @@ impl ReceiverTable {
         self.owners[j as usize][0]
     }
 
+    /// The centre of element `j` (the element record's).
+    pub fn centre(&self, j: u32) -> glam::Vec3 {
+        self.elements[j as usize].centre
+    }
+
+    /// The first and one-past-last elements of patch `k`.
+    pub fn elements_of(&self, k: u32) -> [u32; 2] {
+        self.patch_elements[k as usize]
+    }
+
     /// The polygon of element `j`, if there is such an element.
     pub fn polygon(&self, j: u32) -> Option<u32> {
         self.owners.get(j as usize).map(|o| o[1])

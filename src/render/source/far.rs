@@ -141,7 +141,9 @@ impl Guide<'_> {
 /// A far receiver whose centre the shooter's ray reached.
 #[derive(Clone, Copy)]
 pub(super) struct Clear {
-    patch: u32,
+    /// The patch as the scan read it (its elements' rays need its normal,
+    /// polygon and elements: a cache miss apiece from the mesh).
+    patch: FarPatch,
     /// Whether it subtends at most one cell (its elements then take its
     /// centre's verdict; larger ones cast a ray to each element).
     one_cell: bool,
@@ -197,7 +199,7 @@ fn centre_rays(
             || guide.and_then(|g| g.polygon(d)),
         ) {
             clear.push(Clear {
-                patch: fp.patch,
+                patch: *fp,
                 one_cell: solid_angle <= shot.cell,
             });
         }
@@ -412,15 +414,14 @@ impl GpuFormFactors<'_> {
         // The elements the rays see, in patch order: a patch under a cell
         // takes its centre's verdict, a larger one a ray to each element.
         let sp = &mesh.patches[shooter as usize];
+        let receivers = &self.receivers;
         let elements = |run: &[Clear]| -> Vec<u32> {
             let mut found = Vec::new();
-            for c in run.iter().filter(|c| !seen[c.patch as usize]) {
-                let p = &mesh.patches[c.patch as usize];
-                let rn = mesh.polygons[p.polygon as usize].normal;
+            for c in run.iter().filter(|c| !seen[c.patch.patch as usize]) {
+                let p = &c.patch;
                 let skip = [sp.polygon, p.polygon];
-                found.extend(p.elements.clone().filter(|&j| {
-                    let e = &mesh.elements[j as usize];
-                    let to = e.centre + rn * mesh.ray_offset - shot.origin;
+                found.extend((p.elements[0]..p.elements[1]).filter(|&j| {
+                    let to = receivers.centre(j) + p.normal * mesh.ray_offset - shot.origin;
                     keep(j)
                         && shot.normal.dot(to) > 0.0
                         && (c.one_cell || !mesh.occluders.occluded(shot.origin, to, 0.0, 1.0, skip))
@@ -441,8 +442,7 @@ impl GpuFormFactors<'_> {
             let mut merged = Vec::with_capacity(old.len() + found.len());
             let (mut at, mut i) = (0, 0);
             while let Some(&first) = found.get(i) {
-                let patch = &mesh.patches[self.receivers.patch(first) as usize];
-                let (lo, hi) = (patch.elements.start, patch.elements.end);
+                let [lo, hi] = self.receivers.elements_of(self.receivers.patch(first));
                 let below = at + old[at..].partition_point(|p| p.0 < lo);
                 merged.extend_from_slice(&old[at..below]);
                 at = below + old[below..].partition_point(|p| p.0 < hi);
