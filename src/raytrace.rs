@@ -1022,27 +1022,39 @@ mod tests {
         }
     }
 
+    /// Squares scattered over a slab (seeded by `seed`) and 4000 segments
+    /// (origin, end, polygons skipped) from near the origin to
+    /// neighbouring points of a grid above, in order: a hint or a guess
+    /// is often right and sometimes stale.
+    fn neighbouring_segments(seed: u64) -> (Bvh, Vec<(Vec3, Vec3, [u32; 2])>) {
+        let mut rng = crate::fuzz::Rng(seed);
+        let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
+        let mut unit = || unit(&mut rng);
+        let segments = (0..4000)
+            .map(|i| {
+                let o = Vec3::new(unit() * 0.2, unit() * 0.2, 0.0);
+                let to = Vec3::new(
+                    (i % 64) as f32 * 0.12 - 3.8 + unit() * 0.05,
+                    (i / 64) as f32 * 0.12 - 3.8,
+                    6.0,
+                );
+                (o, to, [(i % 300) as u32, u32::MAX])
+            })
+            .collect();
+        (Bvh::new(&polys), segments)
+    }
+
     #[test]
     fn a_hinted_shadow_ray_answers_as_the_full_walk_does() {
         // Squares scattered over a slab; segments to neighbouring points, in
         // order, so the hint (its leaf, then the subtree above it) is often
         // right and sometimes stale: the verdict is the plain walk's and
         // the binary walk's every time, and the hint does the work.
-        let mut rng = crate::fuzz::Rng(11);
-        let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
-        let mut unit = || unit(&mut rng);
-        let bvh = Bvh::new(&polys);
+        let (bvh, segments) = neighbouring_segments(11);
         let mut hint = None;
         let mut recent = [None; RECENT_HINTS];
         let (mut hidden, mut hinted, mut by_recent) = (0, 0, 0);
-        for i in 0..4000 {
-            let o = Vec3::new(unit() * 0.2, unit() * 0.2, 0.0);
-            let to = Vec3::new(
-                (i % 64) as f32 * 0.12 - 3.8 + unit() * 0.05,
-                (i / 64) as f32 * 0.12 - 3.8,
-                6.0,
-            );
-            let skip = [(i % 300) as u32, u32::MAX];
+        for (i, &(o, to, skip)) in segments.iter().enumerate() {
             let want = bvh.occluded(o, to - o, 0.0, 1.0, skip);
             // The binary walk, the wide walks' reference.
             assert_eq!(
@@ -1094,25 +1106,15 @@ mod tests {
         // all), or the nearest polygon the segment meets (right unless
         // skipped). The verdict is the plain walk's every time; a right
         // guess answers where the hint could not.
-        let mut rng = crate::fuzz::Rng(12);
-        let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
-        let mut unit = || unit(&mut rng);
-        let bvh = Bvh::new(&polys);
+        let (bvh, segments) = neighbouring_segments(12);
         let mut hint = None;
         let (mut hidden, mut by_guess) = (0, 0);
-        for i in 0..4000 {
-            let o = Vec3::new(unit() * 0.2, unit() * 0.2, 0.0);
-            let to = Vec3::new(
-                (i % 64) as f32 * 0.12 - 3.8 + unit() * 0.05,
-                (i / 64) as f32 * 0.12 - 3.8,
-                6.0,
-            );
-            let skip = [(i % 300) as u32, u32::MAX];
+        for (i, &(o, to, skip)) in segments.iter().enumerate() {
             let want = bvh.occluded(o, to - o, 0.0, 1.0, skip);
             let nearest = bvh.nearest(o, to - o, 0.0, 1.0).map(|h| h.polygon);
             let guess = match i % 3 {
                 0 => None,
-                1 => Some((unit() * 400.0) as u32),
+                1 => Some((i * 7919 % 400) as u32),
                 _ => nearest,
             };
             let before = hint;
