@@ -358,6 +358,22 @@ pub fn cell_coords(p: Vec3, res: Resolution) -> (f32, f32) {
     )
 }
 
+/// The index (row-major, as an item buffer) of the cell holding the
+/// direction `p`: [`cell_coords`] with [`crate::numeric::atan2_f32`]
+/// (within 5e-7 rad, no library calls), so a cell on a boundary may be
+/// either neighbour. For lookups that only need a nearby cell.
+pub fn cell_holding(p: Vec3, res: Resolution) -> usize {
+    use crate::numeric::atan2_f32;
+    use std::f32::consts::{FRAC_PI_2, TAU};
+    let theta = atan2_f32(p.y, p.x);
+    let theta = if theta < 0.0 { theta + TAU } else { theta };
+    let phi = atan2_f32((p.x * p.x + p.y * p.y).sqrt(), p.z);
+    // Truncation saturates (a NaN gives 0): always a cell.
+    let col = ((theta / TAU * res.cols as f32) as usize).min(res.cols as usize - 1);
+    let row = ((phi / FRAC_PI_2 * res.rows as f32) as usize).min(res.rows as usize - 1);
+    row * res.cols as usize + col
+}
+
 /// The column `x` moved by a whole turn of `cols` to within half a turn of `to`.
 fn within_half_turn(x: f32, to: f32, cols: f32) -> f32 {
     if x - to > 0.5 * cols {
@@ -850,6 +866,35 @@ mod tests {
             super::radix_sort(&mut keys, &mut scratch, bound);
             assert_eq!(keys, expected, "{n} keys below {bound}");
         }
+    }
+
+    #[test]
+    fn the_cell_holding_a_direction_is_its_cell_coordinates_cell() {
+        let res = super::Resolution {
+            rows: 128,
+            cols: 512,
+        };
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let mut checked = 0;
+        for _ in 0..20_000 {
+            let p = glam::Vec3::new(next(), next(), next().abs());
+            let (x, y) = super::cell_coords(p, res);
+            // Away from cell boundaries the two atan2s agree on the cell.
+            let edge = |v: f32| (v - v.round()).abs() < 1e-3;
+            if p.length() < 0.1 || edge(x) || edge(y) {
+                continue;
+            }
+            let want = (y as usize).min(127) * 512 + (x as usize).min(511);
+            assert_eq!(super::cell_holding(p, res), want, "{p:?}");
+            checked += 1;
+        }
+        assert!(checked > 15_000, "{checked} directions checked");
     }
 
     #[test]

@@ -121,19 +121,10 @@ impl Guide<'_> {
     /// The polygon the cell holding direction `d` (from the hemisphere's
     /// centre) saw, if any.
     fn polygon(&self, d: glam::Vec3) -> Option<u32> {
-        use crate::numeric::atan2_f32;
-        use std::f32::consts::{FRAC_PI_2, TAU};
-        let [x, y, z] = self.axes.map(|a| d.dot(a));
-        // `hemisphere::cell_coords` without its library calls (a guess
-        // needs no more than the cell).
-        let theta = atan2_f32(y, x);
-        let theta = if theta < 0.0 { theta + TAU } else { theta };
-        let phi = atan2_f32((x * x + y * y).sqrt(), z);
-        // Truncation saturates (a NaN gives 0): always a cell.
-        let col = ((theta / TAU * self.res.cols as f32) as usize).min(self.res.cols as usize - 1);
-        let row =
-            ((phi / FRAC_PI_2 * self.res.rows as f32) as usize).min(self.res.rows as usize - 1);
-        let item = *self.items.get(row * self.res.cols as usize + col)?;
+        let local = glam::Vec3::from_array(self.axes.map(|a| d.dot(a)));
+        let item = *self
+            .items
+            .get(crate::hemisphere::cell_holding(local, self.res))?;
         self.receivers.polygon(item)
     }
 }
