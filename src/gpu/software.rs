@@ -218,6 +218,12 @@ impl Prepared {
                 hit[l] &= x[l] * e[0] + y[l] * e[1] + z * e[2] >= -EDGE_TOL;
             }
         }
+        // A run of cells wholly outside the outline (a quarter of the runs
+        // in a cluttered room: rectangles bound slanted outlines loosely)
+        // draws nothing: its depths and items are not needed.
+        if hit == [false; LANES] {
+            return ([self.first; LANES], [1.0; LANES], hit);
+        }
         let [nx, ny, nz, w] = self.plane;
         let mut t = [0.0; LANES];
         for l in 0..LANES {
