@@ -196,6 +196,19 @@ pub mod lanes {
     }
 }
 
+/// Asks the cache for the line holding `p` (a hint: no effect on results),
+/// for loops whose scattered reads are cache misses their few instructions
+/// cannot hide.
+#[inline(always)]
+pub fn prefetch<T>(p: *const T) {
+    // SAFETY: a prefetch only hints the cache; it reads nothing and
+    // cannot fault, whatever the address.
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast())
+    };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

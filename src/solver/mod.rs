@@ -15,6 +15,7 @@
 //! knows nothing of GPUs or ranks: form factors arrive as sparse [`Transfer`]s.
 
 use crate::mesh::Mesh;
+use crate::numeric::prefetch;
 use crate::parallel::Owners;
 
 mod state;
@@ -1135,17 +1136,6 @@ impl<'m> Solver<'m> {
 /// read: a row's transfers reach scattered elements, and each record is a
 /// cache miss the loop's few instructions cannot hide.
 const PREFETCH_AHEAD: usize = 8;
-
-/// Asks the cache for the line holding `p` (a hint: no effect on results).
-#[inline(always)]
-fn prefetch<T>(p: *const T) {
-    // SAFETY: a prefetch only hints the cache; it reads nothing and
-    // cannot fault, whatever the address.
-    #[cfg(target_arch = "x86_64")]
-    unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast())
-    };
-}
 
 #[cfg(test)]
 mod tests {
