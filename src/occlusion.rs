@@ -70,17 +70,34 @@ struct RowPlanes {
     plane: [f32; 3],
 }
 
-impl RowPlanes {
-    fn new(piece: &Piece, [sp, cp]: [f32; 2]) -> Self {
-        let along = |n: &[f32]| [sp * n[0], sp * n[1], cp * n[2]];
+/// A piece's edge planes with the degenerate ones marked, found once a
+/// piece rather than once a row (see [`RowPlanes::along`]).
+struct PiecePlanes {
+    edges: [Option<[f32; 3]>; 4],
+    plane: [f32; 3],
+}
+
+impl PiecePlanes {
+    fn new(piece: &Piece) -> Self {
         Self {
-            edges: piece.edges.map(|e| {
-                if e[0] * e[0] + e[1] * e[1] + e[2] * e[2] >= 0.25 {
-                    along(&e)
-                } else {
-                    [0.0, 0.0, 1.0]
-                }
-            }),
+            edges: piece
+                .edges
+                .map(|e| (e[0] * e[0] + e[1] * e[1] + e[2] * e[2] >= 0.25).then_some(e)),
+            plane: [piece.plane[0], piece.plane[1], piece.plane[2]],
+        }
+    }
+}
+
+impl RowPlanes {
+    /// The planes of `piece` along the row whose centre has polar sine
+    /// and cosine `sp`, `cp`.
+    #[inline(always)]
+    fn along(piece: &PiecePlanes, [sp, cp]: [f32; 2]) -> Self {
+        let along = |n: &[f32; 3]| [sp * n[0], sp * n[1], cp * n[2]];
+        Self {
+            edges: piece
+                .edges
+                .map(|e| e.map_or([0.0, 0.0, 1.0], |e| along(&e))),
             plane: along(&piece.plane),
         }
     }
@@ -206,11 +223,11 @@ impl OcclusionMap {
         // The farthest cover of each run of cells (branch-free reductions:
         // a hidden block has every cell read anyway), whole tiles read
         // from their farthest.
-        let res = self.res;
+        let runs = Runs::of(self.res, rect);
         (p0..p1).all(|p| {
             let depth = &self.depth[p * cols..(p + 1) * cols];
             let coarse = &mut self.coarse[p * tiles(cols)..(p + 1) * tiles(cols)];
-            column_runs(res, rect).all(|run| {
+            runs.iter().all(|run| {
                 let (first, end) = (run.start.div_ceil(TILE), run.end / TILE);
                 let far = if first < end {
                     refresh(&mut coarse[first..end], depth, first);
@@ -261,8 +278,9 @@ impl OcclusionMap {
     fn hides_lanes(&self, piece: &Piece, nearest: f32) -> bool {
         let cols = self.res.cols as usize;
         let (p0, p1) = row_span(self.res, piece.rect, 0..self.res.rows as usize);
+        let (prepared, runs) = (PiecePlanes::new(piece), Runs::of(self.res, piece.rect));
         (p0..p1).all(|p| {
-            let planes = RowPlanes::new(piece, self.rows[p]);
+            let planes = RowPlanes::along(&prepared, self.rows[p]);
             let depth = &self.depth[p * cols..(p + 1) * cols];
             let coarse = &self.coarse[p * tiles(cols)..(p + 1) * tiles(cols)];
             // A whole tile covered nearer than the piece can be is hidden
@@ -289,7 +307,7 @@ impl OcclusionMap {
                 };
                 depth[t] * (1.0 + DEPTH_MARGIN) < at
             };
-            column_runs(self.res, piece.rect).all(|run| {
+            runs.iter().all(|run| {
                 // Tile by tile, each run of its cells.
                 let mut t = run.start;
                 while t < run.end {
@@ -371,10 +389,11 @@ impl Band<'_> {
         };
         let (p0, p1) = row_span(res, piece.rect, self.rows.clone());
         let mut held = 0;
+        let (prepared, runs) = (PiecePlanes::new(piece), Runs::of(res, piece.rect));
         for p in p0..p1 {
-            let planes = RowPlanes::new(piece, self.map[p]);
+            let planes = RowPlanes::along(&prepared, self.map[p]);
             let row = &mut self.depth[(p - self.rows.start) * cols..][..cols];
-            for run in column_runs(res, piece.rect) {
+            for run in runs.iter() {
                 held += run.len();
                 let (cos, sin) = (&self.cos[run.clone()], &self.sin[run.clone()]);
                 // Branch-free, so the loop vectorises.
@@ -399,6 +418,26 @@ fn row_span(res: Resolution, rect: [f32; 4], within: std::ops::Range<usize>) -> 
     let lo = ((rect[2] - 0.5).ceil().max(0.0) as usize).max(within.start);
     let hi = (((rect[3] - 0.5).floor() + 1.0).clamp(0.0, res.rows as f32) as usize).min(within.end);
     (lo, hi.max(lo))
+}
+
+/// [`column_runs`] found once for a rectangle's rows (the same for each).
+struct Runs {
+    runs: [std::ops::Range<usize>; 2],
+}
+
+impl Runs {
+    fn of(res: Resolution, rect: [f32; 4]) -> Self {
+        let mut runs = [0..0, 0..0];
+        for (slot, run) in runs.iter_mut().zip(column_runs(res, rect)) {
+            *slot = run;
+        }
+        Self { runs }
+    }
+
+    /// The runs, in [`column_runs`]' order.
+    fn iter(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        self.runs.iter().filter(|r| !r.is_empty()).cloned()
+    }
 }
 
 /// The columns whose centres `rect` holds, as at most two runs of column
