@@ -51,14 +51,14 @@ const WINDOW: u32 = 32;
 /// curving one.
 const PROBE: [bool; 8] = [true, false, false, true, false, true, true, false];
 
-/// The probe's windows after which it may decide early: the first two
-/// pairs (AB, BA), where in each one way took at most [`EARLY`] of the
-/// other's time. In the 4096-cube room drawing ahead is about 0.7 of the
-/// other way, and the second half of the probe cost 64 slow shots, a
-/// twentieth of its 640-shot bench; a closer call, or pairs that
-/// disagree, take all eight windows.
-const EARLY_WINDOWS: usize = 4;
-const EARLY: f64 = 0.8;
+/// When the probe may decide early: after its first pair of windows (AB)
+/// where one way took at most 0.7 of the other's time, or after its first
+/// two pairs (AB, BA) where in each the same way took at most 0.8 of the
+/// other's. In the 4096-cube room drawing ahead takes 0.55-0.65 of the
+/// other way's time, and the probe's in-shot windows cost 9 % of its
+/// 640-shot bench; a closer call, or pairs that disagree, take all eight
+/// windows (Sponza's first probe does).
+const EARLY: [(usize, f64); 2] = [(1, 0.7), (2, 0.8)];
 
 /// Windows the measured choice holds before it measures again; doubled
 /// each time the probe agrees with the choice it held, up to [`MOST_HOLD`]
@@ -136,9 +136,7 @@ impl Probe {
             }
             self.window += 1;
             let probed = self.window as usize - 1;
-            if self.until.is_none()
-                && (probed == PROBE.len() || (probed == EARLY_WINDOWS && self.decisive()))
-            {
+            if self.until.is_none() && (probed == PROBE.len() || self.decisive(probed)) {
                 self.decide();
             }
             if self.until == Some(self.window) {
@@ -174,24 +172,28 @@ impl Probe {
         );
     }
 
-    /// Whether the first [`EARLY_WINDOWS`] probe windows, pair by pair,
-    /// each found the same way faster by [`EARLY`] or more.
-    fn decisive(&self) -> bool {
+    /// Whether the first `probed` probe windows are the pairs of an
+    /// [`EARLY`] decision, each pair finding the same way faster by its
+    /// margin or more.
+    fn decisive(&self, probed: usize) -> bool {
+        let Some(&(pairs, margin)) = EARLY.iter().find(|e| 2 * e.0 == probed) else {
+            return false;
+        };
         let faster = |pair: usize| {
             let (mut t, k) = ([0.0; 2], 2 * pair);
             for (w, &ahead) in PROBE[k..k + 2].iter().enumerate() {
                 t[usize::from(!ahead)] = self.windows[k + w].as_secs_f64();
             }
-            if t[0] <= EARLY * t[1] {
+            if t[0] <= margin * t[1] {
                 Some(true)
-            } else if t[1] <= EARLY * t[0] {
+            } else if t[1] <= margin * t[0] {
                 Some(false)
             } else {
                 None
             }
         };
         let first = faster(0);
-        first.is_some() && (1..EARLY_WINDOWS / 2).all(|p| faster(p) == first)
+        first.is_some() && (1..pairs).all(|p| faster(p) == first)
     }
 
     /// Whether the current window is one of the probe's.
@@ -555,21 +557,22 @@ mod tests {
     }
 
     #[test]
-    fn the_probe_decides_early_only_where_both_pairs_agree_by_far() {
-        // Each pair's way: ahead 0.7 of the other in both pairs decides
-        // after them; in one pair only (the other a coin toss), or 0.85,
-        // the probe takes all its windows.
-        for (second_pair, slow, early) in [
-            (true, 1.43, true),
-            (false, 1.43, false),
-            (true, 1.18, false),
+    fn the_probe_decides_early_only_where_its_pairs_agree_by_far() {
+        // The in-shot way's cost against ahead's in the first pair and the
+        // second: 2x in the first decides after it; 1.33x (0.75) in both
+        // after two pairs; 1.33x then a coin toss, or 1.18x (0.85), takes
+        // all eight windows.
+        for (first, second, probed) in [
+            (2.0, 1.0, 2),
+            (1.33, 1.33, 4),
+            (1.33, 1.0, P),
+            (1.18, 1.18, P),
         ] {
             let ways = run(P as u32 + 3, |ahead, w| {
-                let in_second = (3..5).contains(&w);
-                let factor = if in_second && !second_pair { 1.0 } else { slow };
+                let factor = if (3..5).contains(&w) { second } else { first };
                 shot(ahead, true, 1_000.0, factor)
             });
-            let probed = if early { EARLY_WINDOWS } else { P };
+            let early = probed < P;
             assert_eq!(ways[1..=probed], PROBE[..probed], "the probe's windows");
             assert!(
                 ways[probed + 1..].iter().all(|&a| a),
@@ -581,10 +584,10 @@ mod tests {
     #[test]
     fn the_probe_measures_again_after_holding_and_holds_longer_when_it_agrees() {
         let hold = HOLD as usize;
-        // One way twice as fast: decided after the first two pairs.
+        // One way twice as fast: decided after the first pair.
         let cycle = |warm: bool, hold: usize, held: bool| {
             let mut c = vec![warm];
-            c.extend(&PROBE[..EARLY_WINDOWS]);
+            c.extend(&PROBE[..2]);
             c.extend(vec![held; hold]);
             c
         };
