@@ -631,9 +631,9 @@ pub fn near_receivers(mesh: &Mesh, shooter: u32) -> (impl Fn(u32) -> bool + '_, 
 
 /// Receivers farther than this many shooter radii from its centre take
 /// [`GaussQuad`]'s form factor instead of the contour integral: there its
-/// error is below 1e-4 of A / (pi d^2) (6e-5 the worst seen), the largest form factor a patch of
-/// area A can have at distance d (measured over random quads and
-/// receivers, and tested: `gauss_rule_is_within_its_bound_of_the_contour`).
+/// error is below 1e-4 of A / (pi d^2), the largest form factor a patch of
+/// area A can have at distance d (7e-5 the worst over 20 000 random quads
+/// and receivers: `gauss_rule_is_within_its_bound_of_the_contour`).
 pub const GAUSS_FAR: f64 = 8.0;
 
 /// A planar quad's 2 x 2 Gauss-Legendre rule over its bilinear map: the
@@ -647,7 +647,7 @@ pub struct GaussQuad {
     /// there, so the weights sum to about the area).
     points: [DVec3; 4],
     weights: [f64; 4],
-    /// The quad's unit normal and a point of its plane (its first corner).
+    /// The quad's unit normal and its corners.
     normal: DVec3,
     corners: [DVec3; 4],
 }
@@ -679,7 +679,8 @@ impl GaussQuad {
 
     /// The form factor from a differential area at `x` with unit normal `n`
     /// to the quad; `None` where part of the quad lies behind the receiver
-    /// (the contour integral clips it) or `x` lies behind the quad.
+    /// (the contour integral clips it). Like the contour integral it takes
+    /// no side: receivers behind the quad are the caller's to leave out.
     pub fn form_factor(&self, x: DVec3, n: DVec3) -> Option<f64> {
         if self.corners.iter().any(|&p| n.dot(p - x) < 0.0) {
             return None;

@@ -54,7 +54,7 @@ const PROBE: [bool; 8] = [true, false, false, true, false, true, true, false];
 /// When the probe may decide early: after its first pair of windows (AB)
 /// where one way took at most 0.7 of the other's time, or after its first
 /// two pairs (AB, BA) where in each the same way took at most 0.8 of the
-/// other's. In the 4096-cube room drawing ahead takes 0.55-0.65 of the
+/// other's. In the 4096-cube room drawing ahead takes 0.46-0.65 of the
 /// other way's time, and the probe's in-shot windows cost 9 % of its
 /// 640-shot bench; a closer call, or pairs that disagree, take all eight
 /// windows (Sponza's first probe does).
