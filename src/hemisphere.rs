@@ -743,12 +743,6 @@ fn azimuth_range(u: &[Vec3; 4]) -> (f32, f32, bool) {
 fn polar_range(d: &[Vec3; 4]) -> (f64, f64) {
     let w = d.map(|c| c.as_dvec3());
     let key = |v: glam::DVec3| v.z * v.z.abs() / v.length_squared();
-    let polar = |v: glam::DVec3| {
-        f64::from(crate::numeric::atan2_f32(
-            (v.x * v.x + v.y * v.y).sqrt() as f32,
-            v.z as f32,
-        ))
-    };
     // The candidates nearest the pole and nearest the horizon (or below it).
     let (mut top, mut bottom) = ((key(w[0]), w[0]), (key(w[0]), w[0]));
     for k in 0..4 {
@@ -777,9 +771,21 @@ fn polar_range(d: &[Vec3; 4]) -> (f64, f64) {
             }
         }
     }
+    polar_extremes(top.1, bottom.1)
+}
+
+/// The polar range from its candidates nearest the pole (`top`) and nearest
+/// the horizon (`bottom`), as atan2(rho, z) in f32 from f64 components.
+fn polar_extremes(top: glam::DVec3, bottom: glam::DVec3) -> (f64, f64) {
+    let polar = |v: glam::DVec3| {
+        f64::from(crate::numeric::atan2_f32(
+            (v.x * v.x + v.y * v.y).sqrt() as f32,
+            v.z as f32,
+        ))
+    };
     (
-        polar(top.1).min(std::f64::consts::FRAC_PI_2),
-        polar(bottom.1).max(0.0),
+        polar(top).min(std::f64::consts::FRAC_PI_2),
+        polar(bottom).max(0.0),
     )
 }
 
@@ -797,29 +803,54 @@ const RECT_MARGIN: f32 = 0.01;
 /// Polar angle: the largest is at a corner (or clipped at the horizon); the
 /// smallest at a corner or inside an edge's great-circle arc.
 pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect> {
-    use std::f32::consts::{FRAC_PI_2 as HALF_PI, TAU};
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, just tested.
+        return unsafe { lanes::cell_bounds(d, res, far) };
+    }
+    cell_bounds_scalar(d, res, far)
+}
+
+/// [`cell_bounds`], one corner and one edge at a time.
+fn cell_bounds_scalar(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect> {
     let zmax = d.iter().fold(f32::MIN, |m, c| m.max(c.z));
     if zmax <= 1e-6 * far {
         return None;
     }
-    let (rows, cols) = (res.rows as f32, res.cols as f32);
     let mut u = [Vec3::Z; 4];
     for k in 0..4 {
         let len = d[k].length();
         if len < 1e-7 * far {
-            // A corner at the centre: the piece may fill the hemisphere.
-            return Some(CellRect {
-                x0: 0.0,
-                x1: cols,
-                y0: 0.0,
-                y1: rows,
-            });
+            return Some(whole_hemisphere(res));
         }
         u[k] = d[k] / len;
     }
-    let (t0, span, full) = azimuth_range(&u);
+    let azimuth = azimuth_range(&u);
     let (phi_min, phi_max) = polar_range(d);
-    let (phi_min, phi_max) = (phi_min as f32, phi_max as f32);
+    rect_of(res, azimuth, (phi_min as f32, phi_max as f32))
+}
+
+/// The rectangle of every cell: a piece with a corner at the centre may
+/// fill the hemisphere.
+fn whole_hemisphere(res: Resolution) -> CellRect {
+    CellRect {
+        x0: 0.0,
+        x1: res.cols as f32,
+        y0: 0.0,
+        y1: res.rows as f32,
+    }
+}
+
+/// The cell rectangle of a piece whose azimuth range is `(t0, span, full)`
+/// ([`azimuth_range`]) and polar range `(phi_min, phi_max)`
+/// ([`polar_range`]), or `None` where it holds no cell centre.
+fn rect_of(
+    res: Resolution,
+    (t0, span, full): (f32, f32, bool),
+    (phi_min, phi_max): (f32, f32),
+) -> Option<CellRect> {
+    use std::f32::consts::{FRAC_PI_2 as HALF_PI, TAU};
+    let (rows, cols) = (res.rows as f32, res.cols as f32);
     let phi_max = phi_max.min(HALF_PI);
     let y1 = phi_max / HALF_PI * rows + RECT_MARGIN;
     let (x0, x1, y0) = if full {
@@ -837,6 +868,163 @@ pub fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect>
         return None;
     }
     Some(CellRect { x0, x1, y0, y1 })
+}
+
+/// [`cell_bounds`] with the four corners (and the four edges) in SIMD
+/// lanes: the same operations lane by lane, so the same rectangle bit for
+/// bit (tested), and the choices of extreme corners made by masks instead
+/// of branches, which went either way at random (this was a fifth of the
+/// bounds of the 4096-cube room's shot).
+#[cfg(target_arch = "x86_64")]
+mod lanes {
+    use super::{rect_of, whole_hemisphere, CellRect, Resolution};
+    use glam::Vec3;
+    use std::arch::x86_64::*;
+
+    /// See [`super::cell_bounds`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn cell_bounds(d: &[Vec3; 4], res: Resolution, far: f32) -> Option<CellRect> {
+        use std::f32::consts::{PI, TAU};
+        let zmax = d.iter().fold(f32::MIN, |m, c| m.max(c.z));
+        if zmax <= 1e-6 * far {
+            return None;
+        }
+        let x = _mm_setr_ps(d[0].x, d[1].x, d[2].x, d[3].x);
+        let y = _mm_setr_ps(d[0].y, d[1].y, d[2].y, d[3].y);
+        let z = _mm_setr_ps(d[0].z, d[1].z, d[2].z, d[3].z);
+        // Azimuth, as `azimuth_range` (glam's length: (x x + y y) + z z).
+        let squares = _mm_add_ps(
+            _mm_add_ps(_mm_mul_ps(x, x), _mm_mul_ps(y, y)),
+            _mm_mul_ps(z, z),
+        );
+        let len = _mm_sqrt_ps(squares);
+        if _mm_movemask_ps(_mm_cmplt_ps(len, _mm_set1_ps(1e-7 * far))) != 0 {
+            return Some(whole_hemisphere(res));
+        }
+        let (ux, uy) = (_mm_div_ps(x, len), _mm_div_ps(y, len));
+        let on_axis = _mm_cmplt_ps(
+            _mm_add_ps(_mm_mul_ps(ux, ux), _mm_mul_ps(uy, uy)),
+            _mm_set1_ps(1e-12),
+        );
+        let mut full = _mm_movemask_ps(on_axis) != 0;
+        let wrap = |a: __m128| {
+            let below = _mm_cmplt_ps(a, _mm_setzero_ps());
+            _mm_blendv_ps(a, _mm_add_ps(a, _mm_set1_ps(TAU)), below)
+        };
+        let a = wrap(crate::numeric::lanes::atan2_f32(uy, ux));
+        // Lane k: the largest wrap(a_j - a_k) (max is exact: the order of
+        // the j does not matter; a signed zero changes nothing below).
+        let mut widest = _mm_max_ps(_mm_setzero_ps(), wrap(_mm_sub_ps(a, a)));
+        for other in [
+            _mm_shuffle_ps::<0b00_11_10_01>(a, a),
+            _mm_shuffle_ps::<0b01_00_11_10>(a, a),
+            _mm_shuffle_ps::<0b10_01_00_11>(a, a),
+        ] {
+            widest = _mm_max_ps(widest, wrap(_mm_sub_ps(other, a)));
+        }
+        // The first corner with the narrowest arc, if narrower than a turn.
+        let narrowest = {
+            let m = _mm_min_ps(widest, _mm_shuffle_ps::<0b01_00_11_10>(widest, widest));
+            _mm_min_ps(m, _mm_shuffle_ps::<0b10_11_00_01>(m, m))
+        };
+        let first = _mm_movemask_ps(_mm_cmpeq_ps(widest, narrowest)).trailing_zeros() as usize;
+        let (mut spans, mut starts) = ([0.0f32; 4], [0.0f32; 4]);
+        _mm_storeu_ps(spans.as_mut_ptr(), widest);
+        _mm_storeu_ps(starts.as_mut_ptr(), a);
+        let (t0, span) = if spans[first & 3] < TAU {
+            (starts[first & 3], spans[first & 3])
+        } else {
+            (0.0, TAU)
+        };
+        if span >= 0.999 * PI {
+            full = true;
+        }
+        let polar = polar_range(x, y, z);
+        rect_of(res, (t0, span, full), (polar.0 as f32, polar.1 as f32))
+    }
+
+    /// `polar_range` over the corners in lanes `x`, `y`, `z`: every
+    /// corner's and edge's candidate at once in f64 lanes, the same
+    /// operations as the scalar one's, and its choices (the first of the
+    /// highest in the order corner 0, edge 0, corner 1, ..., the first of
+    /// the lowest corners) made by masks.
+    #[target_feature(enable = "avx2")]
+    unsafe fn polar_range(x: __m128, y: __m128, z: __m128) -> (f64, f64) {
+        let (wx, wy, wz) = (_mm256_cvtps_pd(x), _mm256_cvtps_pd(y), _mm256_cvtps_pd(z));
+        let (mul, add, sub) = (_mm256_mul_pd, _mm256_add_pd, _mm256_sub_pd);
+        let dot = |a: [__m256d; 3], b: [__m256d; 3]| {
+            add(add(mul(a[0], b[0]), mul(a[1], b[1])), mul(a[2], b[2]))
+        };
+        // glam's cross.
+        let cross = |a: [__m256d; 3], b: [__m256d; 3]| {
+            [
+                sub(mul(a[1], b[2]), mul(b[1], a[2])),
+                sub(mul(a[2], b[0]), mul(b[2], a[0])),
+                sub(mul(a[0], b[1]), mul(b[0], a[1])),
+            ]
+        };
+        let abs = |v: __m256d| _mm256_andnot_pd(_mm256_set1_pd(-0.0), v);
+        let key = |vz: __m256d, v2: __m256d| _mm256_div_pd(mul(vz, abs(vz)), v2);
+        // Lane k of `next`: corner k + 1's (the edge's far end).
+        let next = |v: __m256d| _mm256_permute4x64_pd::<0b00_11_10_01>(v);
+        let w = [wx, wy, wz];
+        let w2 = dot(w, w);
+        let corners = key(wz, w2);
+        let b = [next(wx), next(wy), next(wz)];
+        let m = cross(w, b);
+        let m2 = dot(m, m);
+        let tiny = _mm256_set1_pd(1e-24);
+        let spans = _mm256_cmp_pd::<_CMP_GT_OQ>(m2, mul(mul(tiny, w2), next(w2)));
+        let zero = _mm256_setzero_pd();
+        let q = [
+            sub(mul(zero, m2), mul(m[0], m[2])),
+            sub(mul(zero, m2), mul(m[1], m[2])),
+            sub(mul(_mm256_set1_pd(1.0), m2), mul(m[2], m[2])),
+        ];
+        let q2 = dot(q, q);
+        let long = _mm256_cmp_pd::<_CMP_GT_OQ>(q2, mul(mul(tiny, m2), m2));
+        let after = _mm256_cmp_pd::<_CMP_GE_OQ>(dot(cross(w, q), m), zero);
+        let before = _mm256_cmp_pd::<_CMP_GE_OQ>(dot(cross(q, b), m), zero);
+        let on_arc = _mm256_and_pd(_mm256_and_pd(spans, long), _mm256_and_pd(after, before));
+        let arcs = _mm256_blendv_pd(_mm256_set1_pd(f64::NEG_INFINITY), key(q[2], q2), on_arc);
+        // Horizontal extremes, in every lane.
+        let halves = |v: __m256d| _mm256_permute4x64_pd::<0b01_00_11_10>(v);
+        let pairs = |v: __m256d| _mm256_permute4x64_pd::<0b10_11_00_01>(v);
+        let highest = _mm256_max_pd(corners, arcs);
+        let highest = _mm256_max_pd(highest, halves(highest));
+        let highest = _mm256_max_pd(highest, pairs(highest));
+        let lowest = _mm256_min_pd(corners, halves(corners));
+        let lowest = _mm256_min_pd(lowest, pairs(lowest));
+        let mask = |v: __m256d| _mm256_movemask_pd(v) as u32;
+        // Corner k is candidate 2k, edge k's arc candidate 2k + 1.
+        let spread = |b: u32| (b & 1) | (b & 2) << 1 | (b & 4) << 2 | (b & 8) << 3;
+        let top_corners = mask(_mm256_cmp_pd::<_CMP_EQ_OQ>(corners, highest));
+        let top_arcs = mask(_mm256_and_pd(
+            _mm256_cmp_pd::<_CMP_EQ_OQ>(arcs, highest),
+            on_arc,
+        ));
+        let top = (spread(top_corners) | spread(top_arcs) << 1).trailing_zeros() as usize;
+        let bottom = mask(_mm256_cmp_pd::<_CMP_EQ_OQ>(corners, lowest)).trailing_zeros() as usize;
+        let lanes = |v: __m256d| {
+            let mut out = [0.0f64; 4];
+            _mm256_storeu_pd(out.as_mut_ptr(), v);
+            out
+        };
+        let (cx, cy, cz) = (lanes(wx), lanes(wy), lanes(wz));
+        let (qx, qy, qz) = (lanes(q[0]), lanes(q[1]), lanes(q[2]));
+        let (k, t) = ((top / 2) & 3, top & 1 == 1);
+        let top = if t {
+            glam::DVec3::new(qx[k], qy[k], qz[k])
+        } else {
+            glam::DVec3::new(cx[k], cy[k], cz[k])
+        };
+        let k = bottom & 3;
+        let bottom = glam::DVec3::new(cx[k], cy[k], cz[k]);
+        super::polar_extremes(top, bottom)
+    }
 }
 
 #[cfg(test)]
@@ -1042,6 +1230,104 @@ mod tests {
         assert_eq!(l.owner(0, 0), (0, 0));
         assert_eq!(l.owner(1, 5), (1, 1));
         assert_eq!(l.owner(2, 7), (3, 0));
+    }
+
+    /// The lanes give the scalar rectangle bit for bit: random convex quads
+    /// and triangles anywhere around the centre (across the seam, over the
+    /// pole, through the horizon, a corner nearly at the centre, edges
+    /// seen end-on), and pieces built to tie (a corner repeated, corners at
+    /// one polar angle, a symmetric piece over the pole).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn cell_bounds_in_lanes_are_the_scalar_ones_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut seed = 0x5851_f42d_4c95_7f2du64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let bits = |r: Option<CellRect>| r.map(|r| [r.x0, r.x1, r.y0, r.y1].map(f32::to_bits));
+        let mut quads: Vec<[Vec3; 4]> = vec![
+            [
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(0.0, 1.0, 1.0),
+                Vec3::new(-1.0, 0.0, 1.0),
+                Vec3::new(0.0, -1.0, 1.0),
+            ],
+            [
+                Vec3::new(1.0, 1.0, 1.0),
+                Vec3::new(-1.0, 1.0, 1.0),
+                Vec3::new(-1.0, -1.0, 1.0),
+                Vec3::new(1.0, -1.0, 1.0),
+            ],
+            [
+                Vec3::new(1.0, 0.0, 0.5),
+                Vec3::new(0.0, 1.0, 0.5),
+                Vec3::new(0.0, 1.0, 0.5),
+                Vec3::new(1.0, 0.0, 0.5),
+            ],
+            [
+                Vec3::new(1.0, -0.1, 0.0),
+                Vec3::new(1.0, 0.1, 0.0),
+                Vec3::new(1.0, 0.1, 0.2),
+                Vec3::new(1.0, -0.1, 0.2),
+            ],
+            [
+                Vec3::new(1e-9, 0.0, 1e-9),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(1.0, 1.0, 1.0),
+                Vec3::new(0.0, 1.0, 1.0),
+            ],
+            [
+                Vec3::new(0.0, 0.0, 1.0),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(1.0, 1.0, 1.0),
+                Vec3::new(0.0, 1.0, 1.0),
+            ],
+        ];
+        for _ in 0..200_000 {
+            let centre = Vec3::new(rnd() * 4.0 - 2.0, rnd() * 4.0 - 2.0, rnd() * 3.0 - 0.5);
+            let size = 10f32.powf(rnd() * 4.0 - 3.5);
+            let (a, b) = (rnd() * std::f32::consts::TAU, rnd() * std::f32::consts::PI);
+            let e1 = Vec3::new(a.cos() * b.sin(), a.sin() * b.sin(), b.cos()) * size;
+            let e2 = e1.any_orthonormal_vector() * size * (0.2 + rnd());
+            let mut q = [
+                centre - e1 - e2,
+                centre + e1 - e2,
+                centre + e1 + e2,
+                centre - e1 + e2,
+            ];
+            if rnd() < 0.25 {
+                q[3] = q[2];
+            }
+            quads.push(q);
+        }
+        for res in [
+            Resolution {
+                rows: 128,
+                cols: 512,
+            },
+            Resolution {
+                rows: 512,
+                cols: 2048,
+            },
+        ] {
+            for q in &quads {
+                for far in [10.0, 2000.0] {
+                    // SAFETY: the CPU has AVX2, just tested.
+                    let lanes = unsafe { lanes::cell_bounds(q, res, far) };
+                    assert_eq!(
+                        bits(lanes),
+                        bits(cell_bounds_scalar(q, res, far)),
+                        "{q:?} at {res}"
+                    );
+                }
+            }
+        }
     }
 
     /// Brute force: every cell whose centre ray hits the quad lies in its rectangle.

@@ -187,6 +187,38 @@ pub mod lanes {
         _mm256_or_pd(_mm256_andnot_pd(sign, a), _mm256_and_pd(sign, y))
     }
 
+    /// [`super::atan2_f32`] in four lanes at once: the same operations in
+    /// the same order, lane by lane, so the same bits.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn atan2_f32(y: __m128, x: __m128) -> __m128 {
+        use super::{ATAN_32, HALF_PI_32, PI_32};
+        let sign = _mm_set1_ps(-0.0);
+        let (ax, ay) = (_mm_andnot_ps(sign, x), _mm_andnot_ps(sign, y));
+        let low = _mm_cmple_ps(ay, ax);
+        let num = _mm_blendv_ps(ax, ay, low);
+        let den = _mm_blendv_ps(ay, ax, low);
+        let t = _mm_div_ps(num, den);
+        let u = _mm_mul_ps(t, t);
+        // Horner's fold from 0, as the scalar one.
+        let mut poly = _mm_setzero_ps();
+        for &c in ATAN_32.iter().rev() {
+            poly = _mm_add_ps(_mm_mul_ps(poly, u), _mm_set1_ps(c));
+        }
+        let mut a = _mm_mul_ps(t, poly);
+        let steep = _mm_cmpgt_ps(ay, ax);
+        a = _mm_blendv_ps(a, _mm_sub_ps(_mm_set1_ps(HALF_PI_32), a), steep);
+        let left = _mm_cmplt_ps(x, _mm_setzero_ps());
+        a = _mm_blendv_ps(a, _mm_sub_ps(_mm_set1_ps(PI_32), a), left);
+        // den == 0: pi or 0 by the sign of x.
+        let zero = _mm_cmpeq_ps(den, _mm_setzero_ps());
+        let x_negative = _mm_castsi128_ps(_mm_srai_epi32::<31>(_mm_castps_si128(x)));
+        a = _mm_blendv_ps(a, _mm_and_ps(x_negative, _mm_set1_ps(PI_32)), zero);
+        _mm_or_ps(_mm_andnot_ps(sign, a), _mm_and_ps(sign, y))
+    }
+
     /// All ones in the lanes whose sign bit is set (AVX2 has no 64-bit
     /// arithmetic shift).
     #[target_feature(enable = "avx2")]
@@ -239,6 +271,44 @@ mod tests {
                 assert!(
                     got[k].to_bits() == want.to_bits() || (got[k].is_nan() && want.is_nan()),
                     "atan2({}, {}): {} against {}",
+                    y[k],
+                    x[k],
+                    got[k],
+                    want
+                );
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn four_f32_lanes_give_the_angle_bit_for_bit() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        use std::arch::x86_64::*;
+        let mut pairs: Vec<(f32, f32)> = points()
+            .iter()
+            .map(|&(y, x)| (y as f32, x as f32))
+            .collect();
+        for &y in &[0.0, -0.0, 1.0, -1.0, 1e-30, f32::NAN, f32::INFINITY] {
+            for &x in &[0.0, -0.0, 1.0, -1.0, 1e-30, f32::NAN, f32::NEG_INFINITY] {
+                pairs.push((y, x));
+            }
+        }
+        for chunk in pairs.chunks_exact(4) {
+            let (y, x): (Vec<f32>, Vec<f32>) = chunk.iter().copied().unzip();
+            let mut got = [0.0f32; 4];
+            // SAFETY: the CPU has AVX2, just tested.
+            unsafe {
+                let v = lanes::atan2_f32(_mm_loadu_ps(y.as_ptr()), _mm_loadu_ps(x.as_ptr()));
+                _mm_storeu_ps(got.as_mut_ptr(), v);
+            }
+            for k in 0..4 {
+                let want = atan2_f32(y[k], x[k]);
+                assert!(
+                    got[k].to_bits() == want.to_bits() || (got[k].is_nan() && want.is_nan()),
+                    "atan2_f32({}, {}): {} against {}",
                     y[k],
                     x[k],
                     got[k],

@@ -53,8 +53,10 @@ struct Packed {
     e1: [Vec4; 3],
     e2: [Vec4; 3],
     polygon: [u32; 4],
-    /// The binary leaf (whose box a hinted ray tests first).
-    node: u32,
+    /// The binary leaf's box, which a hinted ray tests first (a copy: the
+    /// leaf's node was a second cache miss on every guessed leaf).
+    lo: Vec3,
+    hi: Vec3,
     count: u32,
 }
 
@@ -255,7 +257,8 @@ impl Bvh {
             e1: [Vec4::ZERO; 3],
             e2: [Vec4::ZERO; 3],
             polygon: [u32::MAX; 4],
-            node: at as u32,
+            lo: node.lo,
+            hi: node.hi,
             count: node.count,
         };
         let tris = &self.tris[node.first as usize..(node.first + node.count) as usize];
@@ -576,7 +579,7 @@ impl Bvh {
             let Some(leaf) = recent[i].and_then(|h| self.packed.get(h as usize)) else {
                 break;
             };
-            if slab(&self.nodes[leaf.node as usize], origin, inv, t_min, t_max).is_some()
+            if slab_box(leaf.lo, leaf.hi, origin, inv, t_min, t_max).is_some()
                 && ray.blocked_by(leaf, skip)
             {
                 recent[..=i].rotate_right(1);
@@ -595,7 +598,7 @@ impl Bvh {
             .filter(|&leaf| leaf != NO_CHILD && !recent.contains(&Some(leaf)));
         if let Some(k) = guessed {
             let leaf = &self.packed[k as usize];
-            if slab(&self.nodes[leaf.node as usize], origin, inv, t_min, t_max).is_some()
+            if slab_box(leaf.lo, leaf.hi, origin, inv, t_min, t_max).is_some()
                 && ray.blocked_by(leaf, skip)
             {
                 if !recent.is_empty() {
@@ -904,8 +907,14 @@ fn beats((key, hit): (f32, Hit), best: Option<(f32, Hit)>) -> bool {
 
 /// The entry distance of a ray into a node's box, if it meets it in (t_min, t_max).
 fn slab(node: &Node, origin: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
-    let a = (node.lo - origin) * inv;
-    let b = (node.hi - origin) * inv;
+    slab_box(node.lo, node.hi, origin, inv, t_min, t_max)
+}
+
+/// [`slab`] for the box `lo`..`hi`.
+#[inline(always)]
+fn slab_box(lo: Vec3, hi: Vec3, origin: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
+    let a = (lo - origin) * inv;
+    let b = (hi - origin) * inv;
     let (mut near, mut far) = (t_min, t_max);
     for axis in 0..3 {
         let (x, y) = (a[axis], b[axis]);

@@ -156,7 +156,7 @@ fn centre_rays(
     let mut clear = Vec::new();
     // Most candidates in a cluttered scene are hidden, by the same
     // occluder as the patch before them (see `Bvh::occluded_hinted`).
-    let mut hint = None;
+    let mut hint = [None; 2];
     for fp in part {
         let k = fp.patch as usize;
         if k == shot.shooter as usize || seen.is_some_and(|s| s[k]) {
@@ -186,7 +186,7 @@ fn centre_rays(
             0.0,
             1.0,
             [sp.polygon, fp.polygon],
-            std::slice::from_mut(&mut hint),
+            &mut hint,
             || guide.and_then(|g| g.polygon(d)),
         ) {
             clear.push(Clear {
