@@ -1023,7 +1023,17 @@ mod lanes {
         };
         let k = bottom & 3;
         let bottom = glam::DVec3::new(cx[k], cy[k], cz[k]);
-        super::polar_extremes(top, bottom)
+        // `polar_extremes`, both angles in lanes.
+        let (x, y) = (_mm_setr_pd(top.x, bottom.x), _mm_setr_pd(top.y, bottom.y));
+        let rho = _mm_sqrt_pd(_mm_add_pd(_mm_mul_pd(x, x), _mm_mul_pd(y, y)));
+        let z = _mm_setr_pd(top.z, bottom.z);
+        let angles = crate::numeric::lanes::atan2_f32(_mm_cvtpd_ps(rho), _mm_cvtpd_ps(z));
+        let mut out = [0.0f32; 4];
+        _mm_storeu_ps(out.as_mut_ptr(), angles);
+        (
+            f64::from(out[0]).min(std::f64::consts::FRAC_PI_2),
+            f64::from(out[1]).max(0.0),
+        )
     }
 }
 

@@ -264,18 +264,33 @@ impl OcclusionMap {
             // SAFETY: the CPU has AVX2, just tested.
             return unsafe { self.hides_avx2(piece, nearest) };
         }
-        self.hides_lanes(piece, nearest)
+        self.hides_lanes(piece, nearest, cells_hidden)
     }
 
-    /// [`OcclusionMap::hides_lanes`] compiled for AVX2 (see [`Band::add`]).
+    /// [`OcclusionMap::hides_lanes`] compiled for AVX2, a tile's cells
+    /// eight at a time (see [`wide`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn hides_avx2(&self, piece: &Piece, nearest: f32) -> bool {
-        self.hides_lanes(piece, nearest)
+        if self.cols_cos.len() < wide::LANES {
+            return self.hides_lanes(piece, nearest, cells_hidden);
+        }
+        self.hides_lanes(piece, nearest, |cells, planes, run| {
+            // SAFETY: the CPU has AVX2 (this function's contract), and the
+            // row has a window of lanes.
+            unsafe { wide::cells_hidden(cells, planes, run) }
+        })
     }
 
+    /// Whether every cell `piece` could draw is covered nearer, each run
+    /// of a tile's cells left to `run_hidden`.
     #[inline(always)]
-    fn hides_lanes(&self, piece: &Piece, nearest: f32) -> bool {
+    fn hides_lanes(
+        &self,
+        piece: &Piece,
+        nearest: f32,
+        run_hidden: impl Fn(&RowCells, &RowPlanes, std::ops::Range<usize>) -> bool,
+    ) -> bool {
         let cols = self.res.cols as usize;
         let (p0, p1) = row_span(self.res, piece.rect, 0..self.res.rows as usize);
         let (prepared, runs) = (PiecePlanes::new(piece), Runs::of(self.res, piece.rect));
@@ -289,23 +304,12 @@ impl OcclusionMap {
                 let far = coarse[t / TILE];
                 far != STALE && far * (1.0 + DEPTH_MARGIN) < nearest
             };
-            let hidden_cell = |t: usize| {
-                let (ct, st) = (self.cols_cos[t], self.cols_sin[t]);
-                if planes.least(ct, st) < -INSIDE {
-                    return true;
-                }
-                let cos = planes.cosine(ct, st);
-                let t_hit = piece.plane[3] / cos;
-                let at = if cos.abs() >= GRAZING && t_hit.is_finite() {
-                    if t_hit <= 0.0 {
-                        // Behind the hemisphere: no fragment.
-                        return true;
-                    }
-                    t_hit.max(nearest)
-                } else {
-                    nearest
-                };
-                depth[t] * (1.0 + DEPTH_MARGIN) < at
+            let cells = RowCells {
+                cos: &self.cols_cos,
+                sin: &self.cols_sin,
+                depth,
+                offset: piece.plane[3],
+                nearest,
             };
             runs.iter().all(|run| {
                 // Tile by tile, each run of its cells.
@@ -313,7 +317,7 @@ impl OcclusionMap {
                 while t < run.end {
                     let next = ((t / TILE + 1) * TILE).min(run.end);
                     let whole = next - t == TILE && hidden_tile(t);
-                    if !whole && !(t..next).all(hidden_cell) {
+                    if !whole && !run_hidden(&cells, &planes, t..next) {
                         return false;
                     }
                     t = next;
@@ -321,6 +325,164 @@ impl OcclusionMap {
                 true
             })
         })
+    }
+}
+
+/// One row of a map as [`OcclusionMap::hides`] reads it, with the piece's
+/// plane offset and nearest possible distance.
+struct RowCells<'a> {
+    cos: &'a [f32],
+    sin: &'a [f32],
+    depth: &'a [f32],
+    offset: f32,
+    nearest: f32,
+}
+
+/// Whether every cell of `run` is hidden from the piece whose planes along
+/// the row are `planes`: outside it, behind the hemisphere, or covered
+/// nearer than the piece can be there.
+fn cells_hidden(cells: &RowCells, planes: &RowPlanes, run: std::ops::Range<usize>) -> bool {
+    run.into_iter().all(|t| {
+        let (ct, st) = (cells.cos[t], cells.sin[t]);
+        if planes.least(ct, st) < -INSIDE {
+            return true;
+        }
+        let cos = planes.cosine(ct, st);
+        let t_hit = cells.offset / cos;
+        let at = if cos.abs() >= GRAZING && t_hit.is_finite() {
+            if t_hit <= 0.0 {
+                // Behind the hemisphere: no fragment.
+                return true;
+            }
+            t_hit.max(cells.nearest)
+        } else {
+            cells.nearest
+        };
+        cells.depth[t] * (1.0 + DEPTH_MARGIN) < at
+    })
+}
+
+/// The cell tests of [`Band::add`] and [`OcclusionMap::hides`] on eight
+/// columns an instruction, whatever a run's length: the runs of a small
+/// piece are a few cells long, and the compiler's vector loop left them
+/// to its one-cell remainder. A run is taken in windows of eight columns
+/// (the last moved back to end at the row's end), the lanes outside the
+/// run masked; each lane does the scalar test's operations in its order,
+/// so the same map and verdicts (tested).
+#[cfg(target_arch = "x86_64")]
+mod wide {
+    use super::{RowCells, RowPlanes, DEPTH_MARGIN, GRAZING, INSIDE};
+    use std::arch::x86_64::*;
+
+    /// Columns a window holds.
+    pub(super) const LANES: usize = 8;
+
+    /// The least edge test and the plane's cosine of the window's columns.
+    #[target_feature(enable = "avx2")]
+    fn terms(planes: &RowPlanes, ct: __m256, st: __m256) -> (__m256, __m256) {
+        let term = |e: &[f32; 3]| {
+            let along = _mm256_add_ps(
+                _mm256_mul_ps(_mm256_set1_ps(e[0]), ct),
+                _mm256_mul_ps(_mm256_set1_ps(e[1]), st),
+            );
+            _mm256_add_ps(along, _mm256_set1_ps(e[2]))
+        };
+        let [a, b, c, d] = [0, 1, 2, 3].map(|k| term(&planes.edges[k]));
+        let least = _mm256_min_ps(_mm256_min_ps(a, b), _mm256_min_ps(c, d));
+        (least, term(&planes.plane))
+    }
+
+    /// All ones in the lanes of the window from `start` whose columns lie
+    /// in `run`.
+    #[target_feature(enable = "avx2")]
+    fn in_run(start: usize, run: &std::ops::Range<usize>) -> __m256 {
+        let column = _mm256_add_epi32(
+            _mm256_set1_epi32(start as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+        );
+        let from = _mm256_cmpgt_epi32(_mm256_set1_epi32(run.start as i32), column);
+        let before = _mm256_cmpgt_epi32(_mm256_set1_epi32(run.end as i32), column);
+        _mm256_castsi256_ps(_mm256_andnot_si256(from, before))
+    }
+
+    /// The windows over `run` in a row of `cols` columns (at least
+    /// [`LANES`]): each window's first column.
+    fn windows(run: std::ops::Range<usize>, cols: usize) -> impl Iterator<Item = usize> {
+        let last = cols - LANES;
+        (run.start..run.end)
+            .step_by(LANES)
+            .map(move |s| s.min(last))
+    }
+
+    /// [`super::cells_hidden`] a window at a time.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2, and the row at least [`LANES`] columns.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn cells_hidden(
+        cells: &RowCells,
+        planes: &RowPlanes,
+        run: std::ops::Range<usize>,
+    ) -> bool {
+        let cols = cells.cos.len();
+        let (sign, zero) = (_mm256_set1_ps(-0.0), _mm256_setzero_ps());
+        let nearest = _mm256_set1_ps(cells.nearest);
+        for w in windows(run.clone(), cols) {
+            let load = |v: &[f32]| _mm256_loadu_ps(v[w..w + LANES].as_ptr());
+            let (least, cos) = terms(planes, load(cells.cos), load(cells.sin));
+            let outside = _mm256_cmp_ps::<_CMP_LT_OQ>(least, _mm256_set1_ps(-INSIDE));
+            let t_hit = _mm256_div_ps(_mm256_set1_ps(cells.offset), cos);
+            let finite = _mm256_cmp_ps::<_CMP_LT_OQ>(
+                _mm256_andnot_ps(sign, t_hit),
+                _mm256_set1_ps(f32::INFINITY),
+            );
+            let steep =
+                _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_andnot_ps(sign, cos), _mm256_set1_ps(GRAZING));
+            let trusted = _mm256_and_ps(steep, finite);
+            let behind = _mm256_and_ps(trusted, _mm256_cmp_ps::<_CMP_LE_OQ>(t_hit, zero));
+            let at = _mm256_blendv_ps(nearest, _mm256_max_ps(t_hit, nearest), trusted);
+            let cover = _mm256_mul_ps(load(cells.depth), _mm256_set1_ps(1.0 + DEPTH_MARGIN));
+            let covered = _mm256_cmp_ps::<_CMP_LT_OQ>(cover, at);
+            let hidden = _mm256_or_ps(outside, _mm256_or_ps(behind, covered));
+            let shown = _mm256_andnot_ps(hidden, in_run(w, &run));
+            if _mm256_movemask_ps(shown) != 0 {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// [`super::Band::add`]'s cell loop over `run` of `row` a window at
+    /// a time.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2, and the row at least [`LANES`] columns.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn cover_run(
+        row: &mut [f32],
+        (cos, sin): (&[f32], &[f32]),
+        planes: &RowPlanes,
+        offset: f32,
+        run: std::ops::Range<usize>,
+    ) {
+        let sign = _mm256_set1_ps(-0.0);
+        for w in windows(run.clone(), cos.len()) {
+            let load = |v: &[f32]| _mm256_loadu_ps(v[w..w + LANES].as_ptr());
+            let (least, c) = terms(planes, load(cos), load(sin));
+            let t_hit = _mm256_div_ps(_mm256_set1_ps(offset), c);
+            let inside = _mm256_cmp_ps::<_CMP_GE_OQ>(least, _mm256_set1_ps(INSIDE));
+            let steep =
+                _mm256_cmp_ps::<_CMP_GE_OQ>(_mm256_andnot_ps(sign, c), _mm256_set1_ps(GRAZING));
+            let ahead = _mm256_cmp_ps::<_CMP_GT_OQ>(t_hit, _mm256_setzero_ps());
+            let covers = _mm256_and_ps(
+                _mm256_and_ps(inside, steep),
+                _mm256_and_ps(ahead, in_run(w, &run)),
+            );
+            let depth = &mut row[w..w + LANES];
+            let old = _mm256_loadu_ps(depth.as_ptr());
+            let new = _mm256_blendv_ps(old, _mm256_min_ps(old, t_hit), covers);
+            _mm256_storeu_ps(depth.as_mut_ptr(), new);
+        }
     }
 }
 
@@ -370,18 +532,31 @@ impl Band<'_> {
             // SAFETY: the CPU has AVX2, just tested.
             return unsafe { self.add_avx2(piece) };
         }
-        self.add_lanes(piece)
+        self.add_lanes(piece, cover_run)
     }
 
-    /// [`Band::add_lanes`] compiled for AVX2.
+    /// [`Band::add_lanes`] compiled for AVX2, a run's cells eight at a
+    /// time (see [`wide`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn add_avx2(&mut self, piece: &Piece) -> usize {
-        self.add_lanes(piece)
+        if self.cos.len() < wide::LANES {
+            return self.add_lanes(piece, cover_run);
+        }
+        self.add_lanes(piece, |row, columns, planes, offset, run| {
+            // SAFETY: the CPU has AVX2 (this function's contract), and the
+            // row has a window of lanes.
+            unsafe { wide::cover_run(row, columns, planes, offset, run) }
+        })
     }
 
+    /// Takes in a piece, each run of a row's cells left to `cover`.
     #[inline(always)]
-    fn add_lanes(&mut self, piece: &Piece) -> usize {
+    fn add_lanes(
+        &mut self,
+        piece: &Piece,
+        cover: impl Fn(&mut [f32], (&[f32], &[f32]), &RowPlanes, f32, std::ops::Range<usize>),
+    ) -> usize {
         let cols = self.cos.len();
         let res = Resolution {
             rows: self.map.len() as u32,
@@ -395,21 +570,39 @@ impl Band<'_> {
             let row = &mut self.depth[(p - self.rows.start) * cols..][..cols];
             for run in runs.iter() {
                 held += run.len();
-                let (cos, sin) = (&self.cos[run.clone()], &self.sin[run.clone()]);
-                // Branch-free, so the loop vectorises.
-                for ((d, &ct), &st) in row[run.clone()].iter_mut().zip(cos).zip(sin) {
-                    let c = planes.cosine(ct, st);
-                    let t_hit = piece.plane[3] / c;
-                    let covers =
-                        planes.least(ct, st) >= INSIDE && c.abs() >= GRAZING && t_hit > 0.0;
-                    *d = if covers { d.min(t_hit) } else { *d };
-                }
+                cover(
+                    row,
+                    (self.cos, self.sin),
+                    &planes,
+                    piece.plane[3],
+                    run.clone(),
+                );
                 // The tiles the run touched: their farthest, when asked.
                 let coarse = &mut self.coarse[(p - self.rows.start) * tiles(cols)..][..tiles(cols)];
                 coarse[run.start / TILE..=(run.end - 1) / TILE].fill(STALE);
             }
         }
         held
+    }
+}
+
+/// Covers the cells of `run` of `row` that the piece whose planes along the
+/// row are `planes` (plane offset `offset`) certainly covers, at its
+/// distance there where nearer than their cover so far.
+fn cover_run(
+    row: &mut [f32],
+    (cos, sin): (&[f32], &[f32]),
+    planes: &RowPlanes,
+    offset: f32,
+    run: std::ops::Range<usize>,
+) {
+    let (cos, sin) = (&cos[run.clone()], &sin[run.clone()]);
+    // Branch-free, so the loop vectorises.
+    for ((d, &ct), &st) in row[run].iter_mut().zip(cos).zip(sin) {
+        let c = planes.cosine(ct, st);
+        let t_hit = offset / c;
+        let covers = planes.least(ct, st) >= INSIDE && c.abs() >= GRAZING && t_hit > 0.0;
+        *d = if covers { d.min(t_hit) } else { *d };
     }
 }
 
@@ -612,6 +805,106 @@ mod tests {
         assert!(
             hidden[0] > 10 && hidden[1] > 10,
             "{hidden:?}: both verdicts"
+        );
+    }
+
+    /// The windows of eight give the scalar loops' map and verdicts bit for
+    /// bit: random tilted pieces (grazing, behind the centre, across the
+    /// seam) over rectangles that cut runs of every length.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn windows_of_eight_give_the_scalar_map_and_verdicts() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = crate::fuzz::Rng(0x9e37_79b9_7f4a_7c15);
+        let mut uniform = move || rng.unit() as f32;
+        let band = |map: &mut OcclusionMap| {
+            let rows = 0..map.res.rows as usize;
+            // (A band over every row, as `OcclusionMap::add` makes.)
+            (
+                map.rows.clone(),
+                map.cols_cos.clone(),
+                map.cols_sin.clone(),
+                rows,
+            )
+        };
+        let mut verdicts = [0, 0];
+        for r in [
+            Resolution { rows: 24, cols: 96 },
+            Resolution {
+                rows: 128,
+                cols: 512,
+            },
+        ] {
+            let (mut scalar, mut wide) = (OcclusionMap::new(r), OcclusionMap::new(r));
+            let (rows, cos, sin, all) = band(&mut scalar);
+            for k in 0..300 {
+                let centre = [
+                    uniform() * 2.0 - 1.0,
+                    uniform() * 2.0 - 1.0,
+                    uniform() * 1.5 - 0.3,
+                ];
+                let (a, b) = (uniform() * 0.6, uniform() * 0.6);
+                let tilt = uniform() - 0.5;
+                let c = [
+                    [centre[0] - a, centre[1] - b, centre[2] - tilt * a],
+                    [centre[0] - a, centre[1] + b, centre[2] - tilt * a],
+                    [centre[0] + a, centre[1] + b, centre[2] + tilt * a],
+                    [centre[0] + a, centre[1] - b, centre[2] + tilt * a],
+                ];
+                let (edges, plane) = quad(c);
+                let x0 = uniform() * r.cols as f32 * 1.2 - 0.2 * r.cols as f32;
+                let y0 = uniform() * r.rows as f32;
+                let rect = [x0, x0 + uniform() * 40.0, y0, y0 + uniform() * 12.0];
+                let piece = Piece {
+                    rect,
+                    edges: &edges,
+                    plane,
+                };
+                for nearest in [0.2, 0.8, 2.0] {
+                    let want = scalar.hides_lanes(&piece, nearest, cells_hidden);
+                    // SAFETY: the CPU has AVX2, just tested.
+                    let got = unsafe { wide.hides_avx2(&piece, nearest) };
+                    assert_eq!(got, want, "piece {k} at {nearest} in {r}");
+                    verdicts[usize::from(want)] += 1;
+                }
+                let mut one = Band {
+                    map: &rows,
+                    cos: &cos,
+                    sin: &sin,
+                    depth: &mut scalar.depth,
+                    coarse: &mut scalar.coarse,
+                    rows: all.clone(),
+                };
+                one.add_lanes(&piece, cover_run);
+                let mut eight = Band {
+                    map: &rows,
+                    cos: &cos,
+                    sin: &sin,
+                    depth: &mut wide.depth,
+                    coarse: &mut wide.coarse,
+                    rows: all.clone(),
+                };
+                // SAFETY: the CPU has AVX2, just tested.
+                unsafe { eight.add_avx2(&piece) };
+                let bits =
+                    |m: &OcclusionMap| m.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+                assert!(
+                    bits(&scalar) == bits(&wide),
+                    "piece {k} in {r}: the maps differ"
+                );
+                assert!(
+                    scalar.coarse == wide.coarse,
+                    "piece {k} in {r}: the tiles differ"
+                );
+            }
+            let covered = scalar.depth.iter().filter(|d| d.is_finite()).count();
+            assert!(covered > 500, "{covered} cells of {r} covered");
+        }
+        assert!(
+            verdicts[0] > 50 && verdicts[1] > 50,
+            "{verdicts:?}: both verdicts"
         );
     }
 
