@@ -554,10 +554,19 @@ impl Bvh {
         self.occluded_guided(origin, dir, t_min, t_max, skip, recent, || None)
     }
 
+    /// The packed leaf a guess at polygon `polygon` names for
+    /// [`Bvh::occluded_guided`] (the first holding its triangles), if any.
+    pub fn polygon_leaf(&self, polygon: u32) -> Option<u32> {
+        self.polygon_leaf
+            .get(polygon as usize)
+            .copied()
+            .filter(|&leaf| leaf != NO_CHILD)
+    }
+
     /// [`Bvh::occluded_recent`], trying next, where the recent occluders
-    /// do not block the ray, a leaf of the polygon `guess` names (found
-    /// only then: the polygon a hemisphere cell beside the ray saw, which
-    /// costs a cell lookup), which becomes the latest hint if it blocks
+    /// do not block the ray, the leaf `guess` names ([`Bvh::polygon_leaf`]
+    /// of a polygon; found only then: the polygon a hemisphere cell beside
+    /// the ray saw, which costs a cell lookup), which becomes the latest hint if it blocks
     /// and otherwise anchors the subtree tried before the rest. The answer
     /// is `occluded`'s whatever the guess, as for any hint.
     // The ray, its range and skips, the hints and the guess: all needed.
@@ -592,10 +601,9 @@ impl Bvh {
         if slab(root, origin, inv, t_min, t_max).is_none() {
             return false;
         }
-        // The guessed polygon's leaf, unless a recent hint just failed there.
+        // The guessed leaf, unless a recent hint just failed there.
         let guessed = guess()
-            .and_then(|polygon| self.polygon_leaf.get(polygon as usize).copied())
-            .filter(|&leaf| leaf != NO_CHILD && !recent.contains(&Some(leaf)));
+            .filter(|&leaf| (leaf as usize) < self.packed.len() && !recent.contains(&Some(leaf)));
         if let Some(k) = guessed {
             let leaf = &self.packed[k as usize];
             if slab_box(leaf.lo, leaf.hi, origin, inv, t_min, t_max).is_some()
@@ -1137,7 +1145,7 @@ mod tests {
                 std::slice::from_mut(&mut hint),
                 || {
                     asked = true;
-                    guess
+                    guess.and_then(|polygon| bvh.polygon_leaf(polygon))
                 },
             );
             assert_eq!(got, want, "segment {i}, guess {guess:?}");

@@ -135,6 +135,10 @@ pub(in crate::render) struct Shared {
     shapes: Arc<ProxyShapes>,
     /// The receivers as hybrid rows read them.
     receivers: Arc<formfactor::ReceiverTable>,
+    /// Per element, the leaf of the occluders' hierarchy holding its
+    /// polygon (`u32::MAX`: none), for the far receivers' guesses (see
+    /// `far::Guide`).
+    guide_leaves: Arc<Vec<u32>>,
 }
 
 /// A cached row's cost against a fresh fine one (a rank combines it with
@@ -192,6 +196,8 @@ pub struct GpuFormFactors<'a> {
     /// The receivers as hybrid rows and the marking of patches seen read
     /// them (compact: see [`formfactor::ReceiverTable`]).
     receivers: Arc<formfactor::ReceiverTable>,
+    /// Per element, its polygon's leaf of the occluders ([`Shared`]).
+    guide_leaves: Arc<Vec<u32>>,
     /// Every tier's rasterisation proxies (shared with a sibling source).
     shapes: Arc<ProxyShapes>,
     /// What the far receivers' scan reads of each of this rank's patches,
@@ -248,6 +254,7 @@ impl<'a> GpuFormFactors<'a> {
         let shared = Shared {
             shapes: Arc::new(ProxyShapes::build(mesh, opts.raster_pieces)),
             receivers: Arc::new(formfactor::ReceiverTable::new(mesh)),
+            guide_leaves: Arc::new(far::guide_leaves(mesh)),
         };
         Self::sharing((gpu, mesh), opts, comm, extent, shared)
     }
@@ -307,6 +314,7 @@ impl<'a> GpuFormFactors<'a> {
             split: opts.split_shots,
             seen: vec![false; mesh.patches.len()],
             receivers: shared.receivers,
+            guide_leaves: shared.guide_leaves,
             shapes: shared.shapes,
             far_patches: FarPatch::owned(mesh, comm.rank(), n),
             max_patch_radius: mesh

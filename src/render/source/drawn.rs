@@ -31,6 +31,7 @@ impl<'a> GpuFormFactors<'a> {
             shared: Shared {
                 shapes: Arc::clone(&self.shapes),
                 receivers: Arc::clone(&self.receivers),
+                guide_leaves: Arc::clone(&self.guide_leaves),
             },
         }
     }

@@ -114,19 +114,34 @@ struct Guide<'a> {
     res: crate::hemisphere::Resolution,
     /// The hemisphere's frame (its x, y and z axes).
     axes: [glam::Vec3; 3],
-    receivers: &'a formfactor::ReceiverTable,
+    /// Per element, its polygon's leaf ([`guide_leaves`]).
+    leaves: &'a [u32],
 }
 
 impl Guide<'_> {
-    /// The polygon the cell holding direction `d` (from the hemisphere's
-    /// centre) saw, if any.
-    fn polygon(&self, d: glam::Vec3) -> Option<u32> {
+    /// The occluders' leaf holding the polygon the cell holding direction
+    /// `d` (from the hemisphere's centre) saw, if any.
+    fn leaf(&self, d: glam::Vec3) -> Option<u32> {
         let local = glam::Vec3::from_array(self.axes.map(|a| d.dot(a)));
         let item = *self
             .items
             .get(crate::hemisphere::cell_holding(local, self.res))?;
-        self.receivers.polygon(item)
+        self.leaves
+            .get(item as usize)
+            .copied()
+            .filter(|&l| l != u32::MAX)
     }
+}
+
+/// Per element of `mesh`, the leaf of its occluders' hierarchy holding the
+/// element's polygon (`u32::MAX`: none): a guess at a far receiver's
+/// occluder reads one table from the cell's item instead of two (the
+/// element's polygon, the polygon's leaf), each a cache miss.
+pub(super) fn guide_leaves(mesh: &Mesh) -> Vec<u32> {
+    mesh.elements
+        .iter()
+        .map(|e| mesh.occluders.polygon_leaf(e.polygon).unwrap_or(u32::MAX))
+        .collect()
 }
 
 /// A far receiver whose centre the shooter's ray reached.
@@ -187,7 +202,7 @@ fn centre_rays(
             1.0,
             [sp.polygon, fp.polygon],
             &mut hint,
-            || guide.and_then(|g| g.polygon(d)),
+            || guide.and_then(|g| g.leaf(d)),
         ) {
             clear.push(Clear {
                 patch: *fp,
@@ -394,7 +409,7 @@ impl GpuFormFactors<'_> {
             items: &self.items,
             res,
             axes: [frame.tangent, frame.bitangent, frame.normal],
-            receivers: &self.receivers,
+            leaves: &self.guide_leaves,
         });
         let clear = match ahead {
             Some(clear) => clear,
