@@ -205,18 +205,35 @@ impl OcclusionMap {
             // SAFETY: the CPU has AVX2, just tested.
             return unsafe { self.hides_rect_avx2(rect, nearest) };
         }
-        self.hides_rect_lanes(rect, nearest)
+        self.hides_rect_lanes(rect, nearest, |_, _| None)
     }
 
-    /// [`OcclusionMap::hides_rect_lanes`] compiled for AVX2 (see [`Band::add`]).
+    /// [`OcclusionMap::hides_rect_lanes`] compiled for AVX2, runs of up
+    /// to two windows read eight cells an instruction (see [`wide`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn hides_rect_avx2(&mut self, rect: [f32; 4], nearest: f32) -> bool {
-        self.hides_rect_lanes(rect, nearest)
+        if self.cols_cos.len() < wide::LANES {
+            return self.hides_rect_lanes(rect, nearest, |_, _| None);
+        }
+        self.hides_rect_lanes(rect, nearest, |depth, run| {
+            // SAFETY: the CPU has AVX2 (this function's contract), and the
+            // row has a window of lanes.
+            (run.len() <= 2 * wide::LANES)
+                .then(|| unsafe { wide::covered_nearer(depth, run, nearest) })
+        })
     }
 
+    /// Whether every cell `rect` holds is covered nearer than `nearest`,
+    /// a run's answer left to `short` where it gives one (the tiles'
+    /// farthest depths are only a cache: the answer is the same).
     #[inline(always)]
-    fn hides_rect_lanes(&mut self, rect: [f32; 4], nearest: f32) -> bool {
+    fn hides_rect_lanes(
+        &mut self,
+        rect: [f32; 4],
+        nearest: f32,
+        short: impl Fn(&[f32], std::ops::Range<usize>) -> Option<bool>,
+    ) -> bool {
         let cols = self.res.cols as usize;
         let (p0, p1) = row_span(self.res, rect, 0..self.res.rows as usize);
         let farthest = |a: f32, d: &f32| a.max(*d);
@@ -228,6 +245,9 @@ impl OcclusionMap {
             let depth = &self.depth[p * cols..(p + 1) * cols];
             let coarse = &mut self.coarse[p * tiles(cols)..(p + 1) * tiles(cols)];
             runs.iter().all(|run| {
+                if let Some(hidden) = short(depth, run.clone()) {
+                    return hidden;
+                }
                 let (first, end) = (run.start.div_ceil(TILE), run.end / TILE);
                 let far = if first < end {
                     refresh(&mut coarse[first..end], depth, first);
@@ -446,6 +466,30 @@ mod wide {
             let hidden = _mm256_or_ps(outside, _mm256_or_ps(behind, covered));
             let shown = _mm256_andnot_ps(hidden, in_run(w, &run));
             if _mm256_movemask_ps(shown) != 0 {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Whether every cell of `run` in the row `depth` is covered nearer
+    /// than `nearest` by the margin: the farthest's test, lane by lane
+    /// (rounding is monotone, so every lane's product is below `nearest`
+    /// exactly where the farthest's is).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2, and the row at least [`LANES`] columns.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn covered_nearer(
+        depth: &[f32],
+        run: std::ops::Range<usize>,
+        nearest: f32,
+    ) -> bool {
+        let (margin, nearest) = (_mm256_set1_ps(1.0 + DEPTH_MARGIN), _mm256_set1_ps(nearest));
+        for w in windows(run.clone(), depth.len()) {
+            let cover = _mm256_mul_ps(_mm256_loadu_ps(depth[w..w + LANES].as_ptr()), margin);
+            let nearer = _mm256_cmp_ps::<_CMP_LT_OQ>(cover, nearest);
+            if _mm256_movemask_ps(_mm256_andnot_ps(nearer, in_run(w, &run))) != 0 {
                 return false;
             }
         }
@@ -829,7 +873,7 @@ mod tests {
                 rows,
             )
         };
-        let mut verdicts = [0, 0];
+        let (mut verdicts, mut rect_verdicts) = ([0, 0], [0, 0]);
         for r in [
             Resolution { rows: 24, cols: 96 },
             Resolution {
@@ -868,6 +912,11 @@ mod tests {
                     let got = unsafe { wide.hides_avx2(&piece, nearest) };
                     assert_eq!(got, want, "piece {k} at {nearest} in {r}");
                     verdicts[usize::from(want)] += 1;
+                    let want = scalar.hides_rect_lanes(rect, nearest, |_, _| None);
+                    // SAFETY: the CPU has AVX2, just tested.
+                    let got = unsafe { wide.hides_rect_avx2(rect, nearest) };
+                    assert_eq!(got, want, "rectangle {k} at {nearest} in {r}");
+                    rect_verdicts[usize::from(want)] += 1;
                 }
                 let mut one = Band {
                     map: &rows,
@@ -894,6 +943,10 @@ mod tests {
                     bits(&scalar) == bits(&wide),
                     "piece {k} in {r}: the maps differ"
                 );
+                // (The tiles are a cache that the rectangles' tests fill
+                // as they go; found afresh, they agree.)
+                scalar.refresh();
+                wide.refresh();
                 assert!(
                     scalar.coarse == wide.coarse,
                     "piece {k} in {r}: the tiles differ"
@@ -905,6 +958,10 @@ mod tests {
         assert!(
             verdicts[0] > 50 && verdicts[1] > 50,
             "{verdicts:?}: both verdicts"
+        );
+        assert!(
+            rect_verdicts[0] > 50 && rect_verdicts[1] > 50,
+            "{rect_verdicts:?}: both rectangle verdicts"
         );
     }
 
