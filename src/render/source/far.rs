@@ -213,6 +213,22 @@ fn centre_rays(
     clear
 }
 
+/// `items.partition_point(pred)` found by doubling steps from the start,
+/// then halving: the merge of the rays' pairs into the cells' walks both
+/// lists forward, and its next cut is mostly a few pairs on (a search
+/// over the whole rest was a sixth of the shot's own bookkeeping).
+fn gallop<T>(items: &[T], pred: impl Fn(&T) -> bool) -> usize {
+    let mut step = 1;
+    let mut lo = 0;
+    // Invariant: every item before `lo` satisfies `pred`.
+    while lo + step <= items.len() && pred(&items[lo + step - 1]) {
+        lo += step;
+        step *= 2;
+    }
+    let hi = (lo + step).min(items.len());
+    lo + items[lo..hi].partition_point(pred)
+}
+
 /// `scan` over `items` on every core, in runs of `run` items joined in
 /// order (a ray's hint only saves time, so the verdicts are the same
 /// however it is split), or on this thread alone below `parallel` items
@@ -449,9 +465,9 @@ impl GpuFormFactors<'_> {
             let (mut at, mut i) = (0, 0);
             while let Some(&first) = found.get(i) {
                 let [lo, hi] = self.receivers.elements_of(self.receivers.patch(first));
-                let below = at + old[at..].partition_point(|p| p.0 < lo);
+                let below = at + gallop(&old[at..], |p| p.0 < lo);
                 merged.extend_from_slice(&old[at..below]);
-                at = below + old[below..].partition_point(|p| p.0 < hi);
+                at = below + gallop(&old[below..], |p| p.0 < hi);
                 while let Some(&j) = found.get(i).filter(|&&j| j < hi) {
                     merged.push((j, formfactor::VISIBLE_ONE + 1));
                     i += 1;
@@ -489,7 +505,18 @@ impl GpuFormFactors<'_> {
 
 #[cfg(test)]
 mod tests {
-    use super::{FarWay, TRY_OTHER};
+    use super::{gallop, FarWay, TRY_OTHER};
+
+    #[test]
+    fn the_gallop_finds_the_partition_point() {
+        for n in 0..70usize {
+            let items: Vec<usize> = (0..n).map(|k| 3 * k).collect();
+            for x in 0..3 * n + 3 {
+                let want = items.partition_point(|&v| v < x);
+                assert_eq!(gallop(&items, |&v| v < x), want, "{x} in {n}");
+            }
+        }
+    }
 
     #[test]
     fn the_cheaper_way_for_its_drawing_is_taken_and_the_other_tried_again() {
