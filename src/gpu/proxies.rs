@@ -1071,7 +1071,7 @@ fn sphere_cells(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f
 #[target_feature(enable = "avx2")]
 unsafe fn sphere_cells_avx2(c: Vec3, r: f32, res: Resolution) -> Option<[f32; 4]> {
     use std::arch::x86_64::*;
-    use std::f32::consts::{FRAC_PI_2, TAU};
+    use std::f32::consts::FRAC_PI_2;
     let d = c.length();
     if r.is_nan() || r >= 0.9 * d {
         return None;
@@ -1098,22 +1098,29 @@ unsafe fn sphere_cells_avx2(c: Vec3, r: f32, res: Resolution) -> Option<[f32; 4]
     if r >= 0.9 * rho {
         return Some([0.0, cols, y0, y1]);
     }
+    Some(azimuth_cells((azimuth, beta), cols, [y0, y1]))
+}
+
+/// A sphere's rectangle from its centre's azimuth (atan2's, in (-pi, pi])
+/// and its half-width `beta` in azimuth, over rows `y`.
+fn azimuth_cells((azimuth, beta): (f32, f32), cols: f32, [y0, y1]: [f32; 2]) -> [f32; 4] {
+    use std::f32::consts::TAU;
     let azimuth = if azimuth < 0.0 {
         azimuth + TAU
     } else {
         azimuth
     };
-    Some([
+    [
         (azimuth - beta) / TAU * cols - SPHERE_MARGIN,
         (azimuth + beta) / TAU * cols + SPHERE_MARGIN,
         y0,
         y1,
-    ])
+    ]
 }
 
 /// [`sphere_cells`], one angle at a time.
 fn sphere_cells_scalar(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Option<[f32; 4]> {
-    use std::f32::consts::{FRAC_PI_2, TAU};
+    use std::f32::consts::FRAC_PI_2;
     let d = c.length();
     // Near or around the shooter the cone is wide; asin is steep there
     // (and a NaN, from a degenerate polygon, says nothing either).
@@ -1137,17 +1144,7 @@ fn sphere_cells_scalar(c: Vec3, r: f32, res: Resolution, split: [bool; 2]) -> Op
     }
     let beta = asin(r / rho);
     let azimuth = crate::numeric::atan2_f32(c.y, c.x);
-    let azimuth = if azimuth < 0.0 {
-        azimuth + TAU
-    } else {
-        azimuth
-    };
-    Some([
-        (azimuth - beta) / TAU * cols - SPHERE_MARGIN,
-        (azimuth + beta) / TAU * cols + SPHERE_MARGIN,
-        y0,
-        y1,
-    ])
+    Some(azimuth_cells((azimuth, beta), cols, [y0, y1]))
 }
 
 /// Cells of margin around a sphere's bounds (see [`sphere_cells`]): far more
