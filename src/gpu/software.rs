@@ -91,13 +91,11 @@ impl Owned {
         }
         let centre_before = |c: usize| (c as f32 + 0.5) < x;
         // A saturating cast (NaN: 0) within one of the count; no libm call.
+        // Moved by at most one each way without branches (which way is a
+        // coin toss for the predictor, four times a rectangle).
         let mut k = ((x - 0.5) as i64).clamp(0, n as i64) as usize;
-        while k > 0 && !centre_before(k - 1) {
-            k -= 1;
-        }
-        while k < n && centre_before(k) {
-            k += 1;
-        }
+        k -= usize::from((k > 0) & !centre_before(k.saturating_sub(1)));
+        k += usize::from((k < n) & centre_before(k));
         k
     }
 }
