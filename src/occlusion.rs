@@ -141,16 +141,19 @@ impl OcclusionMap {
     /// inside all its edge planes is covered at its distance there.
     /// Returns the cells the piece's rectangle holds.
     pub fn add(&mut self, piece: &Piece) -> usize {
-        let rows = 0..self.res.rows as usize;
-        let mut band = Band {
+        self.whole_band().add(piece)
+    }
+
+    /// Every row of the map, as one thread fills them.
+    fn whole_band(&mut self) -> Band<'_> {
+        Band {
             map: &self.rows,
             cos: &self.cols_cos,
             sin: &self.cols_sin,
             depth: &mut self.depth,
             coarse: &mut self.coarse,
-            rows,
-        };
-        band.add(piece)
+            rows: 0..self.res.rows as usize,
+        }
     }
 
     /// [`OcclusionMap::add`] for every item's piece, the rows divided
@@ -863,16 +866,6 @@ mod tests {
         }
         let mut rng = crate::fuzz::Rng(0x9e37_79b9_7f4a_7c15);
         let mut uniform = move || rng.unit() as f32;
-        let band = |map: &mut OcclusionMap| {
-            let rows = 0..map.res.rows as usize;
-            // (A band over every row, as `OcclusionMap::add` makes.)
-            (
-                map.rows.clone(),
-                map.cols_cos.clone(),
-                map.cols_sin.clone(),
-                rows,
-            )
-        };
         let (mut verdicts, mut rect_verdicts) = ([0, 0], [0, 0]);
         for r in [
             Resolution { rows: 24, cols: 96 },
@@ -882,7 +875,6 @@ mod tests {
             },
         ] {
             let (mut scalar, mut wide) = (OcclusionMap::new(r), OcclusionMap::new(r));
-            let (rows, cos, sin, all) = band(&mut scalar);
             for k in 0..300 {
                 let centre = [
                     uniform() * 2.0 - 1.0,
@@ -918,25 +910,9 @@ mod tests {
                     assert_eq!(got, want, "rectangle {k} at {nearest} in {r}");
                     rect_verdicts[usize::from(want)] += 1;
                 }
-                let mut one = Band {
-                    map: &rows,
-                    cos: &cos,
-                    sin: &sin,
-                    depth: &mut scalar.depth,
-                    coarse: &mut scalar.coarse,
-                    rows: all.clone(),
-                };
-                one.add_lanes(&piece, cover_run);
-                let mut eight = Band {
-                    map: &rows,
-                    cos: &cos,
-                    sin: &sin,
-                    depth: &mut wide.depth,
-                    coarse: &mut wide.coarse,
-                    rows: all.clone(),
-                };
+                scalar.whole_band().add_lanes(&piece, cover_run);
                 // SAFETY: the CPU has AVX2, just tested.
-                unsafe { eight.add_avx2(&piece) };
+                unsafe { wide.whole_band().add_avx2(&piece) };
                 let bits =
                     |m: &OcclusionMap| m.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
                 assert!(
