@@ -12,7 +12,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
-cargo build --release --locked --bin radiosity
+cargo build --release --locked --bin radiosity --bin radiosity-lab
 bin=target/release/radiosity
 SHOTS=${SHOTS:-20}
 RANKS=${RANKS:-"1 2 4 8 16"}
@@ -44,4 +44,4 @@ done
 for tile in 1x1 4x4 16x8 64x32; do
   solve "$SWEEP_RANKS" "sweep-tile-$tile" "$SWEEP_SCENE" --tile "$tile"
 done
-"$bin" bench-report "$runs"/*.json --out docs/bench
+target/release/radiosity-lab bench-report "$runs"/*.json --out docs/bench

@@ -14,8 +14,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
 install_missing libembree-dev gcc libc6-dev
-cargo build --release --locked --bin radiosity
+cargo build --release --locked --bin radiosity --bin radiosity-lab
 bin=target/release/radiosity
+lab=target/release/radiosity-lab
 SCENES=${SCENES:-"cubes-4 cubes-16"}
 SHOTS=${SHOTS:-640}
 ROUNDS=${ROUNDS:-2}
@@ -23,16 +24,16 @@ THREADS=${THREADS:-$(nproc)}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 gcc -O3 -march=native -fopenmp scripts/packets.c -lembree3 -lm -o "$work/packets"
-# The bench's shot settings (README "Performance").
+# The bench's shot settings (docs/notebook/shot-phases.md).
 settings=(--no-cache --coarse-below 0 --shots "$SHOTS" --converge 0)
 mean_ms() { # bench args...: the table's mean shot ms
-  "$bin" bench "$@" 2>/dev/null | awk -F'|' '/^\| [a-z]/ && $2 !~ /scene/ {gsub(/ /, "", $8); print $8}'
+  "$lab" bench "$@" 2>/dev/null | awk -F'|' '/^\| [a-z]/ && $2 !~ /scene/ {gsub(/ /, "", $8); print $8}'
 }
 for scene in $SCENES; do
   "$bin" scene "$scene" --nodes "$work/nodes.json" >/dev/null
   # One shot at a time, nothing drawn ahead: each logged whole hemisphere
   # is a shot's (the refinement pass's first, then the bench's).
-  RUST_LOG=radiosity::hemispheres=trace "$bin" bench --scenes "$scene" "${settings[@]}" \
+  RUST_LOG=radiosity::hemispheres=trace "$lab" bench --scenes "$scene" "${settings[@]}" \
     --no-look-ahead 2>"$work/log" >/dev/null
   python3 - "$work/nodes.json" "$work/log" "$SHOTS" "$work/input.bin" <<'EOF'
 import json, re, struct, sys

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Measurements the performance model (docs/scaling.md, `radiosity scaling`)
+# Measurements the performance model (docs/scaling.md, `radiosity-lab scaling`)
 # is calibrated and validated on. Every run is the paper's: 100 shots, no
 # threshold, no image.
 #
@@ -20,11 +20,11 @@
 #
 # Writes docs/scaling/runs/<scene>-<resolution>-n<ranks>-<exchange>.json,
 # skipping runs already there (FORCE=1 redoes them), then fits the model
-# (`radiosity scaling`: docs/scaling/*.csv and the charts).
+# (`radiosity-lab scaling`: docs/scaling/*.csv and the charts).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/setup.sh
-cargo build --release --locked --bin radiosity
+cargo build --release --locked --bin radiosity --bin radiosity-lab
 # A copy, so a build during the runs cannot swap the binary under them.
 bin=$(mktemp -d)/radiosity
 cp target/release/radiosity "$bin"
@@ -35,12 +35,12 @@ OVER=${OVER:-"4 8 16"}
 OVER_BIG=${OVER_BIG:-"4 8"}
 REPEAT=${REPEAT:-2}
 # The ranks deal the bounds at every rank count (the model fits the deal's
-# all-to-all as its own term; README "Ranks"); DEAL=auto or off to compare.
+# all-to-all as its own term; docs/notebook/ranks.md "Ranks"); DEAL=auto or off to compare.
 DEAL=${DEAL:-on}
 # Who draws the hemispheres (`--rasteriser`): the committed runs in
 # docs/scaling/runs were made by the device (lavapipe), before the CPU
 # drawing existed; RASTERISER=cpu (or auto, the default a render takes on
-# lavapipe) for the current shot (README "Drawn on the CPU").
+# lavapipe) for the current shot (docs/scaling.md "Drawn on the CPU").
 RASTERISER=${RASTERISER:-device}
 runs=${RUNS:-docs/scaling/runs}
 mkdir -p "$runs"
@@ -114,4 +114,4 @@ for rep in $(seq 1 "$REPEAT"); do
     for n in $OVER_BIG; do run "$n" "$scene" 128x512 hemispheres "$rep"; done
   done
 done
-"$bin" scaling --runs "$runs" --out "$(dirname "$runs")"
+target/release/radiosity-lab scaling --runs "$runs" --out "$(dirname "$runs")"

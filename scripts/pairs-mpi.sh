@@ -3,7 +3,7 @@
 # one core each" medians. Each round runs build A on 1 rank (pinned to core
 # 0), A on 2 ranks (one core each), then B the same, so both builds see the
 # same hour; prints each round's whole-solve times and ratios, then the
-# medians. 100 shots in batches of 64, as in README "Ranks".
+# medians. 100 shots in batches of 64, as in docs/notebook/ranks.md "Ranks".
 #
 #   scripts/pairs-mpi.sh OLD_BINARY NEW_BINARY [SCENE [ROUNDS]] [-- FLAGS...]
 #   scripts/pairs-mpi.sh /tmp/before target/release/radiosity cubes-b1 20

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Path-traced per-node radiosity with Mitsuba 3, for `radiosity accuracy`.
+"""Path-traced per-node radiosity with Mitsuba 3, for `radiosity-lab accuracy`.
 
-Reads the scene that `radiosity accuracy` exports (JSON: per glTF node its
+Reads the scene that `radiosity-lab accuracy` exports (JSON: per glTF node its
 world-space triangles, reflectance and emitted radiance), builds a Mitsuba
 scene with one-sided diffuse surfaces and area emitters (the renderer's
 conventions, DESIGN.md section 6), and estimates every node's irradiance with

@@ -27,8 +27,8 @@
 //! Deterministic: every group's rays come from a generator seeded by its
 //! index, whatever the thread count.
 
-use crate::fuzz::Rng;
 use crate::mesh::Mesh;
+use crate::rng::Rng;
 use crate::sampling::{in_parallel, point_in, unit};
 use glam::Vec3;
 
@@ -1005,7 +1005,7 @@ mod tests {
             "{} landings: one thread",
             t.into.len()
         );
-        let mut rng = crate::fuzz::Rng(7);
+        let mut rng = crate::rng::Rng(7);
         let n = t.groups();
         let unshot: Vec<[f64; 3]> = (0..n)
             .map(|_| {

@@ -5,7 +5,7 @@
 //! samples or an element's points, see [`Pool`]: exact where they see all or
 //! none of the emitter, noisy only in penumbrae); and each point,
 //! spot or directional light's irradiance with its one shadow ray
-//! ([`crate::lights::irradiance`]).
+//! (`lights::irradiance`).
 //!
 //! The image is then the solution's indirect part, interpolated, plus this
 //! direct part per pixel: contact shadows and shadow edges as sharp as the
@@ -13,9 +13,9 @@
 //! updates: the solver's numbers are untouched.
 
 use crate::formfactor::point_to_polygon;
-use crate::fuzz::Rng;
 use crate::mesh::Mesh;
 use crate::raytrace::Bvh;
+use crate::rng::Rng;
 use crate::sampling::{in_parallel, point_in, unit};
 use crate::scene::{Camera, Scene};
 use glam::{DVec3, Vec3};
@@ -49,10 +49,7 @@ pub struct DirectLight<'a> {
     eps: f32,
 }
 
-/// Points per element along each axis for its mean direct irradiance: the
-/// element means are taken out of the interpolated rest, so their noise
-/// would show as blotches.
-pub const ELEMENT_POINTS: u32 = 4;
+pub use crate::sampling::ELEMENT_POINTS;
 
 /// Shadow rays per emitter per element point, along each axis.
 pub const ELEMENT_RAYS: u32 = 2;

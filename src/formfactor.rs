@@ -7,7 +7,7 @@
 //! point gets, exactly. Pure maths: nothing here knows about GPUs or ranks.
 
 use crate::mesh::{element_centre, Mesh};
-use crate::solver::{ShotRegion, Transfer};
+use crate::shot::{ShotRegion, Transfer};
 use glam::DVec3;
 
 /// How one visible cell counts in a hybrid shot's per-element sums: visible
@@ -159,7 +159,7 @@ pub struct Row {
     /// them, at any distance. Its share of `total` says how much of the
     /// shooter's light lands where its size would blur the shadow (a
     /// penumbra), which one point at its centre cannot see: the shooter
-    /// refinement criterion (`crate::refine`). [`SHARE_ONE`] fixed point.
+    /// refinement criterion (`refine`). [`SHARE_ONE`] fixed point.
     pub partial: u64,
     /// Per column, the share of that shooter element's light (delta form
     /// factors of its hemisphere's cells, over every rank) that meets the
@@ -889,7 +889,7 @@ mod tests {
         // GAUSS_FAR to 3 GAUSS_FAR radii in any direction in front, facing
         // any way that keeps the quad in front: the rule within 1e-4 of
         // A / (pi d^2) of the exact contour integral.
-        let mut rng = crate::fuzz::Rng(0x2545_f491_4f6c_dd1d);
+        let mut rng = crate::rng::Rng(0x2545_f491_4f6c_dd1d);
         let mut uniform = move || rng.unit();
         let (mut cases, mut worst) = (0, 0.0f64);
         while cases < 20_000 {
@@ -926,7 +926,7 @@ mod tests {
     fn the_edges_side_by_side_are_the_edges_one_by_one() {
         // The AVX2 edge terms against the scalar ones, bit for bit: quads
         // near and far, seen from points on their corners and edges too.
-        let mut rng = crate::fuzz::Rng(0x853c_49e6_748f_ea9b);
+        let mut rng = crate::rng::Rng(0x853c_49e6_748f_ea9b);
         let mut uniform = move || rng.unit();
         let mut cases = 0;
         for k in 0..20_000usize {
@@ -960,7 +960,7 @@ mod tests {
         // Triangles and quads with corners behind the receiver (some a
         // rounding behind, as where a face meets the floor): the form
         // factor's bits are the scalar edge sum's over the clipped outline.
-        let mut rng = crate::fuzz::Rng(0x9e37_79b9_7f4a_7c15);
+        let mut rng = crate::rng::Rng(0x9e37_79b9_7f4a_7c15);
         let mut uniform = move || rng.unit();
         for k in 0..20_000usize {
             let count = 3 + k % 2;

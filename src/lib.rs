@@ -23,22 +23,23 @@
 //!   write path;
 //! - [`compare`]: image error against a reference (SMAPE over blocks);
 //! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
-//! - [`fuzz`]: broken scenes generated from good ones, for robustness checks;
 //! - [`bake`]: the solution as glTF with vertex colours.
 
 pub mod ambient;
 pub mod bake;
 pub mod checkpoint;
+pub mod cli;
 pub mod comm;
 pub mod compare;
 pub mod direct;
+pub mod export;
 pub mod formfactor;
-pub mod fuzz;
 pub mod gpu;
 pub mod hemisphere;
 pub mod interpolate;
 pub mod launch;
 pub mod lights;
+pub mod lit_mesh;
 pub mod mesh;
 pub mod numeric;
 pub mod occlusion;
@@ -48,8 +49,9 @@ pub mod raytrace;
 pub mod refine;
 pub mod render;
 pub mod report;
+pub mod rng;
 pub mod sampling;
-pub mod scaling;
 pub mod scene;
 pub mod settings;
+pub mod shot;
 pub mod solver;

@@ -17,16 +17,14 @@
 //! element), so every rank computes the same field bit for bit. Pure maths:
 //! no GPU, no radiosity updates.
 
-use crate::fuzz::Rng;
 use crate::mesh::Mesh;
 use crate::raytrace::{Bvh, Hints, RECENT_HINTS};
+use crate::rng::Rng;
 use crate::sampling::{in_parallel, point_in, unit};
 use crate::scene::{Light, LightKind};
 use glam::Vec3;
 
-/// Points per element along each axis (as for the traced direct light of
-/// emitting surfaces: [`crate::direct::ELEMENT_POINTS`]).
-pub const ELEMENT_POINTS: u32 = crate::direct::ELEMENT_POINTS;
+pub use crate::sampling::ELEMENT_POINTS;
 
 /// Sky directions per element point along each axis: each element's
 /// points share one `(ELEMENT_POINTS * SKY_RAYS)^2` stratification of the
@@ -64,10 +62,10 @@ pub struct KeptField {
 }
 
 impl KeptField {
-    /// Takes `mesh`'s light field (leaving it empty) to reuse.
-    pub fn take(mesh: &mut Mesh) -> Self {
+    /// Keeps `field`, the light field of `mesh`, to reuse.
+    pub fn new(field: LightField, mesh: &Mesh) -> Self {
         Self {
-            field: std::mem::take(&mut mesh.light_field),
+            field,
             polygons: mesh
                 .polygons
                 .iter()
@@ -304,7 +302,7 @@ pub fn element_field_reusing(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{Mesh, MeshSettings};
+    use crate::mesh::MeshSettings;
 
     #[test]
     fn a_refined_mesh_reuses_the_field_of_its_unrefined_polygons_bit_for_bit() {
@@ -319,13 +317,14 @@ mod tests {
         });
         scene.sky = Some([3.0; 3]);
         let settings = MeshSettings::default();
-        let mut coarse = Mesh::build(&scene, &settings);
+        use crate::lit_mesh::LitMesh;
+        let mut coarse = LitMesh::build(&scene, &settings);
         let factors: Vec<u32> = (0..scene.polygons.len())
             .map(|i| 1 + i as u32 % 2)
             .collect();
-        let fresh = Mesh::build_refined(&scene, &settings, &factors);
-        let kept = KeptField::take(&mut coarse);
-        let reused = Mesh::build_refined_from(&scene, &settings, &factors, Some(&kept));
+        let fresh = LitMesh::build_refined(&scene, &settings, &factors);
+        let kept = coarse.take_field();
+        let reused = LitMesh::build_refined_from(&scene, &settings, &factors, Some(&kept));
         assert!(fresh.light_field.sky.iter().any(|s| s[0] > 0.0));
         assert!(fresh.light_field.direct.iter().any(|d| d[0] > 0.0));
         assert_eq!(reused.light_field, fresh.light_field);

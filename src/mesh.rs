@@ -33,7 +33,7 @@ pub struct MeshSettings {
     pub max_patches_per_edge: u32,
     /// Cap on elements along one patch edge.
     pub max_elements_per_edge: u32,
-    /// Refinement passes by need (`crate::refine`): the automatic rule starts
+    /// Refinement passes by need (`refine`): the automatic rule starts
     /// `2^refine` times coarser (patches up to `near_field_ratio * 2^refine`
     /// of the distance, at most the distance), and each pass doubles the
     /// patch grid of the polygons whose shots ask for it.
@@ -41,18 +41,18 @@ pub struct MeshSettings {
     /// Refinement by need also doubles the patch grid of a polygon one of
     /// whose patches holds its light so unevenly that a uniform patch would
     /// misplace more than this fraction of the emitted power
-    /// (`crate::refine`); 0: receivers never ask.
+    /// (`refine`); 0: receivers never ask.
     pub receiver_tol: f64,
     /// Refinement by need also doubles the patch grid of a polygon one of
     /// whose patches the camera image would shade with a relative error
-    /// above this (`crate::refine::shading_error`); 0: never.
+    /// above this (`refine::shading_error`); 0: never.
     pub shading_tol: f64,
 }
 
 /// The default of [`MeshSettings::receiver_tol`]: chosen on the Cornell box
 /// and seed 1 of the scene family against their path-traced images (0.002
 /// refined too few receivers; 0.0002 cost 1.5-3x the solve time for little
-/// more), judged on seed 2 (README, "Refinement by need").
+/// more), judged on seed 2 (docs/guide/meshing.md, "Refinement by need").
 pub const DEFAULT_RECEIVER_TOL: f64 = 5e-4;
 
 /// The default of [`MeshSettings::shading_tol`].
@@ -167,12 +167,6 @@ pub struct Mesh {
     pub occluders: crate::raytrace::Bvh,
     /// How far a ray starts off its surface, m (1e-5 of the scene's size).
     pub ray_offset: f32,
-    /// What the scene's lights and sky deliver to each element (empty
-    /// without them): their one shot, which every solver starts from.
-    pub light_field: crate::lights::LightField,
-    /// Where each group of surfaces' diffuse light lands, for the display's
-    /// ambient term (built on first use, see [`Mesh::ambient_transport`]).
-    pub ambient: std::sync::OnceLock<crate::ambient::Transport>,
 }
 
 /// A glTF node whose polygons close a volume with their fronts facing out (a
@@ -358,18 +352,6 @@ impl Mesh {
     /// by `factors[i]` along each edge (within the cap; each patch keeps its
     /// element grid); missing factors are 1.
     pub fn build_refined(scene: &Scene, settings: &MeshSettings, factors: &[u32]) -> Mesh {
-        Self::build_refined_from(scene, settings, factors, None)
-    }
-
-    /// [`Mesh::build_refined`], reusing the light field `kept` from another
-    /// mesh of `scene` for the polygons subdivided alike (the same mesh, bit
-    /// for bit: see [`crate::lights::element_field_reusing`]).
-    pub fn build_refined_from(
-        scene: &Scene,
-        settings: &MeshSettings,
-        factors: &[u32],
-        kept: Option<&crate::lights::KeptField>,
-    ) -> Mesh {
         let sizes = patch_sizes(scene, settings);
         let mut mesh = Mesh::default();
         for (pi, (poly, &size)) in scene.polygons.iter().zip(&sizes).enumerate() {
@@ -379,8 +361,6 @@ impl Mesh {
         (mesh.solids, mesh.solid_of) = find_solids(&scene.polygons);
         mesh.occluders = crate::raytrace::Bvh::new(&scene.polygons);
         mesh.ray_offset = 1e-5 * scene.extent().max(1e-6);
-        mesh.light_field =
-            crate::lights::element_field_reusing(&mesh, &scene.lights, scene.sky, kept);
         mesh
     }
 
@@ -453,14 +433,6 @@ impl Mesh {
             })
     }
 
-    /// The ambient term's transport ([`crate::ambient::Transport`]), estimated
-    /// on the first call (a few hundred thousand rays at most): only a
-    /// display of the solution needs it.
-    pub fn ambient_transport(&self) -> &crate::ambient::Transport {
-        self.ambient
-            .get_or_init(|| crate::ambient::Transport::new(self))
-    }
-
     /// Total emitted power (exitance times area, summed over patches and RGB), W.
     pub fn emitted_power(&self) -> f64 {
         self.patches
@@ -470,13 +442,6 @@ impl Mesh {
                 (e[0] + e[1] + e[2]) * p.area
             })
             .sum()
-    }
-
-    /// The power the solution starts from, W (sum over RGB): the surfaces'
-    /// emission plus what the lights, the sun and the sky deliver. What the
-    /// unshot fraction and a shot's strength are measured against.
-    pub fn source_power(&self) -> f64 {
-        self.emitted_power() + self.light_field.emitted
     }
 
     /// Total area of all elements.

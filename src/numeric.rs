@@ -5,8 +5,8 @@
 //! factor and every patch's unshot power to fixed point ([`round_u64`],
 //! [`round_i64`]: the same results, by truncation and one compare), and a
 //! big scene's shot makes millions of atan2 calls: four per contour
-//! integral of every receiver ([`crate::formfactor::point_to_polygon`]) and
-//! six per cell rectangle ([`crate::hemisphere::cell_bounds`]). glibc's are
+//! integral of every receiver (`formfactor::point_to_polygon`) and
+//! six per cell rectangle (`hemisphere::cell_bounds`). glibc's are
 //! correctly rounded and cost 40-100 cycles; these reduce the argument to
 //! [0, 1] with one division and evaluate a polynomial fitted to atan on it
 //! (Chebyshev fit of atan(t)/t in t^2, converted to powers): within 5e-14

@@ -797,7 +797,7 @@ mod tests {
         // The tiles' farthest depths only let whole tiles be passed over:
         // every verdict is the one the cells alone give.
         let r = Resolution { rows: 24, cols: 96 };
-        let mut rng = crate::fuzz::Rng(0x2545_f491_4f6c_dd1d);
+        let mut rng = crate::rng::Rng(0x2545_f491_4f6c_dd1d);
         let mut uniform = move || rng.unit() as f32;
         let mut map = OcclusionMap::new(r);
         let mut pieces = Vec::new();
@@ -864,7 +864,7 @@ mod tests {
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
-        let mut rng = crate::fuzz::Rng(0x9e37_79b9_7f4a_7c15);
+        let mut rng = crate::rng::Rng(0x9e37_79b9_7f4a_7c15);
         let mut uniform = move || rng.unit() as f32;
         let (mut verdicts, mut rect_verdicts) = ([0, 0], [0, 0]);
         for r in [

@@ -1,6 +1,6 @@
 //! The collectives a distributed solve needs, as a trait, so the render loop
 //! can run on one process or on MPI ranks without knowing which. The MPI
-//! implementation lives in [`crate::comm`], the only module that calls MPI.
+//! implementation lives in `comm`, the only module that calls MPI.
 
 use std::any::Any;
 use std::cell::Cell;
@@ -580,7 +580,7 @@ impl Owners {
 
 /// Ranks as threads of one process, for tests of what ranks exchange
 /// without MPI: every collective meets at a barrier and copies what each
-/// rank put in its slot. Traffic is counted as [`crate::comm::MpiComm`]
+/// rank put in its slot. Traffic is counted as `comm::MpiComm`
 /// counts it (the form-factor exchanges only).
 pub struct ThreadComm {
     rank: usize,

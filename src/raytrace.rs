@@ -1,7 +1,7 @@
 //! Exact visibility on the CPU: a bounding volume hierarchy over the scene's
 //! polygons (fanned into triangles), answering nearest-hit and any-hit
 //! (shadow) queries. The camera image's direct light uses it
-//! ([`crate::direct`]); nothing here knows about radiosity. Pure maths.
+//! (`direct`); nothing here knows about radiosity. Pure maths.
 
 use crate::scene::Polygon;
 use glam::{BVec4A, Vec3, Vec4};
@@ -981,7 +981,7 @@ mod tests {
     }
 
     /// A number in [0, 1).
-    fn unit(rng: &mut crate::fuzz::Rng) -> f32 {
+    fn unit(rng: &mut crate::rng::Rng) -> f32 {
         (rng.next_u64() >> 11) as f32 / (1u64 << 53) as f32
     }
 
@@ -990,7 +990,7 @@ mod tests {
     /// `size[0] + size[1]`, the share `facing_z` of them facing +z (the rest
     /// +x).
     fn scattered(
-        rng: &mut crate::fuzz::Rng,
+        rng: &mut crate::rng::Rng,
         n: usize,
         box_: [f32; 3],
         size: [f32; 2],
@@ -1013,7 +1013,7 @@ mod tests {
     fn nearest_hit_matches_a_brute_force_scan() {
         // A stack of squares at random heights and offsets: the hierarchy's
         // nearest hit is the one a scan of every polygon finds.
-        let mut rng = crate::fuzz::Rng(7);
+        let mut rng = crate::rng::Rng(7);
         let polys = scattered(&mut rng, 200, [4.0, 0.0, 10.0], [0.2, 0.5], 0.5);
         let mut unit = || unit(&mut rng);
         let bvh = Bvh::new(&polys);
@@ -1044,7 +1044,7 @@ mod tests {
     /// neighbouring points of a grid above, in order: a hint or a guess
     /// is often right and sometimes stale.
     fn neighbouring_segments(seed: u64) -> (Bvh, Vec<(Vec3, Vec3, [u32; 2])>) {
-        let mut rng = crate::fuzz::Rng(seed);
+        let mut rng = crate::rng::Rng(seed);
         let polys = scattered(&mut rng, 300, [8.0, 1.0, 4.0], [0.1, 0.4], 0.7);
         let mut unit = || unit(&mut rng);
         let segments = (0..4000)
@@ -1200,7 +1200,7 @@ mod tests {
     /// facing z, x and y in turn (edges on the planes [`grid_ray`]'s rays
     /// start in), each given twice and every third once more facing the
     /// other way (exact ties, facing keys), then scattered ones.
-    fn grid_scene(rng: &mut crate::fuzz::Rng, n: usize, heights: usize) -> Vec<Polygon> {
+    fn grid_scene(rng: &mut crate::rng::Rng, n: usize, heights: usize) -> Vec<Polygon> {
         let mut polys = Vec::new();
         for i in 0..n {
             for j in 0..n {
@@ -1268,7 +1268,7 @@ mod tests {
     /// the wide walk's shadow verdict and nearest hit (every `behind`) are
     /// the binary walk's. Returns how many were hidden and how many hit.
     fn compare_walks(seed: u64, n: usize, heights: usize) -> (u32, u32) {
-        let mut rng = crate::fuzz::Rng(seed);
+        let mut rng = crate::rng::Rng(seed);
         let polys = grid_scene(&mut rng, n, heights);
         let bvh = Bvh::new(&polys);
         assert!(!bvh.wide.is_empty());
@@ -1301,7 +1301,7 @@ mod tests {
         // A face at distance t ties a best key k when its own key (t, or
         // t (1 + behind) for a back face), rounded, equals k: the walks must
         // still test it, so t must lie inside the reach after k.
-        let mut rng = crate::fuzz::Rng(21);
+        let mut rng = crate::rng::Rng(21);
         let none = Hit { t: 0.0, polygon: 0 };
         for k in 0..200_000 {
             let t = 1e-3 + unit(&mut rng) * 100.0;

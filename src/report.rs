@@ -185,12 +185,39 @@ pub struct TracePoint {
     pub seconds: f64,
     /// Unshot power / emitted power.
     pub unshot_fraction: f64,
-    /// Per node, exactly as the top-level `surfaces`.
+    /// Per node, exactly as the top-level `surfaces`; absent at the points
+    /// [`thin_trace`] leaves without them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub surfaces: Vec<Surface>,
     /// The refinement pass (from 0) whose coarse solution this is; absent
     /// for the final solve's points. A pass's `shots` count its own.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pass: Option<u32>,
+}
+
+/// The most per-node values a report's convergence trace keeps (about
+/// 100 bytes each in JSON): a 4000-node scene's 80 points would otherwise
+/// make a report of tens of megabytes.
+pub const TRACE_VALUES: usize = 32_768;
+
+/// Keeps the per-node values of at most [`TRACE_VALUES`] / nodes points
+/// (at least the first and the last), spread evenly over the points, which
+/// the trace spaces evenly in log shots; every point keeps its shots, time
+/// and unshot fraction. A trace within the budget is left as it is.
+pub fn thin_trace(points: &mut [TracePoint]) {
+    let nodes = points.iter().map(|p| p.surfaces.len()).max().unwrap_or(0);
+    let n = points.len();
+    if n <= 2 || nodes * n <= TRACE_VALUES {
+        return;
+    }
+    let keep = (TRACE_VALUES / nodes).clamp(2, n);
+    let kept: std::collections::BTreeSet<usize> =
+        (0..keep).map(|i| i * (n - 1) / (keep - 1)).collect();
+    for (i, p) in points.iter_mut().enumerate() {
+        if !kept.contains(&i) {
+            p.surfaces = Vec::new();
+        }
+    }
 }
 
 /// Problem sizes.
@@ -643,4 +670,50 @@ pub fn relative_error(s: &[Surface], reference: &[Surface]) -> (f64, f64) {
         worst = worst.max(e);
     }
     (if area > 0.0 { sum / area } else { 0.0 }, worst)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(shots: u64, nodes: usize) -> TracePoint {
+        let surface = |k: usize| Surface {
+            node: format!("n{k}"),
+            area: 1.0,
+            radiosity: [shots as f64; 3],
+            back: None,
+        };
+        TracePoint {
+            shots,
+            seconds: shots as f64,
+            unshot_fraction: 1.0 / shots as f64,
+            surfaces: (0..nodes).map(surface).collect(),
+            pass: None,
+        }
+    }
+
+    #[test]
+    fn a_big_trace_keeps_per_node_values_at_few_points_a_small_one_at_all() {
+        let mut small: Vec<_> = (1..=80).map(|s| point(s, 10)).collect();
+        let before = small.clone();
+        thin_trace(&mut small);
+        assert_eq!(small, before, "within the budget nothing changes");
+
+        let nodes = 4000;
+        let mut big: Vec<_> = (1..=80).map(|s| point(s, nodes)).collect();
+        thin_trace(&mut big);
+        let kept: Vec<_> = big.iter().filter(|p| !p.surfaces.is_empty()).collect();
+        assert_eq!(kept.len(), TRACE_VALUES / nodes);
+        assert!(kept.len() * nodes <= TRACE_VALUES);
+        assert_eq!(kept.first().map(|p| p.shots), Some(1), "the first point");
+        assert_eq!(kept.last().map(|p| p.shots), Some(80), "the last point");
+        assert!(big
+            .iter()
+            .all(|p| p.unshot_fraction == 1.0 / p.shots as f64));
+        // Thinned points say nothing of the nodes in JSON, and read back.
+        let json = serde_json::to_string(&big[1]).expect("JSON");
+        assert!(!json.contains("surfaces"), "{json}");
+        let back: TracePoint = serde_json::from_str(&json).expect("reads back");
+        assert_eq!(back, big[1]);
+    }
 }

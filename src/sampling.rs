@@ -2,8 +2,13 @@
 //! quads, uniform numbers from the project's seeded generator, and a
 //! deterministic parallel map (each slot's result depends only on its index).
 
-use crate::fuzz::Rng;
+use crate::rng::Rng;
 use glam::Vec3;
+
+/// Points per element along each axis for its mean irradiance, from lights
+/// and from emitting surfaces alike: the element means are taken out of the
+/// interpolated rest, so their noise would show as blotches.
+pub const ELEMENT_POINTS: u32 = 4;
 
 /// A point of a triangle or convex quad from (u, v) in the unit square, and
 /// the density's Jacobian there (area per unit (u, v)): bilinear for a quad,

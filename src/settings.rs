@@ -2,6 +2,9 @@
 //! low in the module graph so that the report, the checkpoint and the render
 //! driver can all name them without importing one another.
 
+/// Default shadow rays per emitter per image sample (`--shadow-rays`).
+pub const DEFAULT_SHADOW_RAYS: u32 = 1;
+
 /// How the form factor from a shooter to each element is evaluated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -81,8 +84,7 @@ impl Projection {
 #[serde(rename_all = "lowercase")]
 pub enum Rasteriser {
     /// On the CPU where the adapter is itself a CPU rasteriser (lavapipe,
-    /// which draws a shot's cells several times slower: README
-    /// "Performance"), on the device otherwise.
+    /// which draws a shot's cells several times slower: docs/notebook/shot-phases.md), on the device otherwise.
     #[default]
     Auto,
     /// Always by the wgpu device.
@@ -136,7 +138,7 @@ pub enum DealRows {
 
 /// The fewest polygons of a scene whose bounds `--deal-bounds auto` deals
 /// (on any number of ranks above one: measured on cubes-b1 and
-/// classroom-c3, README "Ranks", since the pieces travel as (proxy, cell
+/// classroom-c3, docs/notebook/ranks.md "Ranks", since the pieces travel as (proxy, cell
 /// rectangle), 20 bytes instead of the whole 152-byte rectangle, a shot is
 /// 1.5-5 % faster dealt at 2 ranks and a rank's CPU 7-9 % less at 4; with
 /// the 152-byte pieces 2 ranks had not gained).
@@ -159,7 +161,7 @@ impl DealBounds {
 }
 
 /// Pieces per quad polygon edge the hemisphere rasteriser draws by default
-/// (chosen by `radiosity bench`; see README "Performance").
+/// (chosen by `radiosity-lab bench`; see docs/notebook/shot-speed.md "Performance").
 pub const DEFAULT_RASTER_PIECES: u32 = 1;
 
 /// The memory each rank aims to stay within by default, bytes (`--memory`):
@@ -167,7 +169,7 @@ pub const DEFAULT_RASTER_PIECES: u32 = 1;
 pub const DEFAULT_MEMORY_BUDGET: u64 = 2_000_000_000;
 
 /// Shooters below this fraction of the emitted power draw the coarse
-/// hemisphere (`--coarse-below`; README "Coarse hemispheres for weak shooters").
+/// hemisphere (`--coarse-below`; docs/method/form-factors.md "Coarse hemispheres for weak shooters").
 pub const DEFAULT_COARSE_BELOW: f64 = 3e-3;
 
 /// The transport tier's threshold where it is on by default (meshes of more

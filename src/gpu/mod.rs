@@ -58,6 +58,24 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
 }
 
+/// Keeps Mesa's device-selection layer out of a headless process. The
+/// layer is implicit: it asks the window system (Wayland, then X) which GPU
+/// drives the display, and without one it prints "error: XDG_RUNTIME_DIR is
+/// invalid or not set" on every run, though nothing is wrong. A renderer
+/// with no window has no display to match, so unless the user chose a
+/// device through the layer (`MESA_VK_DEVICE_SELECT`) or set
+/// `NODEVICE_SELECT` themselves, it is switched off by the loader's own
+/// switch. Call it first thing in `main`, before any thread starts (it sets
+/// the process environment).
+pub fn leave_out_device_select_layer() {
+    let chosen = ["NODEVICE_SELECT", "MESA_VK_DEVICE_SELECT"]
+        .iter()
+        .any(|v| std::env::var_os(v).is_some());
+    if !chosen {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+}
+
 /// The backends the renderer and the viewer open: Vulkan only (its float
 /// render targets need it, and a missing driver must be an error rather
 /// than a fall-back to GL), unless `WGPU_BACKEND` says otherwise.

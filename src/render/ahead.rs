@@ -80,7 +80,7 @@ const MOST_HOLD: u32 = 256;
 /// first counted, chose each row in its shot in the 4096-cube room, 30 %
 /// slower. Still fooled by a sudden drop: Sponza's shots cost a tenth
 /// after its first 130, so its probe measures ahead as faster, and its
-/// solve pays 0.3-0.8 s (README "Rows drawn ahead"). Windows of 16 shots,
+/// solve pays 0.3-0.8 s (docs/notebook/shot-speed.md "Rows drawn ahead"). Windows of 16 shots,
 /// ABBA four times, measured the switches more than the ways. Only time
 /// depends on it: the rows are the same either way.
 #[derive(Debug)]

@@ -10,6 +10,7 @@ use super::trace::{gather_whole, Extra, Trace};
 use crate::checkpoint::Header;
 use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
+use crate::lit_mesh::LitMesh;
 use crate::mesh::Mesh;
 use crate::parallel::{Collectives, Exchange, Single, ThreadComm, Traffic};
 use crate::render::image::{solution_image, view_for};
@@ -25,7 +26,7 @@ use std::time::{Duration, Instant};
 /// The result of [`render`].
 pub struct Rendered {
     /// The discretised scene.
-    pub mesh: Mesh,
+    pub mesh: LitMesh,
     /// Radiosity per element (the ambient term added when the options say so).
     pub radiosity: Vec<[f64; 3]>,
     /// Image size and linear radiance pixels (top row first), if an image was asked for.
@@ -69,7 +70,7 @@ pub fn render_ranks(
     if opts.batch <= 1 {
         // Not an error (the same numbers as one rank), but rarely wanted.
         log::warn!(
-            "{ranks} ranks with --batch 1 split each shot's hemisphere between them, which on one machine is slower than one rank; --batch 16 or more gives each rank whole shots (README \"Ranks in one process\")"
+            "{ranks} ranks with --batch 1 split each shot's hemisphere between them, which on one machine is slower than one rank; --batch 16 or more gives each rank whole shots (docs/guide/mpi.md)"
         );
     }
     let progress = std::sync::Mutex::new(progress);
@@ -103,7 +104,7 @@ fn solve_mesh(
         )));
     }
     Ok(Refined {
-        mesh: Mesh::build_refined(scene, &opts.mesh_settings(), &c.header.factors),
+        mesh: LitMesh::build_refined(scene, &opts.mesh_settings(), &c.header.factors),
         refinement: c.header.refinement.clone(),
         factors: c.header.factors.clone(),
         // The checkpoint's trace holds the passes' points.
@@ -116,7 +117,7 @@ fn solve_mesh(
 /// A solver at the start of the final solve (or where a checkpoint left
 /// it), its trace so far, and the solve seconds already spent.
 fn start_solver<'m>(
-    mesh: &'m Mesh,
+    mesh: &'m LitMesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
     (refinement, passes, handoff): (&Refinement, Vec<TracePoint>, Option<Handoff>),
@@ -171,7 +172,7 @@ struct Solved<'m> {
 #[allow(clippy::too_many_arguments)]
 fn final_solve<'m>(
     scene: &Scene,
-    mesh: &'m Mesh,
+    mesh: &'m LitMesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
     source: &mut GpuFormFactors,

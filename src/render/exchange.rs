@@ -168,7 +168,7 @@ mod tests {
     /// A made-up whole item buffer (some cells empty) and covered-cell
     /// counts, the same on every call.
     fn drawing(res: Resolution) -> (Vec<u32>, Vec<(u32, u64)>) {
-        let mut rng = crate::fuzz::Rng(12345);
+        let mut rng = crate::rng::Rng(12345);
         let mut next = || rng.next_u64() as u32;
         let items = (0..res.cells())
             .map(|_| match next() % 10 {

@@ -13,8 +13,7 @@ use crate::render::options::RenderOptions;
 use crate::scene::{Camera, Scene};
 use crate::solver::Solver;
 
-/// Default shadow rays per emitter per image sample (`--shadow-rays`).
-pub const DEFAULT_SHADOW_RAYS: u32 = 1;
+pub use crate::settings::DEFAULT_SHADOW_RAYS;
 
 /// Image samples per pixel along each axis (box-filtered), where the
 /// device allows the supersampled target.

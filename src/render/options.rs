@@ -9,7 +9,7 @@ use crate::parallel::Exchange;
 use crate::scene::{Scene, Subdivision};
 pub use crate::settings::{
     DealBounds, FormFactorMethod, Projection, Rasteriser, AUTO_TRANSPORT_BELOW,
-    DEFAULT_COARSE_BELOW, DEFAULT_MEMORY_BUDGET, DEFAULT_RASTER_PIECES,
+    DEFAULT_COARSE_BELOW, DEFAULT_MEMORY_BUDGET, DEFAULT_RASTER_PIECES, DEFAULT_SHADOW_RAYS,
     DEFAULT_TESSELLATION_TOLERANCE,
 };
 use crate::solver::StopRule;
@@ -148,7 +148,7 @@ impl Default for RenderOptions {
             width: 512,
             height: None,
             shading: Shading::Smooth,
-            shadow_rays: crate::render::image::DEFAULT_SHADOW_RAYS,
+            shadow_rays: DEFAULT_SHADOW_RAYS,
             ambient: crate::settings::AmbientTerm::default(),
             cache_rows: true,
             memory_budget: DEFAULT_MEMORY_BUDGET,
@@ -170,7 +170,7 @@ impl RenderOptions {
     /// The hemisphere resolution weak shooters draw at, if there is a coarse
     /// tier: `coarse`, or half `resolution` along each axis but no coarser
     /// than 64 x 256 (weak shooters at 48 x 192 or 32 x 128 leave the 64
-    /// cubes above 1 %: README "Coarse hemispheres for weak shooters"), when
+    /// cubes above 1 %: docs/method/form-factors.md "Coarse hemispheres for weak shooters"), when
     /// `coarse_below` is above 0 and it has fewer cells than `resolution`.
     pub fn coarse_tier(&self) -> Option<Resolution> {
         let res = self.resolution;

@@ -9,7 +9,7 @@ use super::source::GpuFormFactors;
 use super::trace::{gather_whole, Extra, Trace};
 use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
 use crate::gpu::Gpu;
-use crate::lights::KeptField;
+use crate::lit_mesh::LitMesh;
 use crate::mesh::Mesh;
 use crate::parallel::{Collectives, Single};
 use crate::refine::{self, PatchStats};
@@ -26,7 +26,7 @@ const SHADING_CAP: f64 = 16.0;
 /// What refinement by need leaves the final solve.
 pub struct Refined {
     /// The mesh to solve.
-    pub mesh: Mesh,
+    pub mesh: LitMesh,
     /// What the passes did.
     pub refinement: Refinement,
     /// Per polygon, its patch-grid factor.
@@ -89,7 +89,7 @@ pub fn refined_mesh_shown(
     let mut kept = None;
     for pass in 0..levels {
         let mut mesh = crate::parallel::built_once(comm, || {
-            Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
+            LitMesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
         });
         if pass == 0 {
             summary.start = [mesh.patches.len(), mesh.elements.len()];
@@ -171,14 +171,14 @@ pub fn refined_mesh_shown(
             last = Some(mesh);
             break;
         }
-        kept = Some(KeptField::take(&mut mesh));
+        kept = Some(mesh.take_field());
     }
     summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
     summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
     summary.shading_polygons = shading.iter().filter(|&&x| x).count() as u32;
     let mesh = last.unwrap_or_else(|| {
         crate::parallel::built_once(comm, || {
-            Mesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
+            LitMesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
         })
     });
     summary.end = [mesh.patches.len(), mesh.elements.len()];
@@ -208,7 +208,7 @@ const TRANSPORT_RUNS_PER_RANK: usize = 32;
 /// groups taken from a pool as it comes free
 /// ([`crate::ambient::Plan::pieces`]) and all gathering the counts: the
 /// same bits as one rank casting them all, whoever cast what.
-pub(super) fn shared_transport(mesh: &Mesh, budget: usize, comm: &dyn Collectives) {
+pub(super) fn shared_transport(mesh: &LitMesh, budget: usize, comm: &dyn Collectives) {
     mesh.ambient.get_or_init(|| {
         Transport::built_within(mesh, budget, |plan| {
             let ranks = comm.size();
@@ -313,7 +313,7 @@ pub struct Handoff {
 fn one_pass(
     gpu: &Gpu,
     scene: &Scene,
-    mesh: &Mesh,
+    mesh: &LitMesh,
     opts: &RenderOptions,
     comm: &dyn Collectives,
     (pass, before): (u32, f64),
@@ -326,7 +326,7 @@ fn one_pass(
     let one = Single::default();
     let mut source = GpuFormFactors::for_solve(gpu, mesh, opts, (comm, &one), scene.extent())?;
     // Coarse, unsplit hemispheres measure what the pass decides by as
-    // well, in 2-6x less pass time (README "Refinement by need"); the
+    // well, in 2-6x less pass time (docs/guide/meshing.md "Refinement by need"); the
     // emitters draw fine, as a coarse light over-refined the 64 cubes
     // (8100 -> 12 900 elements).
     source.measuring();

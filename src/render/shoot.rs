@@ -7,7 +7,7 @@
 use super::ahead::{Ahead, RUNNERS_UP};
 use super::options::{RenderError, RenderOptions};
 use super::source::{GpuFormFactors, GroupPart, Started};
-use crate::mesh::Mesh;
+use crate::lit_mesh::LitMesh;
 use crate::parallel::{Collectives, Deal};
 use crate::solver::{
     Candidate, FormFactorSource, NetUnshot, Shot, ShotRegion, Solver, StopRule, Transfer,
@@ -191,7 +191,7 @@ pub enum Step {
 /// The shooting loop, one shot at a time (the renderer runs it to the end;
 /// the viewer steps it between its commands).
 pub struct ShotLoop<'m> {
-    mesh: &'m Mesh,
+    mesh: &'m LitMesh,
     comm: &'m dyn Collectives,
     stop: StopRule,
     floor: f64,
@@ -218,7 +218,7 @@ pub struct ShotLoop<'m> {
 impl<'m> ShotLoop<'m> {
     /// A loop that shoots until `stop` says done, or until the strongest
     /// shooter left has less than `floor` power.
-    pub fn new(mesh: &'m Mesh, comm: &'m dyn Collectives, stop: StopRule, floor: f64) -> Self {
+    pub fn new(mesh: &'m LitMesh, comm: &'m dyn Collectives, stop: StopRule, floor: f64) -> Self {
         Self {
             mesh,
             comm,
@@ -1005,7 +1005,7 @@ fn unpack_rows<'w>(
 /// ahead where [`Ahead::applies`] (the final solve; a pass measures the
 /// penumbrae of the rows its source draws, so it draws each in its shot).
 pub fn shoot_until<'m>(
-    mesh: &'m Mesh,
+    mesh: &'m LitMesh,
     opts: &RenderOptions,
     (floor, ahead): (f64, bool),
     comm: &dyn Collectives,
@@ -1088,7 +1088,7 @@ mod tests {
 
     #[test]
     fn rows_travel_exactly_and_uniform_ones_in_a_third() {
-        let mesh = crate::mesh::unit_square(64, 2);
+        let mesh = LitMesh::unlit(crate::mesh::unit_square(64, 2));
         let solver = Solver::partitioned(&mesh, 0, 2);
         let shoot = [0.3, 0.7, 1e-9];
         let uniform_row: Vec<Transfer> = (0..mesh.elements.len() as u32)

@@ -10,6 +10,7 @@ use super::tiers::{layout_for, TierCells, TierChoice};
 use crate::formfactor::{self, Row};
 use crate::gpu::{self, Gpu, GpuError, HemisphereRasterizer, ProxyShapes};
 use crate::hemisphere::{FormFactorAccumulator, Resolution, TileLayout, EMPTY, FIXED_ONE};
+use crate::lit_mesh::LitMesh;
 use crate::mesh::{Mesh, ShooterFrame};
 use crate::parallel::{self, Collectives, Single};
 use crate::settings::{FormFactorMethod, Projection, Rasteriser};
@@ -150,7 +151,7 @@ const CACHED_ROW_COST: f64 = 0.02;
 /// the form factors of this rank's elements only.
 pub struct GpuFormFactors<'a> {
     gpu: &'a Gpu,
-    mesh: &'a Mesh,
+    mesh: &'a LitMesh,
     comm: &'a dyn Collectives,
     /// The hemisphere at the shot resolution, and at the coarse one for weak
     /// shooters (see [`RenderOptions::coarse_below`]).
@@ -231,7 +232,7 @@ impl<'a> GpuFormFactors<'a> {
     /// elements'; otherwise the ranks split each hemisphere over `comm`.
     pub fn for_solve(
         gpu: &'a Gpu,
-        mesh: &'a Mesh,
+        mesh: &'a LitMesh,
         opts: &RenderOptions,
         (comm, one): (&'a dyn Collectives, &'a Single),
         extent: f32,
@@ -246,7 +247,7 @@ impl<'a> GpuFormFactors<'a> {
     /// multi-rank `layout`, every rank's tiles are drawn here in turn.
     pub fn new(
         gpu: &'a Gpu,
-        mesh: &'a Mesh,
+        mesh: &'a LitMesh,
         opts: &RenderOptions,
         comm: &'a dyn Collectives,
         extent: f32,
@@ -262,7 +263,7 @@ impl<'a> GpuFormFactors<'a> {
     /// As [`GpuFormFactors::new`], with what another source of the same
     /// mesh and options shares (see [`Shared`]).
     fn sharing(
-        (gpu, mesh): (&'a Gpu, &'a Mesh),
+        (gpu, mesh): (&'a Gpu, &'a LitMesh),
         opts: &RenderOptions,
         comm: &'a dyn Collectives,
         extent: f32,

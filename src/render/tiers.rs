@@ -63,7 +63,7 @@ pub const AUTO_TILES_PER_RANK_AXIS: u32 = 4;
 
 /// The automatic tile size for a hemisphere of `res` over a `px` x `py`
 /// rank grid: [`AUTO_TILES_PER_RANK_AXIS`] tiles per rank along each axis.
-/// Measured on two ranks of one core each (README "Ranks"): 1 x 1 tiles
+/// Measured on two ranks of one core each (docs/notebook/ranks.md "Ranks"): 1 x 1 tiles
 /// (the paper's per-cell interleave) make every rank bound and draw nearly
 /// every rectangle, since nearly every rectangle holds cells of every rank
 /// (cubes-b1 1.32x, classroom-c3 1.29x); tiles this size let each rank skip

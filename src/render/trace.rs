@@ -185,7 +185,8 @@ impl<'m> Trace<'m> {
         }
     }
 
-    /// The points so far, the last made equal to `report` (which the trace keeps going after).
+    /// The points so far, the last made equal to `report` (which the trace
+    /// keeps going after), thinned for the report ([`report::thin_trace`]).
     pub fn ending_with(&self, report: &Report, seconds: f64) -> Vec<TracePoint> {
         let mut points = self.points.clone();
         if points
@@ -201,6 +202,7 @@ impl<'m> Trace<'m> {
             surfaces: report.surfaces.clone(),
             pass: None,
         });
+        report::thin_trace(&mut points);
         points
     }
 }

@@ -1,7 +1,7 @@
 //! Built-in scenes, generated as glTF text so they go through the same loader
 //! as files (and can be written out with `radiosity scene NAME --out FILE`).
 
-use super::gltf_write::{write_gltf, GltfSurface};
+use super::gltf_write::{box_faces, write_gltf, GltfSurface};
 use super::Subdivision;
 use glam::{Quat, Vec3};
 
@@ -38,55 +38,6 @@ pub fn builtin_gltf(name: &str) -> Option<String> {
             (1..=40).contains(&n).then(|| cubes(n))
         }
     }
-}
-
-/// Six faces of an axis-aligned box, each facing outwards (or inwards).
-pub(super) fn box_faces(lo: Vec3, hi: Vec3, outward: bool) -> Vec<Vec<Vec3>> {
-    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
-    let (a, b) = (lo, hi);
-    // Counter-clockwise seen from outside.
-    let mut faces = vec![
-        vec![
-            c(a.x, a.y, a.z),
-            c(a.x, a.y, b.z),
-            c(a.x, b.y, b.z),
-            c(a.x, b.y, a.z),
-        ], // -x
-        vec![
-            c(b.x, a.y, a.z),
-            c(b.x, b.y, a.z),
-            c(b.x, b.y, b.z),
-            c(b.x, a.y, b.z),
-        ], // +x
-        vec![
-            c(a.x, a.y, a.z),
-            c(b.x, a.y, a.z),
-            c(b.x, a.y, b.z),
-            c(a.x, a.y, b.z),
-        ], // -y
-        vec![
-            c(a.x, b.y, a.z),
-            c(a.x, b.y, b.z),
-            c(b.x, b.y, b.z),
-            c(b.x, b.y, a.z),
-        ], // +y
-        vec![
-            c(a.x, a.y, a.z),
-            c(a.x, b.y, a.z),
-            c(b.x, b.y, a.z),
-            c(b.x, a.y, a.z),
-        ], // -z
-        vec![
-            c(a.x, a.y, b.z),
-            c(b.x, a.y, b.z),
-            c(b.x, b.y, b.z),
-            c(a.x, b.y, b.z),
-        ], // +z
-    ];
-    if !outward {
-        faces.iter_mut().for_each(|f| f.reverse());
-    }
-    faces
 }
 
 /// The paper's benchmark: a 10 m room (10 x 10 patches of 2 x 2 elements per

@@ -461,7 +461,7 @@ mod tests {
             .chain(&families)
             .map(|name| crate::scene::open_as_authored(name).unwrap().polygons)
             .collect();
-        let mut rng = crate::fuzz::Rng(7);
+        let mut rng = crate::rng::Rng(7);
         let mut unit = || crate::sampling::unit(&mut rng);
         let floor = Polygon::square(Vec3::ZERO, 2.0, Vec3::X, -Vec3::Z, [0.5; 3], [0.0; 3]);
         let mut scatter = vec![floor];

@@ -7,9 +7,9 @@
 //! balance; none carries a subdivision of its own (the defaults mesh it).
 //! Named `family-KIND-SEED`, e.g. `family-stacked-3`.
 
-use super::builtin::box_faces;
+use super::gltf_write::box_faces;
 use super::gltf_write::{write_gltf, GltfSurface};
-use crate::fuzz::Rng;
+use crate::rng::Rng;
 use glam::{Quat, Vec3};
 
 /// The kinds of scene in the family.

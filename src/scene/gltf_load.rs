@@ -32,7 +32,7 @@ pub fn load_slice(bytes: &[u8], name: &str) -> Result<Scene, SceneError> {
 
 /// gltf-json 1.4's validator indexes `accessors` with a primitive's POSITION
 /// index before checking it, and panics on a file where it is out of range
-/// (found by `radiosity fuzz`): check every primitive's accessor indices first.
+/// (found by `radiosity-lab fuzz`): check every primitive's accessor indices first.
 fn check_primitive_indices(bytes: &[u8], name: &str) -> Result<(), SceneError> {
     let json = if bytes.starts_with(b"glTF") {
         match gltf::Glb::from_slice(bytes) {

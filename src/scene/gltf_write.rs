@@ -168,3 +168,52 @@ pub fn axis_rect(axis: usize, at: f32, lo: [f32; 2], hi: [f32; 2], positive: boo
     }
     q
 }
+
+/// Six faces of an axis-aligned box, each facing outwards (or inwards).
+pub(super) fn box_faces(lo: Vec3, hi: Vec3, outward: bool) -> Vec<Vec<Vec3>> {
+    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let (a, b) = (lo, hi);
+    // Counter-clockwise seen from outside.
+    let mut faces = vec![
+        vec![
+            c(a.x, a.y, a.z),
+            c(a.x, a.y, b.z),
+            c(a.x, b.y, b.z),
+            c(a.x, b.y, a.z),
+        ], // -x
+        vec![
+            c(b.x, a.y, a.z),
+            c(b.x, b.y, a.z),
+            c(b.x, b.y, b.z),
+            c(b.x, a.y, b.z),
+        ], // +x
+        vec![
+            c(a.x, a.y, a.z),
+            c(b.x, a.y, a.z),
+            c(b.x, a.y, b.z),
+            c(a.x, a.y, b.z),
+        ], // -y
+        vec![
+            c(a.x, b.y, a.z),
+            c(a.x, b.y, b.z),
+            c(b.x, b.y, b.z),
+            c(b.x, b.y, a.z),
+        ], // +y
+        vec![
+            c(a.x, a.y, a.z),
+            c(a.x, b.y, a.z),
+            c(b.x, b.y, a.z),
+            c(b.x, a.y, a.z),
+        ], // -z
+        vec![
+            c(a.x, a.y, b.z),
+            c(b.x, a.y, b.z),
+            c(b.x, b.y, b.z),
+            c(a.x, b.y, b.z),
+        ], // +z
+    ];
+    if !outward {
+        faces.iter_mut().for_each(|f| f.reverse());
+    }
+    faces
+}

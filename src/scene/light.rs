@@ -1,7 +1,7 @@
 //! Light that does not come from a surface: glTF's `KHR_lights_punctual`
 //! (point, spot, directional), a sun (`--sun`) and a uniform sky (`--sky`).
 //! Plain data and the units' conversion; what a light delivers is
-//! `crate::lights`.
+//! `lights`.
 //!
 //! Units are radiometric, as emission is (W sr^-1 m^-2): a point or spot
 //! light's intensity is W/sr, a directional light's W/m^2 on a surface

@@ -14,6 +14,7 @@
 //! Each element of the shooter shoots its own share, per channel. The solver
 //! knows nothing of GPUs or ranks: form factors arrive as sparse [`Transfer`]s.
 
+use crate::lit_mesh::LitMesh;
 use crate::mesh::Mesh;
 use crate::numeric::prefetch;
 use crate::parallel::Owners;
@@ -21,75 +22,8 @@ use crate::parallel::Owners;
 mod state;
 mod vote;
 use crate::settings::AmbientTerm;
+pub use crate::shot::{FormFactorSource, ShotRegion, Transfer};
 pub use state::{SolverState, StateMismatch};
-
-/// Anything that can produce the form factors from a shooter patch to the elements.
-pub trait FormFactorSource {
-    /// The error a shot can fail with.
-    type Error;
-    /// Fills `out` with what shooter patch `shooter` sends each element it
-    /// reaches, shooting `region` (see [`Solver::shooting_region`]), sorted by element.
-    fn form_factors(
-        &mut self,
-        shooter: u32,
-        region: &ShotRegion,
-        out: &mut Vec<Transfer>,
-    ) -> Result<(), Self::Error>;
-}
-
-/// What one shot sends one receiving element.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Transfer {
-    /// The receiving element.
-    pub element: u32,
-    /// F_ij from the shooter patch to the element, as if the patch shot
-    /// uniformly (the geometry alone: the share of a shot that lands).
-    pub form_factor: f64,
-    /// sum_k F_kj * S_k over the shooter's elements k, per channel: the shot
-    /// radiosity the element receives before its reflectance and the area
-    /// ratio A_i / A_j (F_ij * S_i when the patch shoots uniformly).
-    pub radiosity: [f64; 3],
-}
-
-/// How a shooter patch shoots: where its hemisphere goes, and what radiosity
-/// it and each of its elements shoot.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ShotRegion {
-    /// The hemisphere's centre (a point of the patch).
-    pub centre: glam::Vec3,
-    /// The shooter's unshot power (of |dB|, sum over RGB), W: how much the
-    /// shot matters (a weak one may draw a coarser hemisphere).
-    pub power: f64,
-    /// The radiosity the patch shoots, per channel (area-weighted over its elements).
-    pub shoot: [f64; 3],
-    /// Per element of the patch (in order), the radiosity it shoots, per
-    /// channel: the patch shoots each element's own share, so a coarse
-    /// shooter keeps the detail its elements received (hidden elements shoot
-    /// nothing). Empty when all equal `shoot` (the patch shoots uniformly).
-    pub elements: Vec<[f64; 3]>,
-}
-
-impl ShotRegion {
-    /// The region of a patch whose elements shoot `elements` (in order; its
-    /// area-weighted mean is `shoot`): uniform, with no per-element list,
-    /// when every element shoots the same. The one place that decides it.
-    pub fn new(centre: glam::Vec3, power: f64, shoot: [f64; 3], elements: Vec<[f64; 3]>) -> Self {
-        match elements.first() {
-            Some(first) if elements.iter().all(|s| s == first) => Self {
-                centre,
-                power,
-                shoot: *first,
-                elements: Vec::new(),
-            },
-            _ => Self {
-                centre,
-                power,
-                shoot,
-                elements,
-            },
-        }
-    }
-}
 
 /// When to stop shooting.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -215,7 +149,7 @@ pub const UNSHOT_ONE: f64 = (1u64 << 40) as f64;
 /// belong to ranks as [`Owners`] deals them, and an element to its
 /// patch's rank.
 pub struct Solver<'m> {
-    mesh: &'m Mesh,
+    mesh: &'m LitMesh,
     rank: usize,
     ranks: usize,
     /// Radiosity B per element, W/m^2 per channel.
@@ -373,12 +307,12 @@ fn abs_power(b: &[f64; 3], area: f64) -> f64 {
 
 impl<'m> Solver<'m> {
     /// Starts with B = dB = E (the emitters' exitance) everywhere.
-    pub fn new(mesh: &'m Mesh) -> Self {
+    pub fn new(mesh: &'m LitMesh) -> Self {
         Self::partitioned(mesh, 0, 1)
     }
 
     /// The share of rank `rank` of `ranks` (it holds every patch but updates only its own).
-    pub fn partitioned(mesh: &'m Mesh, rank: usize, ranks: usize) -> Self {
+    pub fn partitioned(mesh: &'m LitMesh, rank: usize, ranks: usize) -> Self {
         let owners = Owners::new(mesh.patches.len(), ranks);
         let PerElement {
             exitance: radiosity,
@@ -425,7 +359,7 @@ impl<'m> Solver<'m> {
         solver
     }
 
-    /// The lights' and sky's one shot ([`crate::lights`]): each element
+    /// The lights' and sky's one shot (`lights`): each element
     /// reflects rho E of what they deliver, into its radiosity and its
     /// patch's unshot store; the lights' part is direct light (the camera
     /// image traces it again), the sky's is not. Every rank does it whole,
@@ -471,7 +405,7 @@ impl<'m> Solver<'m> {
     }
 
     /// The mesh this solver works on.
-    pub fn mesh(&self) -> &'m Mesh {
+    pub fn mesh(&self) -> &'m LitMesh {
         self.mesh
     }
 
@@ -1112,7 +1046,7 @@ impl<'m> Solver<'m> {
 
     /// The display's ambient term: the irradiance per group of surfaces
     /// that this solver's unshot power will deliver, carried along the
-    /// mesh's geometry ([`crate::ambient::Transport`]), with the transport
+    /// mesh's geometry (`ambient::Transport`), with the transport
     /// (None when nothing is unshot). Needs the whole solution (one rank,
     /// or assembled).
     fn carried_ambient(&self) -> Option<(&'m crate::ambient::Transport, Vec<[f64; 3]>)> {
@@ -1142,10 +1076,10 @@ mod tests {
     use super::*;
 
     /// One unit square of 2 x 2 patches that emits 1 W/m^2 and reflects 0.5.
-    fn emitting_square() -> Mesh {
+    fn emitting_square() -> LitMesh {
         let mut mesh = crate::mesh::unit_square(2, 1);
         mesh.polygons[0].exitance = [1.0; 3];
-        mesh
+        LitMesh::unlit(mesh)
     }
 
     #[test]
@@ -1160,6 +1094,7 @@ mod tests {
         for j in degenerate {
             mesh.elements[j as usize].area = 0.0;
         }
+        let mut mesh = LitMesh::unlit(mesh);
         mesh.light_field = crate::lights::LightField {
             direct: vec![[1.0; 3]; n],
             sky: vec![[0.0; 3]; n],

@@ -211,7 +211,7 @@ mod tests {
 
     #[test]
     fn the_kept_vote_is_the_scans_after_any_changes() {
-        let mut rng = crate::fuzz::Rng(0x5eed);
+        let mut rng = crate::rng::Rng(0x5eed);
         for leaves in [0usize, 1, 2, 3, 7, 64, 1000] {
             let mut power: Vec<f64> = (0..leaves).map(|_| (rng.next_u64() % 5) as f64).collect();
             let fixed_of = |w: f64| (w * 1000.0) as u64;

@@ -749,7 +749,7 @@ fn ranks_divide_the_hemisphere_cells_and_say_what_they_repeat() {
             "{ranks} ranks: receivers {receivers:?} (even: {fair})"
         );
         // Rectangles: each rank draws those that hold some of its cells
-        // (with 1 x 1 tiles, nearly all of them; see README "Ranks"), or,
+        // (with 1 x 1 tiles, nearly all of them; see docs/notebook/ranks.md "Ranks"), or,
         // dealing the bounds (`auto`: scenes of 1024 polygons and more,
         // not this box), finds those of its polygons.
         // Either way at most 3/4 of them from 2 ranks on.

@@ -20,8 +20,8 @@ fn flaws_real_files_carry_load_with_the_documented_warnings_and_a_sun_lights_it(
     // AMD_split_roughnessMetallic used to stop the load. It has no light of
     // its own (the sky and sun light it): rendering it alone says how to
     // light it.
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures/flawed/flawed.gltf");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/flawed/flawed.gltf");
     let mut scene = load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let about = |s: &str| scene.warnings.iter().filter(|w| w.contains(s)).count();
     assert_eq!(

@@ -252,7 +252,7 @@ fn a_refinement_pass_shows_its_solution_from_its_first_shot() {
 /// shares, so the result is coarser than the default's, but it must stay
 /// within the bounds (1 % mean, 3 % worst) on a built-in scene and
 /// two held-out ones. (At 1e-3, held-out stacked boxes end 6.7 % off on one
-/// box, and family-boxes-2 3.1 %: README "Weak shooters along the transport".)
+/// box, and family-boxes-2 3.1 %: docs/bench/transport-below.md "Weak shooters along the transport".)
 #[test]
 fn weak_shooters_along_the_transport_stay_within_one_percent_mean() {
     let opts = RenderOptions {

@@ -516,7 +516,7 @@ impl Viewer {
             .x_axis_label(if self.plot_time { "seconds" } else { "shots" });
         if let Some(reference) = &self.reference {
             // The trace's per-node radiosities against the reference: the
-            // same error `radiosity accuracy` charts.
+            // same error `radiosity-lab accuracy` charts.
             // The refinement passes' points count their own shots: against
             // shots only the final solve's are drawn, against time all.
             let (mean, worst): (Vec<[f64; 2]>, Vec<[f64; 2]>) = snap
@@ -768,7 +768,7 @@ impl eframe::App for Viewer {
 /// How long closing the window waits for the background threads.
 const EXIT_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
 
-/// The `surfaces` of a report or of a `radiosity accuracy` reference.
+/// The `surfaces` of a report or of a `radiosity-lab accuracy` reference.
 fn read_reference(path: &std::path::Path) -> Result<Vec<radiosity::report::Surface>, String> {
     #[derive(serde::Deserialize)]
     struct WithSurfaces {

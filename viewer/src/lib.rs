@@ -54,7 +54,7 @@ pub struct Args {
     #[arg(long)]
     pub continuous: bool,
     /// Compare the convergence plot with this reference (a report or a
-    /// `radiosity accuracy` reference JSON with `surfaces`): the plot then
+    /// `radiosity-lab accuracy` reference JSON with `surfaces`): the plot then
     /// shows the area-weighted mean error per surface against time.
     #[arg(long)]
     pub reference: Option<PathBuf>,

@@ -2,6 +2,7 @@
 //! factors, driven by commands from the window and publishing snapshots.
 
 use radiosity::gpu::Gpu;
+use radiosity::lit_mesh::LitMesh;
 use radiosity::mesh::Mesh;
 use radiosity::parallel::Single;
 use radiosity::render::write::{write_outputs, OutputPaths};
@@ -64,7 +65,7 @@ pub struct Snapshot {
     /// Bumped whenever the radiosities change.
     pub version: u64,
     /// The mesh being solved (replaced on restart).
-    pub mesh: Option<Arc<Mesh>>,
+    pub mesh: Option<Arc<LitMesh>>,
     /// Display radiance per element (B plus ambient, over pi). Shared, so
     /// the UI's copy of a snapshot each frame copies no arrays.
     pub radiance: Arc<Vec<[f32; 3]>>,
@@ -257,7 +258,7 @@ struct PassShower<'s, W: Fn()> {
     ambient: radiosity::settings::AmbientTerm,
     wake: &'s W,
     /// The pass whose mesh was copied, and the copy.
-    mesh: Option<(u32, Arc<Mesh>)>,
+    mesh: Option<(u32, Arc<LitMesh>)>,
     last_publish: Option<Instant>,
 }
 
@@ -288,13 +289,13 @@ impl<'s, W: Fn()> PassShower<'s, W> {
             Some((p, m)) if *p == pass => m.clone(),
             _ => {
                 let m = solver.mesh();
-                let copy = Arc::new(Mesh {
+                let copy = Arc::new(LitMesh::unlit(Mesh {
                     polygons: m.polygons.clone(),
                     patches: m.patches.clone(),
                     elements: m.elements.clone(),
                     vertices: m.vertices.clone(),
                     ..Mesh::default()
-                });
+                }));
                 self.mesh = Some((pass, copy.clone()));
                 copy
             }
@@ -329,7 +330,7 @@ impl<'s, 'm, W: Fn()> Publisher<'s, 'm, W> {
     /// time with theirs (`passes`).
     fn start(
         shared: &'s Mutex<Snapshot>,
-        mesh: &Arc<Mesh>,
+        mesh: &Arc<LitMesh>,
         solver: &Solver,
         opts: &RenderOptions,
         wake: &'s W,
@@ -480,7 +481,7 @@ mod tests {
     fn a_pass_is_shown_on_its_own_mesh() {
         let scene = radiosity::scene::open("cornell").expect("scene");
         let opts = RenderOptions::default();
-        let mesh = Mesh::build_refined(&scene, &opts.mesh_settings(), &[]);
+        let mesh = LitMesh::build_refined(&scene, &opts.mesh_settings(), &[]);
         let solver = Solver::new(&mesh);
         let shared = Mutex::new(Snapshot::default());
         let woken = std::cell::Cell::new(0);

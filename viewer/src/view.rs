@@ -5,7 +5,7 @@
 
 use eframe::egui::ColorImage;
 use radiosity::gpu::{Gpu, ViewRenderer, ViewSettings};
-use radiosity::mesh::Mesh;
+use radiosity::lit_mesh::LitMesh;
 use radiosity::scene::Camera;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
@@ -17,7 +17,7 @@ pub struct Request<K> {
     /// What the image shows (returned with it).
     pub key: K,
     /// The mesh.
-    pub mesh: Arc<Mesh>,
+    pub mesh: Arc<LitMesh>,
     /// Display radiance per element.
     pub radiance: Arc<Vec<[f32; 3]>>,
     /// A patch to draw in magenta (the last shooter), if any.

@@ -5,7 +5,7 @@
 use super::{GpuFormFactors, PhaseTimes, Shared};
 use crate::formfactor::Row;
 use crate::gpu::Gpu;
-use crate::mesh::Mesh;
+use crate::lit_mesh::LitMesh;
 use crate::parallel::Single;
 use crate::render::cache::RowKey;
 use crate::render::options::{RenderError, RenderOptions};
@@ -15,7 +15,7 @@ use std::time::Instant;
 /// What a sibling source is built from (see [`GpuFormFactors::parts`]).
 pub(in crate::render) struct Parts<'a> {
     gpu: &'a Gpu,
-    mesh: &'a Mesh,
+    mesh: &'a LitMesh,
     extent: f32,
     shared: Shared,
 }

@@ -1,4 +1,4 @@
-//! `radiosity accuracy --regimes`: the failure-regime study's single-polygon
+//! `radiosity-lab accuracy --regimes`: the failure-regime study's single-polygon
 //! cases (docs/accuracy.md, the same scenes as the test
 //! `traps::failure_regimes_for_both_projections`), each polygon's summed
 //! delta form factors from a point shooter against Lambert's contour

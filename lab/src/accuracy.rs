@@ -1,4 +1,4 @@
-//! `radiosity accuracy`: error against solve time, for every method option and
+//! `radiosity-lab accuracy`: error against solve time, for every method option and
 //! hemisphere resolution, beside a path tracer (Mitsuba 3) on the same axes.
 //!
 //! Error is scored per glTF node against a reference: the area-weighted mean
@@ -11,9 +11,9 @@
 //! run of this renderer (hybrid, 256 x 1024, patches of 1/40 of the scene's
 //! extent, unshot 1e-5), which cannot show the method's own bias.
 
-use crate::SolveArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use radiosity::cli::SolveArgs;
 use radiosity::gpu::Gpu;
 use radiosity::hemisphere::Resolution;
 use radiosity::output;
@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// Options of `radiosity accuracy`.
+/// Options of `radiosity-lab accuracy`.
 #[derive(Args)]
 pub struct AccuracyArgs {
     /// Scenes (built-in names or files; `squares` is the analytic pair of
@@ -42,7 +42,7 @@ pub struct AccuracyArgs {
     /// Where the CSV and the charts go (default docs/bench/accuracy, or
     /// docs/bench/projections with --projections).
     #[arg(long)]
-    out: Option<PathBuf>,
+    pub out: Option<PathBuf>,
     /// Where the cached references are (computed there when missing).
     #[arg(long, default_value = "docs/bench/accuracy")]
     references: PathBuf,
@@ -107,14 +107,14 @@ pub struct AccuracyArgs {
     /// every curve here (Sponza). Writes `error-NAME` and `summary.md` to
     /// --out (default docs/bench/reports).
     #[arg(long, value_delimiter = ',')]
-    reports: Vec<PathBuf>,
+    pub reports: Vec<PathBuf>,
     /// The independent reference the reports are scored against.
     #[arg(long)]
-    reference_file: Option<PathBuf>,
+    pub reference_file: Option<PathBuf>,
     /// With --reports: leave out the nodes whose reference has a relative
     /// standard error above this (Sponza's reached 1 % on 113 of 148).
     #[arg(long, default_value_t = 0.01)]
-    reference_error: f64,
+    pub reference_error: f64,
 }
 
 impl AccuracyArgs {
@@ -268,7 +268,7 @@ fn reference(
     }
     if !args.self_reference {
         bail!(
-            "no independent reference for {} in {}: make one with `radiosity scene {} --nodes nodes.json && python3 scripts/reference.py nodes.json --target 1e-3 > {}` (README \"An independent yardstick\"), or pass --self-reference to score against a long run of this renderer",
+            "no independent reference for {} in {}: make one with `radiosity scene {} --nodes nodes.json && python3 scripts/reference.py nodes.json --target 1e-3 > {}` (docs/method/yardstick.md), or pass --self-reference to score against a long run of this renderer",
             scene.name,
             args.independent.display(),
             scene.name,
@@ -340,6 +340,7 @@ fn run_curve_on(
         .report
         .convergence
         .iter()
+        .filter(|p| !p.surfaces.is_empty())
         .map(|p| {
             let (mean, max) = error(&p.surfaces, reference);
             Point {
@@ -359,97 +360,6 @@ fn run_curve_on(
         elements: r.report.counts.elements,
         points,
     })
-}
-
-/// Writes the scene as JSON for the path tracer: per node, world-space
-/// triangles, reflectance, emitted radiance, area; a textured node also its
-/// texture (the image written beside `path`, its factor and wrap modes) and
-/// each triangle's texture coordinates.
-pub fn export_for_pathtracer(scene: &Scene, path: &Path) -> Result<()> {
-    let mut nodes: Vec<serde_json::Value> = Vec::new();
-    let mut written = std::collections::HashMap::new();
-    for (i, name) in scene.nodes.iter().enumerate() {
-        let polys: Vec<_> = scene.polygons.iter().filter(|p| p.node == i).collect();
-        let map = polys.iter().find_map(|p| p.texture.as_ref());
-        if let Some(m) = map {
-            let alike = polys.iter().all(|p| {
-                p.texture
-                    .as_ref()
-                    .is_some_and(|t| t.texture == m.texture && t.factor == m.factor)
-            });
-            anyhow::ensure!(
-                alike,
-                "node '{name}' mixes textured and other materials: the path tracer takes one per node"
-            );
-        }
-        let (mut tris, mut uvs) = (Vec::new(), Vec::new());
-        for p in &polys {
-            for k in 1..p.vertices.len() - 1 {
-                let t = [p.vertices[0], p.vertices[k], p.vertices[k + 1]];
-                tris.push(t.map(|v| v.to_array()));
-                if let Some(m) = &p.texture {
-                    uvs.push(t.map(|v| m.uv(v).to_array()));
-                }
-            }
-        }
-        let (refl, emit) = polys
-            .first()
-            .map_or(([0.0; 3], [0.0; 3]), |p| (p.reflectance, p.emission));
-        let mut node = serde_json::json!({
-            "name": name,
-            "triangles": tris,
-            "reflectance": refl,
-            "emission": emit,
-            "area": polys.iter().map(|p| p.area() as f64).sum::<f64>(),
-        });
-        if let Some(m) = map {
-            let t = &m.texture;
-            let file = match written.get(&t.index) {
-                Some(f) => f,
-                None => {
-                    let ext = if t.encoded.1 == "image/jpeg" {
-                        "jpg"
-                    } else {
-                        "png"
-                    };
-                    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("nodes");
-                    let file = format!("{stem}.texture{}.{ext}", t.index);
-                    let dir = path.parent().unwrap_or(Path::new("."));
-                    output::write_atomic(&dir.join(&file), &t.encoded.0)?;
-                    written.entry(t.index).or_insert(file)
-                }
-            };
-            let wrap = t.texture.wrap.map(|w| match w {
-                crate::scene::texture::Wrap::Repeat => "repeat",
-                crate::scene::texture::Wrap::Mirror => "mirror",
-                crate::scene::texture::Wrap::Clamp => "clamp",
-            });
-            node["texture"] = serde_json::json!({"image": file, "factor": m.factor, "wrap": wrap});
-            node["uvs"] = serde_json::json!(uvs);
-        }
-        nodes.push(node);
-    }
-    // The camera the render uses (the file's first, or the default), for
-    // path-traced images.
-    let cam = scene.camera.unwrap_or_else(|| scene.default_camera());
-    let camera = serde_json::json!({
-        "position": cam.position.to_array(),
-        "forward": (cam.rotation * -glam::Vec3::Z).to_array(),
-        "up": (cam.rotation * glam::Vec3::Y).to_array(),
-        "yfov_degrees": cam.yfov.to_degrees(),
-        "aspect": cam.aspect,
-    });
-    // Lights as the report gives them (reference.py hands them to Mitsuba).
-    let lights: Vec<radiosity::report::LightSummary> = scene
-        .lights
-        .iter()
-        .map(radiosity::report::LightSummary::of)
-        .collect();
-    output::write_json(
-        path,
-        &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky }),
-    )?;
-    Ok(())
 }
 
 /// Debian's libLLVM 19, which Mitsuba's `llvm_ad_rgb` variant wants.
@@ -509,7 +419,7 @@ fn path_tracer(
         surfaces: Vec<Surface>,
     }
     let json = dir.join(format!("{}-pt.json", stem(&scene.name)));
-    export_for_pathtracer(scene, &json)?;
+    radiosity::export::write_nodes(scene, &json)?;
     eprintln!(
         "accuracy: path tracing {} with Mitsuba 3 ({})...",
         scene.name, args.variant
@@ -911,17 +821,6 @@ fn solver_curves(
 
 /// Runs the accuracy benchmark.
 pub fn run(args: AccuracyArgs, solve: SolveArgs) -> Result<()> {
-    if !args.reports.is_empty() {
-        let reference = args
-            .reference_file
-            .as_deref()
-            .context("--reports needs --reference-file")?;
-        let out = args
-            .out
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("docs/bench/reports"));
-        return crate::charted::run(&args.reports, reference, args.reference_error, &out);
-    }
     let gpu = Gpu::new()?;
     let out_or = |default: &str| args.out.clone().unwrap_or_else(|| PathBuf::from(default));
     if args.regimes {

@@ -6,14 +6,14 @@
 //! at 1 to 16 ranks within 15 %. The runs are measurements, not outputs of
 //! this build: the test checks the model, not the renderer's speed.
 
-use radiosity::scaling::{read_runs, Calibration, AP1000, CALLS, CLUSTER, SLOWEST_ROWS};
+use radiosity_lab::scaling::{read_runs, Calibration, AP1000, CALLS, CLUSTER, SLOWEST_ROWS};
 use std::path::Path;
 
 /// The two committed calibrations: the device's drawing, then the CPU's.
 const CALIBRATIONS: [&str; 2] = ["docs/scaling/runs", "docs/scaling/cpu/runs"];
 
 fn calibration(runs: &str) -> Calibration {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(runs);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(runs);
     let runs = read_runs(&dir).expect("the committed calibration runs");
     assert!(runs.len() >= 20, "{} runs in {}", runs.len(), dir.display());
     Calibration::fit(runs).expect("every scene has its 1- and 2-rank runs")
@@ -105,7 +105,7 @@ fn the_model_counts_a_batched_runs_calls() {
         }
     }
     let cal = calibration(CALIBRATIONS[1]);
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/scaling/cpu/pooled");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/scaling/cpu/pooled");
     let runs = read_runs(&dir).expect("the committed pooled runs");
     assert_eq!(runs.len(), 4);
     for r in &runs {

@@ -496,7 +496,7 @@ pub struct Model {
 /// A batched run's rows replayed on any number of ranks: every batch's
 /// rows with the weights the render dealt them by and the CPU seconds they
 /// took on one rank, dealt again as the render deals them
-/// ([`crate::parallel::Deal`]: one of the dearest rows a rank, the rest
+/// ([`radiosity::parallel::Deal`]: one of the dearest rows a rank, the rest
 /// taken by whichever rank comes free first). The slowest rank's rows set a
 /// batch's time, so the imbalance is the rows' own, not a fitted law. A
 /// rank's CPU seconds outside its rows follow `rest_a + s rest_b / N`,
@@ -558,7 +558,9 @@ impl Replay {
         let mut tickets = 0.0;
         for batch in &self.batches {
             let weights: Vec<f64> = (0..ranks).flat_map(|_| batch.iter().map(|r| r.0)).collect();
-            let pool = crate::parallel::Deal::new(&weights, ranks, true).pool.len();
+            let pool = radiosity::parallel::Deal::new(&weights, ranks, true)
+                .pool
+                .len();
             if pool > 0 {
                 tickets += pool as f64 / n + 1.0;
             }
@@ -581,7 +583,7 @@ impl Replay {
             // Every rank weighs a row alike here (no row caches).
             let weights: Vec<f64> = (0..n).flat_map(|_| batch.iter().map(|r| r.0)).collect();
             let seconds: Vec<f64> = batch.iter().map(|r| r.1).collect();
-            let load = crate::parallel::Deal::new(&weights, n, pooled).loads(&seconds, n);
+            let load = radiosity::parallel::Deal::new(&weights, n, pooled).loads(&seconds, n);
             most += load.iter().copied().fold(0.0, f64::max);
             least += load.iter().copied().fold(f64::INFINITY, f64::min);
         }

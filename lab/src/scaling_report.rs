@@ -1,17 +1,17 @@
-//! `radiosity scaling`: fits the performance model (`radiosity::scaling`)
+//! `radiosity-lab scaling`: fits the performance model (`crate::scaling`)
 //! to the runs of `scripts/calibrate-scaling.sh`, checks it against them,
 //! and redraws the paper's figures 8-12 for up to 1024 ranks over two
 //! networks (docs/scaling.md).
 
+use crate::scaling::{self, Calibration, Model, Network, AP1000, CLUSTER, PHASES};
 use anyhow::Result;
 use clap::Args;
 use plotters::chart::SeriesLabelPosition;
 use radiosity::output;
-use radiosity::scaling::{self, Calibration, Model, Network, AP1000, CLUSTER, PHASES};
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-/// Options of `radiosity scaling`.
+/// Options of `radiosity-lab scaling`.
 #[derive(Args)]
 pub struct ScalingArgs {
     /// Directory of calibration reports (scripts/calibrate-scaling.sh).

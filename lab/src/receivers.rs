@@ -1,4 +1,4 @@
-//! `radiosity accuracy --receivers`: refinement by need against uniform
+//! `radiosity-lab accuracy --receivers`: refinement by need against uniform
 //! meshes, on scenes with path-traced references (the camera image and the
 //! nodes, `docs/references/`). Per scene: the default (shooters, uneven
 //! receivers and badly shaded polygons refined), without the shading

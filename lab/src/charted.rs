@@ -1,6 +1,6 @@
-//! `radiosity accuracy --reports`: error against solve time charted from
+//! `radiosity-lab accuracy --reports`: error against solve time charted from
 //! render reports that were made elsewhere (a scene too big to run every
-//! curve of `radiosity accuracy` in one go), scored per node against an
+//! curve of `radiosity-lab accuracy` in one go), scored per node against an
 //! independent reference, leaving out the nodes the reference itself did
 //! not resolve to the stated standard error.
 
@@ -8,6 +8,20 @@ use crate::accuracy::{chart, time_to, Curve, Point};
 use anyhow::{bail, Context, Result};
 use radiosity::report::Surface;
 use std::path::{Path, PathBuf};
+
+/// `radiosity-lab accuracy --reports ...`: charts the reports' traces against
+/// `--reference-file` into `--out` (default `docs/bench/reports`).
+pub fn from_args(args: &crate::accuracy::AccuracyArgs) -> Result<()> {
+    let reference = args
+        .reference_file
+        .as_deref()
+        .context("--reports needs --reference-file")?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| std::path::PathBuf::from("docs/bench/reports"));
+    run(&args.reports, reference, args.reference_error, &out)
+}
 
 /// Charts `reports` against the reference at `reference` (nodes whose
 /// relative standard error exceeds `max_error` left out) into `out`.
@@ -61,8 +75,11 @@ pub fn run(reports: &[PathBuf], reference: &Path, max_error: f64, out: &Path) ->
                 .filter(|s| names.contains(s.node.as_str()))
                 .count();
         }
+        // Points the report kept without per-node values (a big scene's
+        // thinned trace, `report::thin_trace`) cannot be scored.
         let points = trace
             .iter()
+            .filter(|p| !p.surfaces.is_empty())
             .map(|p| {
                 let scored: Vec<Surface> = p
                     .surfaces

@@ -1,9 +1,9 @@
-//! `radiosity bench`: shot timings on built-in scenes, printed as a Markdown
-//! table (the README's "Performance" section is this output).
+//! `radiosity-lab bench`: shot timings on built-in scenes, printed as a Markdown
+//! table (the notebook's shot measurements, docs/notebook/, are this output).
 
-use crate::SolveArgs;
 use anyhow::Result;
 use clap::Args;
+use radiosity::cli::SolveArgs;
 use radiosity::gpu::Gpu;
 use radiosity::render::render_ranks;
 use radiosity::report::Report;
@@ -11,7 +11,7 @@ use radiosity::{output, scene};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-/// Options of `radiosity bench`.
+/// Options of `radiosity-lab bench`.
 #[derive(Args)]
 pub struct BenchArgs {
     /// Scenes to time (files or built-in names), comma-separated.
@@ -109,7 +109,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// Options of `radiosity bench-report`.
+/// Options of `radiosity-lab bench-report`.
 #[derive(Args)]
 pub struct ReportArgs {
     /// Report JSON files from `radiosity render` runs (see scripts/bench-mpi.sh).

@@ -1,9 +1,10 @@
 //! Mutated scenes for robustness checks: a deterministic generator of
 //! broken glTF and GLB files from a good one, and the check every case must
 //! pass (a clear error, or a render whose report has only finite numbers;
-//! never a panic, never a hang). `radiosity fuzz` runs thousands of cases;
+//! never a panic, never a hang). `radiosity-lab fuzz` runs thousands of cases;
 //! the test suite runs a fixed corpus of a few hundred.
 
+pub use radiosity::rng::Rng;
 use serde_json::Value;
 
 /// One generated input file.
@@ -15,31 +16,6 @@ pub struct Case {
     pub ext: &'static str,
     /// The file's bytes.
     pub bytes: Vec<u8>,
-}
-
-/// SplitMix64: small, fast and the same everywhere (the project's one
-/// generator for seeded cases).
-pub struct Rng(pub u64);
-
-impl Rng {
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// A number in [0, 1) (53 random bits).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// A number in 0..n (0 when n is 0).
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n.max(1) as u64) as usize
-    }
 }
 
 /// Values that break things: out of range, wrong type, extreme.
@@ -215,7 +191,7 @@ pub fn case(base: &Value, seed: u64) -> Case {
         }
     }
     let (ext, mut bytes) = if glb {
-        ("glb", crate::scene::to_glb(&doc).unwrap_or_default())
+        ("glb", radiosity::scene::to_glb(&doc).unwrap_or_default())
     } else {
         ("gltf", serde_json::to_vec(&doc).unwrap_or_default())
     };
@@ -275,7 +251,7 @@ impl Outcome {
 /// Loads `case` from a file in `dir` and renders it small (16 x 64 cells,
 /// 30 shots, a 16-pixel image) on a thread, giving up after `limit`.
 pub fn check(
-    gpu: &'static crate::gpu::Gpu,
+    gpu: &'static radiosity::gpu::Gpu,
     case: &Case,
     dir: &std::path::Path,
     limit: std::time::Duration,
@@ -290,17 +266,17 @@ pub fn check(
         .spawn(move || {
             // A panic is the finding: nothing shared is used after it.
             let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                let scene = match crate::scene::load(&path) {
+                let scene = match radiosity::scene::load(&path) {
                     Ok(s) => s,
                     Err(e) => return Outcome::Rejected(e.to_string()),
                 };
-                let mut opts = crate::render::RenderOptions {
-                    resolution: crate::hemisphere::Resolution { rows: 16, cols: 64 },
+                let mut opts = radiosity::render::RenderOptions {
+                    resolution: radiosity::hemisphere::Resolution { rows: 16, cols: 64 },
                     width: 16,
                     ..Default::default()
                 };
                 opts.stop.max_shots = 30;
-                match crate::render::render(
+                match radiosity::render::render(
                     gpu,
                     &scene,
                     &opts,
@@ -341,7 +317,7 @@ mod tests {
     #[test]
     fn cases_are_deterministic_and_varied() {
         let base: Value =
-            serde_json::from_str(&crate::scene::builtin_gltf("cornell").expect("cornell"))
+            serde_json::from_str(&radiosity::scene::builtin_gltf("cornell").expect("cornell"))
                 .expect("json");
         let a: Vec<Vec<u8>> = (0..50).map(|s| case(&base, s).bytes).collect();
         let b: Vec<Vec<u8>> = (0..50).map(|s| case(&base, s).bytes).collect();
@@ -350,11 +326,11 @@ mod tests {
         assert!(distinct.len() >= 45, "{} distinct", distinct.len());
         assert!((0..50).any(|s| case(&base, s).ext == "glb"));
         // The unmutated GLB is a good scene.
-        let glb = crate::scene::to_glb(&base).expect("glb");
+        let glb = radiosity::scene::to_glb(&base).expect("glb");
         let dir = tempfile::tempdir().expect("dir");
         let path = dir.path().join("c.glb");
         std::fs::write(&path, glb).expect("write");
-        let scene = crate::scene::load(&path).expect("the GLB loads");
+        let scene = radiosity::scene::load(&path).expect("the GLB loads");
         assert_eq!(scene.polygons.len(), 16);
     }
 }

@@ -1,0 +1,114 @@
+//! The scene as the independent path tracer (`scripts/reference.py`) reads
+//! it: per glTF node its world-space triangles, reflectance, emission and
+//! area (a textured node also its image, factor and wrap modes), the camera,
+//! the lights and the sky (`radiosity scene NAME --nodes FILE`).
+
+use crate::output::{self, OutputError};
+use crate::scene::Scene;
+use std::path::Path;
+
+/// Why the scene could not be written for the path tracer.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// The path tracer takes one material per node.
+    #[error(
+        "node '{node}' mixes textured and other materials: the path tracer takes one per node"
+    )]
+    MixedMaterials {
+        /// The node's name.
+        node: String,
+    },
+    /// A file could not be written.
+    #[error(transparent)]
+    Write(#[from] OutputError),
+}
+
+/// Writes the scene as JSON for the path tracer: per node, world-space
+/// triangles, reflectance, emitted radiance, area; a textured node also its
+/// texture (the image written beside `path`, its factor and wrap modes) and
+/// each triangle's texture coordinates.
+pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
+    let mut nodes: Vec<serde_json::Value> = Vec::new();
+    let mut written = std::collections::HashMap::new();
+    for (i, name) in scene.nodes.iter().enumerate() {
+        let polys: Vec<_> = scene.polygons.iter().filter(|p| p.node == i).collect();
+        let map = polys.iter().find_map(|p| p.texture.as_ref());
+        if let Some(m) = map {
+            let alike = polys.iter().all(|p| {
+                p.texture
+                    .as_ref()
+                    .is_some_and(|t| t.texture == m.texture && t.factor == m.factor)
+            });
+            if !alike {
+                return Err(ExportError::MixedMaterials { node: name.clone() });
+            }
+        }
+        let (mut tris, mut uvs) = (Vec::new(), Vec::new());
+        for p in &polys {
+            for k in 1..p.vertices.len() - 1 {
+                let t = [p.vertices[0], p.vertices[k], p.vertices[k + 1]];
+                tris.push(t.map(|v| v.to_array()));
+                if let Some(m) = &p.texture {
+                    uvs.push(t.map(|v| m.uv(v).to_array()));
+                }
+            }
+        }
+        let (refl, emit) = polys
+            .first()
+            .map_or(([0.0; 3], [0.0; 3]), |p| (p.reflectance, p.emission));
+        let mut node = serde_json::json!({
+            "name": name,
+            "triangles": tris,
+            "reflectance": refl,
+            "emission": emit,
+            "area": polys.iter().map(|p| p.area() as f64).sum::<f64>(),
+        });
+        if let Some(m) = map {
+            let t = &m.texture;
+            let file = match written.get(&t.index) {
+                Some(f) => f,
+                None => {
+                    let ext = if t.encoded.1 == "image/jpeg" {
+                        "jpg"
+                    } else {
+                        "png"
+                    };
+                    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("nodes");
+                    let file = format!("{stem}.texture{}.{ext}", t.index);
+                    let dir = path.parent().unwrap_or(Path::new("."));
+                    output::write_atomic(&dir.join(&file), &t.encoded.0)?;
+                    written.entry(t.index).or_insert(file)
+                }
+            };
+            let wrap = t.texture.wrap.map(|w| match w {
+                crate::scene::texture::Wrap::Repeat => "repeat",
+                crate::scene::texture::Wrap::Mirror => "mirror",
+                crate::scene::texture::Wrap::Clamp => "clamp",
+            });
+            node["texture"] = serde_json::json!({"image": file, "factor": m.factor, "wrap": wrap});
+            node["uvs"] = serde_json::json!(uvs);
+        }
+        nodes.push(node);
+    }
+    // The camera the render uses (the file's first, or the default), for
+    // path-traced images.
+    let cam = scene.camera.unwrap_or_else(|| scene.default_camera());
+    let camera = serde_json::json!({
+        "position": cam.position.to_array(),
+        "forward": (cam.rotation * -glam::Vec3::Z).to_array(),
+        "up": (cam.rotation * glam::Vec3::Y).to_array(),
+        "yfov_degrees": cam.yfov.to_degrees(),
+        "aspect": cam.aspect,
+    });
+    // Lights as the report gives them (reference.py hands them to Mitsuba).
+    let lights: Vec<crate::report::LightSummary> = scene
+        .lights
+        .iter()
+        .map(crate::report::LightSummary::of)
+        .collect();
+    output::write_json(
+        path,
+        &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky }),
+    )?;
+    Ok(())
+}
