@@ -102,6 +102,82 @@ pub fn bake(scene: &Scene, mesh: &Mesh, radiosity: &[[f64; 3]], scale: f64) -> (
     (doc, triangles)
 }
 
+/// The bake's glTF arrays and its one buffer, filled node by node.
+#[derive(Default)]
+struct GltfParts {
+    bin: Vec<u8>,
+    views: Vec<Value>,
+    accessors: Vec<Value>,
+    materials: Vec<Value>,
+    images: Vec<Value>,
+    textures: Vec<Value>,
+    /// Texture index in the scene -> its index in the bake and its sampler.
+    texture_of: std::collections::HashMap<usize, (usize, Value)>,
+    triangles: usize,
+}
+
+impl GltfParts {
+    /// A buffer view of `bytes` (`target`: a vertex or index buffer).
+    fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+        push_view(&mut self.bin, &mut self.views, bytes, target)
+    }
+
+    /// One primitive of node `name`: its positions, colours and indices,
+    /// its material and, textured, its coordinates and texture.
+    fn primitive(&mut self, name: &str, g: &NodeGeometry) -> Value {
+        self.triangles += g.triangles;
+        let count = g.pos.len() / 3;
+        let p = self.view(bytemuck::cast_slice(&g.pos), Some(34962));
+        let c = self.view(bytemuck::cast_slice(&g.col), Some(34962));
+        let i = self.view(bytemuck::cast_slice(&g.idx), Some(34963));
+        let a = self.accessors.len();
+        self.accessors.push(
+            json!({"bufferView": p, "componentType": 5126, "count": count, "type": "VEC3",
+            "min": g.lo.to_array().map(|x| x as f32), "max": g.hi.to_array().map(|x| x as f32)}),
+        );
+        self.accessors
+            .push(json!({"bufferView": c, "componentType": 5126, "count": count, "type": "VEC3"}));
+        self.accessors.push(
+            json!({"bufferView": i, "componentType": 5125, "count": g.idx.len(), "type": "SCALAR"}),
+        );
+        let mut attributes = json!({"POSITION": a, "COLOR_0": a + 1});
+        let mut material = baked_material(name, g.reflectance, g.exitance);
+        if let Some(t) = &g.texture {
+            let uv = self.view(bytemuck::cast_slice(&g.uv), Some(34962));
+            attributes["TEXCOORD_0"] = json!(self.accessors.len());
+            self.accessors.push(
+                json!({"bufferView": uv, "componentType": 5126, "count": count, "type": "VEC2"}),
+            );
+            let index = self.texture(t);
+            material["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": index});
+        }
+        let m = self.materials.len();
+        self.materials.push(material);
+        json!({"attributes": attributes, "indices": a + 2, "material": m, "mode": 4})
+    }
+
+    /// The bake's index of texture `t`, its image written once.
+    fn texture(&mut self, t: &crate::scene::texture::TextureRef) -> usize {
+        if let Some((k, _)) = self.texture_of.get(&t.index) {
+            return *k;
+        }
+        let v = self.view(&t.encoded.0, None);
+        self.images
+            .push(json!({"bufferView": v, "mimeType": t.encoded.1, "name": t.texture.name}));
+        let [s, tw] = t.texture.wrap.map(|w| match w {
+            crate::scene::texture::Wrap::Repeat => 10497,
+            crate::scene::texture::Wrap::Mirror => 33648,
+            crate::scene::texture::Wrap::Clamp => 33071,
+        });
+        let k = self.textures.len();
+        self.textures
+            .push(json!({"source": self.images.len() - 1, "sampler": k}));
+        self.texture_of
+            .insert(t.index, (k, json!({"wrapS": s, "wrapT": tw})));
+        k
+    }
+}
+
 /// [`bake`]'s document without its buffer's URI, the buffer's bytes, and
 /// the triangle count: a GLB is written from them directly (Sponza's bake
 /// is 178 MB; a data URI would hold a third more, twice over).
@@ -112,14 +188,8 @@ fn bake_parts(
     scale: f64,
 ) -> (Value, Vec<u8>, usize) {
     let origin = DVec3::from(scene.origin);
-    let mut bin: Vec<u8> = Vec::new();
-    let (mut nodes, mut meshes, mut materials, mut accessors) = (vec![], vec![], vec![], vec![]);
-    let mut views: Vec<Value> = Vec::new();
-    let mut triangles = 0usize;
-    let mut images: Vec<Value> = Vec::new();
-    let mut textures: Vec<Value> = Vec::new();
-    // Texture index in the scene -> index in the bake.
-    let mut texture_of = std::collections::HashMap::new();
+    let mut baked = GltfParts::default();
+    let (mut nodes, mut meshes) = (vec![], vec![]);
     for (n, name) in scene.nodes.iter().enumerate() {
         // Vertices in the node's own frame, so its transform stays its own.
         let world = scene
@@ -132,76 +202,7 @@ fn bake_parts(
         if groups.is_empty() {
             continue;
         }
-        let mut primitives = Vec::new();
-        for g in groups {
-            triangles += g.triangles;
-            let count = g.pos.len() / 3;
-            let p = push_view(
-                &mut bin,
-                &mut views,
-                bytemuck::cast_slice(&g.pos),
-                Some(34962),
-            );
-            let c = push_view(
-                &mut bin,
-                &mut views,
-                bytemuck::cast_slice(&g.col),
-                Some(34962),
-            );
-            let i = push_view(
-                &mut bin,
-                &mut views,
-                bytemuck::cast_slice(&g.idx),
-                Some(34963),
-            );
-            let a = accessors.len();
-            accessors.push(
-                json!({"bufferView": p, "componentType": 5126, "count": count, "type": "VEC3",
-                "min": g.lo.to_array().map(|x| x as f32), "max": g.hi.to_array().map(|x| x as f32)}),
-            );
-            accessors.push(
-                json!({"bufferView": c, "componentType": 5126, "count": count, "type": "VEC3"}),
-            );
-            accessors.push(
-                json!({"bufferView": i, "componentType": 5125, "count": g.idx.len(), "type": "SCALAR"}),
-            );
-            let mut attributes = json!({"POSITION": a, "COLOR_0": a + 1});
-            let mut material = baked_material(name, g.reflectance, g.exitance);
-            if let Some(t) = &g.texture {
-                let uv = push_view(
-                    &mut bin,
-                    &mut views,
-                    bytemuck::cast_slice(&g.uv),
-                    Some(34962),
-                );
-                attributes["TEXCOORD_0"] = json!(accessors.len());
-                accessors.push(
-                    json!({"bufferView": uv, "componentType": 5126, "count": count, "type": "VEC2"}),
-                );
-                let index = match texture_of.get(&t.index) {
-                    Some((k, _)) => *k,
-                    None => {
-                        let v = push_view(&mut bin, &mut views, &t.encoded.0, None);
-                        images.push(json!({"bufferView": v, "mimeType": t.encoded.1, "name": t.texture.name}));
-                        let [s, tw] = t.texture.wrap.map(|w| match w {
-                            crate::scene::texture::Wrap::Repeat => 10497,
-                            crate::scene::texture::Wrap::Mirror => 33648,
-                            crate::scene::texture::Wrap::Clamp => 33071,
-                        });
-                        let k = textures.len();
-                        textures.push(json!({"source": images.len() - 1, "sampler": k}));
-                        texture_of.insert(t.index, (k, json!({"wrapS": s, "wrapT": tw})));
-                        k
-                    }
-                };
-                material["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": index});
-            }
-            let m = materials.len();
-            materials.push(material);
-            primitives.push(
-                json!({"attributes": attributes, "indices": a + 2, "material": m, "mode": 4}),
-            );
-        }
+        let primitives: Vec<Value> = groups.iter().map(|g| baked.primitive(name, g)).collect();
         meshes.push(json!({"name": name, "primitives": primitives}));
         let mut node = json!({"name": name, "mesh": meshes.len() - 1});
         if world != DMat4::IDENTITY {
@@ -209,6 +210,16 @@ fn bake_parts(
         }
         nodes.push(node);
     }
+    let GltfParts {
+        bin,
+        views,
+        accessors,
+        materials,
+        images,
+        textures,
+        texture_of,
+        triangles,
+    } = baked;
     let mut samplers: Vec<(usize, Value)> = texture_of.into_values().collect();
     samplers.sort_by_key(|(i, _)| *i);
     let mut doc = json!({

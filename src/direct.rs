@@ -16,7 +16,7 @@ use crate::formfactor::point_to_polygon;
 use crate::mesh::Mesh;
 use crate::raytrace::Bvh;
 use crate::rng::Rng;
-use crate::sampling::{in_parallel, point_in, unit};
+use crate::sampling::{in_parallel, point_in, unit, RayStart};
 use crate::scene::{Camera, Scene};
 use glam::{DVec3, Vec3};
 
@@ -211,7 +211,12 @@ impl<'a> DirectLight<'a> {
                 continue;
             }
             let hint = &mut emitter_hints[k];
-            let (seen, all) = self.shadow_rays(e, origin, n, polygon, rng, strata, hint);
+            let from = RayStart {
+                origin,
+                normal: n,
+                polygon,
+            };
+            let (seen, all) = self.shadow_rays(e, from, rng, strata, hint);
             for ((u, w), x) in pool.unoccluded[k].iter_mut().zip(weight).zip(e.exitance) {
                 *u += w * x * f;
             }
@@ -223,17 +228,19 @@ impl<'a> DirectLight<'a> {
     /// Emitter `e`'s shadow rays from `origin`: the visible ones' and all
     /// of them's cos cos / r^2 over the sampling density (their ratio is the
     /// share of the unoccluded form factor `origin` sees).
-    #[allow(clippy::too_many_arguments)]
     fn shadow_rays(
         &self,
         e: &Emitter,
-        origin: Vec3,
-        n: Vec3,
-        polygon: u32,
+        from: RayStart,
         rng: &mut Rng,
         strata: Strata,
         hints: &mut crate::raytrace::Hints,
     ) -> (f64, f64) {
+        let RayStart {
+            origin,
+            normal: n,
+            polygon,
+        } = from;
         let (mut all, mut seen) = (0.0f64, 0.0f64);
         let g = strata.grid as f32;
         for i in 0..strata.side * strata.side {

@@ -64,28 +64,7 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
             "area": polys.iter().map(|p| p.area() as f64).sum::<f64>(),
         });
         if let Some(m) = map {
-            let t = &m.texture;
-            let file = match written.get(&t.index) {
-                Some(f) => f,
-                None => {
-                    let ext = if t.encoded.1 == "image/jpeg" {
-                        "jpg"
-                    } else {
-                        "png"
-                    };
-                    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("nodes");
-                    let file = format!("{stem}.texture{}.{ext}", t.index);
-                    let dir = path.parent().unwrap_or(Path::new("."));
-                    output::write_atomic(&dir.join(&file), &t.encoded.0)?;
-                    written.entry(t.index).or_insert(file)
-                }
-            };
-            let wrap = t.texture.wrap.map(|w| match w {
-                crate::scene::texture::Wrap::Repeat => "repeat",
-                crate::scene::texture::Wrap::Mirror => "mirror",
-                crate::scene::texture::Wrap::Clamp => "clamp",
-            });
-            node["texture"] = serde_json::json!({"image": file, "factor": m.factor, "wrap": wrap});
+            node["texture"] = texture_json(m, path, &mut written)?;
             node["uvs"] = serde_json::json!(uvs);
         }
         nodes.push(node);
@@ -111,4 +90,36 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
         &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky }),
     )?;
     Ok(())
+}
+
+/// A textured node's texture as the path tracer reads it: its image (written
+/// beside `path` once, whoever uses it), factor and wrap modes.
+fn texture_json(
+    m: &crate::scene::texture::TexMap,
+    path: &Path,
+    written: &mut std::collections::HashMap<usize, String>,
+) -> Result<serde_json::Value, ExportError> {
+    let t = &m.texture;
+    let file = match written.get(&t.index) {
+        Some(f) => f.clone(),
+        None => {
+            let ext = if t.encoded.1 == "image/jpeg" {
+                "jpg"
+            } else {
+                "png"
+            };
+            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("nodes");
+            let file = format!("{stem}.texture{}.{ext}", t.index);
+            let dir = path.parent().unwrap_or(Path::new("."));
+            output::write_atomic(&dir.join(&file), &t.encoded.0)?;
+            written.insert(t.index, file.clone());
+            file
+        }
+    };
+    let wrap = t.texture.wrap.map(|w| match w {
+        crate::scene::texture::Wrap::Repeat => "repeat",
+        crate::scene::texture::Wrap::Mirror => "mirror",
+        crate::scene::texture::Wrap::Clamp => "clamp",
+    });
+    Ok(serde_json::json!({"image": file, "factor": m.factor, "wrap": wrap}))
 }

@@ -2,28 +2,26 @@
 //! equal-angle hemisphere rasterised with wgpu (Uejima & Yamazaki 1999).
 //!
 //! Layers, bottom up (see ARCHITECTURE.md):
-//! - [`hemisphere`]: cells, delta form factors, tiles (pure maths);
-//! - [`formfactor`]: analytic point-to-polygon form factors (pure maths);
-//! - [`numeric`]: atan2 and rounding without libm calls (pure maths);
-//! - [`scene`], [`mesh`]: glTF in, polygons -> patches -> elements;
-//! - [`settings`]: the enums a render is told and the report records;
-//! - [`raytrace`], [`direct`], [`lights`], [`sampling`]: exact visibility
-//!   on the CPU, the camera image's direct light, what lights, suns and
-//!   skies deliver (pure maths);
-//! - [`interpolate`]: per-element values to vertex values for smooth shading;
-//! - [`solver`]: progressive refinement, knows nothing of GPUs;
-//! - [`refine`]: which polygons a coarse solution says to subdivide (pure maths);
-//! - [`gpu`]: wgpu plumbing (device, hemisphere rasteriser, camera view);
+//! - [`settings`], [`shot`], [`rng`], [`numeric`]: plain data, the
+//!   solver's interface to a form-factor source, the seeded generator,
+//!   atan2 and rounding without libm calls;
+//! - [`hemisphere`], [`formfactor`], [`occlusion`]: cells and delta form
+//!   factors, Lambert's contour integral, the occlusion map (pure maths);
+//! - [`scene`], [`mesh`], [`lit_mesh`]: glTF in, polygons -> patches ->
+//!   elements, and the lighting state beside the geometry;
+//! - [`raytrace`], [`sampling`], [`lights`], [`direct`], [`ambient`]: exact
+//!   visibility on the CPU and what it estimates;
+//! - [`solver`], [`refine`], [`interpolate`]: progressive refinement,
+//!   refinement by need, smooth shading's vertex values;
+//! - [`raster`]: the CPU side of drawing a hemisphere (no wgpu); [`gpu`]:
+//!   wgpu plumbing (device, hemisphere rasteriser, camera view);
 //! - [`parallel`]: the collectives a distributed solve needs; [`comm`]: their
-//!   MPI implementation (the only module that calls MPI); [`launch`]: starting
-//!   the ranks a launcher started;
-//! - [`render`]: one render from scene to image and report, on one or many
-//!   ranks: options, the row cache, tiers and exchanges (no GPU), the GPU
-//!   form-factor source, the shooting loop, trace, passes, driver and the one
-//!   write path;
-//! - [`compare`]: image error against a reference (SMAPE over blocks);
-//! - [`output`], [`report`], [`checkpoint`]: files out (and a solve's state, to resume);
-//! - [`bake`]: the solution as glTF with vertex colours.
+//!   MPI implementation (the only module that calls MPI); [`launch`]: the
+//!   ranks a launcher started;
+//! - [`render`]: one render from scene to image and report, on one or many ranks;
+//! - [`report`], [`output`], [`checkpoint`], [`bake`], [`export`],
+//!   [`compare`]: what goes out;
+//! - [`cli`]: the render flags, shared by the binaries.
 
 pub mod ambient;
 pub mod bake;
@@ -45,6 +43,7 @@ pub mod numeric;
 pub mod occlusion;
 pub mod output;
 pub mod parallel;
+pub mod raster;
 pub mod raytrace;
 pub mod refine;
 pub mod render;

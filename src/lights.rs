@@ -20,7 +20,7 @@
 use crate::mesh::Mesh;
 use crate::raytrace::{Bvh, Hints, RECENT_HINTS};
 use crate::rng::Rng;
-use crate::sampling::{in_parallel, point_in, unit};
+use crate::sampling::{in_parallel, point_in, unit, RayStart};
 use crate::scene::{Light, LightKind};
 use glam::Vec3;
 
@@ -142,18 +142,12 @@ pub fn irradiance(
 /// the scene, from shadow rays along the cells `first..first+side` (each
 /// axis) of a `grid` x `grid` stratification (one jittered direction a
 /// cell), each trying first the leaves that stopped recent ones (`hints`).
-#[allow(clippy::too_many_arguments)]
-fn sky_share(
-    bvh: &Bvh,
-    x: Vec3,
-    n: Vec3,
-    polygon: u32,
-    eps: f32,
-    cells: Cells,
-    rng: &mut Rng,
-    hints: &mut Hints,
-) -> f64 {
-    let origin = x + n * eps;
+fn sky_share(bvh: &Bvh, from: RayStart, cells: Cells, rng: &mut Rng, hints: &mut Hints) -> f64 {
+    let RayStart {
+        origin,
+        normal: n,
+        polygon,
+    } = from;
     let (t, b) = frame(n);
     let g = cells.grid as f32;
     let (mut open, mut all) = (0u32, 0u32);
@@ -213,8 +207,6 @@ pub fn element_field_reusing(
     if lights.is_empty() && sky.is_none() {
         return LightField::default();
     }
-    let eps = mesh.ray_offset;
-    let bvh = &mesh.occluders;
     // Per element: the lights' irradiance, the sky's, and the part of the
     // first from directional lights (sum over RGB).
     let work = |j: usize, out: &mut ([f64; 3], [f64; 3], f64)| {
@@ -222,53 +214,7 @@ pub fn element_field_reusing(
             *out = (f.direct[k], f.sky[k], f.directional[k]);
             return;
         }
-        let e = &mesh.elements[j];
-        let n = mesh.polygons[e.polygon as usize].normal;
-        let corners: &[Vec3] = if e.corners[3] == e.corners[2] {
-            &e.corners[..3]
-        } else {
-            &e.corners
-        };
-        // Seeded by the element's polygon and place in it, not its index in
-        // the mesh, so that another mesh's field can be reused.
-        let local = j as u64 - u64::from(mesh.polygons[e.polygon as usize].elements.start);
-        let mut rng = Rng(0x119b_7000_0000 ^ (u64::from(e.polygon) << 32) ^ local);
-        let (side, rays) = (ELEMENT_POINTS, SKY_RAYS);
-        let (mut direct, mut parallel, mut open, mut weight) = ([0.0; 3], 0.0, 0.0, 0.0);
-        // The leaves that stopped each light's recent rays, and the sky's:
-        // an element's points are mostly shadowed by the same few occluders.
-        let mut hints = vec![[None; RECENT_HINTS]; lights.len()];
-        let mut sky_hints = [None; RECENT_HINTS];
-        for q in 0..side * side {
-            let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
-            let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;
-            let (x, jac) = point_in(corners, u, v);
-            let jac = f64::from(jac);
-            for (light, hint) in lights.iter().zip(&mut hints) {
-                let d = irradiance(light, bvh, x, n, e.polygon, eps, hint);
-                for c in 0..3 {
-                    direct[c] += d[c] * jac;
-                }
-                if light.kind == LightKind::Directional {
-                    parallel += d.iter().sum::<f64>() * jac;
-                }
-            }
-            if sky.is_some() {
-                let cells = Cells {
-                    grid: side * rays,
-                    first: [q % side * rays, q / side * rays],
-                    side: rays,
-                };
-                open += sky_share(bvh, x, n, e.polygon, eps, cells, &mut rng, &mut sky_hints) * jac;
-            }
-            weight += jac;
-        }
-        if weight > 0.0 {
-            out.0 = direct.map(|d| d / weight);
-            let share = open / weight;
-            out.1 = sky.map_or([0.0; 3], |l| l.map(|l| std::f64::consts::PI * l * share));
-            out.2 = parallel / weight;
-        }
+        *out = element_light(mesh, lights, sky, j);
     };
     let started = std::time::Instant::now();
     let mut values = vec![([0.0; 3], [0.0; 3], 0.0); mesh.elements.len()];
@@ -297,6 +243,73 @@ pub fn element_field_reusing(
         delivered,
         directional: values.iter().map(|v| v.2).collect(),
     }
+}
+
+/// Element `j`'s mean irradiance from the lights, from the sky (lit by
+/// `sky`), and the lights' part that is directional (sum over RGB), over
+/// jittered points on it, each with shadow rays.
+fn element_light(
+    mesh: &Mesh,
+    lights: &[Light],
+    sky: Option<[f64; 3]>,
+    j: usize,
+) -> ([f64; 3], [f64; 3], f64) {
+    let (eps, bvh) = (mesh.ray_offset, &mesh.occluders);
+    let e = &mesh.elements[j];
+    let n = mesh.polygons[e.polygon as usize].normal;
+    let corners: &[Vec3] = if e.corners[3] == e.corners[2] {
+        &e.corners[..3]
+    } else {
+        &e.corners
+    };
+    // Seeded by the element's polygon and place in it, not its index in
+    // the mesh, so that another mesh's field can be reused.
+    let local = j as u64 - u64::from(mesh.polygons[e.polygon as usize].elements.start);
+    let mut rng = Rng(0x119b_7000_0000 ^ (u64::from(e.polygon) << 32) ^ local);
+    let (side, rays) = (ELEMENT_POINTS, SKY_RAYS);
+    let (mut direct, mut parallel, mut open, mut weight) = ([0.0; 3], 0.0, 0.0, 0.0);
+    // The leaves that stopped each light's recent rays, and the sky's:
+    // an element's points are mostly shadowed by the same few occluders.
+    let mut hints = vec![[None; RECENT_HINTS]; lights.len()];
+    let mut sky_hints = [None; RECENT_HINTS];
+    for q in 0..side * side {
+        let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
+        let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;
+        let (x, jac) = point_in(corners, u, v);
+        let jac = f64::from(jac);
+        for (light, hint) in lights.iter().zip(&mut hints) {
+            let d = irradiance(light, bvh, x, n, e.polygon, eps, hint);
+            for c in 0..3 {
+                direct[c] += d[c] * jac;
+            }
+            if light.kind == LightKind::Directional {
+                parallel += d.iter().sum::<f64>() * jac;
+            }
+        }
+        if sky.is_some() {
+            let cells = Cells {
+                grid: side * rays,
+                first: [q % side * rays, q / side * rays],
+                side: rays,
+            };
+            let from = RayStart {
+                origin: x + n * eps,
+                normal: n,
+                polygon: e.polygon,
+            };
+            open += sky_share(bvh, from, cells, &mut rng, &mut sky_hints) * jac;
+        }
+        weight += jac;
+    }
+    if weight <= 0.0 {
+        return ([0.0; 3], [0.0; 3], 0.0);
+    }
+    let share = open / weight;
+    (
+        direct.map(|d| d / weight),
+        sky.map_or([0.0; 3], |l| l.map(|l| std::f64::consts::PI * l * share)),
+        parallel / weight,
+    )
 }
 
 #[cfg(test)]

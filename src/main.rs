@@ -347,45 +347,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if rank > 0 {
         log::set_max_level(log::LevelFilter::Warn);
     }
-    // Every rank loads the scene and opens a device; any failure ends all of
-    // them, with rank 0 reporting which rank failed and why.
-    let t = Instant::now();
-    let setup = scene::open(&args.scene)
-        .and_then(|mut s| {
-            if let Some(name) = &args.camera {
-                s.use_camera(name)?;
-            }
-            args.lights.apply(&mut s);
-            s.check_lit()?;
-            Ok(s)
-        })
-        .map_err(anyhow::Error::from)
-        .and_then(|s| {
-            if rank == 0 {
-                check_outputs(&args)?;
-            }
-            Ok(s)
-        })
-        .and_then(|s| Ok((s, Gpu::new()?)))
-        .map_err(|e| format!("{e:#}"));
-    let load_time = t.elapsed();
-    let (scene, gpu) = match launch::start_together(comm, setup) {
-        Ok(x) => x,
-        Err(e) => {
-            if rank == 0 {
-                print_error(&format!("error: {e}"));
-            }
-            return Err(ReportedByRankZero.into());
-        }
-    };
-    if rank == 0 {
-        let ranks_note = if ranks > 1 {
-            format!(", {ranks} ranks")
-        } else {
-            String::new()
-        };
-        log::info!("device: {}{ranks_note}", gpu.describe());
-    }
+    let (scene, gpu, load_time) = open_everywhere(&args, comm)?;
     let opts = render_options(&args, interrupt)?;
     let mut reporter = (rank == 0).then(|| Reporter::new(opts.stop.max_shots, opts.stop.threshold));
     let mut show = |p: &Progress| {
@@ -415,6 +377,55 @@ fn run_render(args: RenderArgs) -> Result<()> {
         Some(rendered) => write_rendered(&args, &scene, rendered),
         None => Ok(()),
     }
+}
+
+/// Every rank loads the scene and opens a device; any failure ends all of
+/// them, with rank 0 reporting which rank failed and why (before any work,
+/// rank 0 also checks that every output can be written). Returns them and
+/// this rank's load time.
+fn open_everywhere(
+    args: &RenderArgs,
+    comm: &dyn Collectives,
+) -> Result<(scene::Scene, Gpu, Duration)> {
+    let (rank, ranks) = (comm.rank(), comm.size());
+    let t = Instant::now();
+    let setup = scene::open(&args.scene)
+        .and_then(|mut s| {
+            if let Some(name) = &args.camera {
+                s.use_camera(name)?;
+            }
+            args.lights.apply(&mut s);
+            s.check_lit()?;
+            Ok(s)
+        })
+        .map_err(anyhow::Error::from)
+        .and_then(|s| {
+            if rank == 0 {
+                check_outputs(args)?;
+            }
+            Ok(s)
+        })
+        .and_then(|s| Ok((s, Gpu::new()?)))
+        .map_err(|e| format!("{e:#}"));
+    let load_time = t.elapsed();
+    let (scene, gpu) = match launch::start_together(comm, setup) {
+        Ok(x) => x,
+        Err(e) => {
+            if rank == 0 {
+                print_error(&format!("error: {e}"));
+            }
+            return Err(ReportedByRankZero.into());
+        }
+    };
+    if rank == 0 {
+        let ranks_note = if ranks > 1 {
+            format!(", {ranks} ranks")
+        } else {
+            String::new()
+        };
+        log::info!("device: {}{ranks_note}", gpu.describe());
+    }
+    Ok((scene, gpu, load_time))
 }
 
 /// Rank 0's outputs: the image, the bake and the report.

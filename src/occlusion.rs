@@ -208,35 +208,18 @@ impl OcclusionMap {
             // SAFETY: the CPU has AVX2, just tested.
             return unsafe { self.hides_rect_avx2(rect, nearest) };
         }
-        self.hides_rect_lanes(rect, nearest, |_, _| None)
+        self.hides_rect_lanes(rect, nearest)
     }
 
-    /// [`OcclusionMap::hides_rect_lanes`] compiled for AVX2, runs of up
-    /// to two windows read eight cells an instruction (see [`wide`]).
+    /// [`OcclusionMap::hides_rect_lanes`] compiled for AVX2 (see [`Band::add`]).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn hides_rect_avx2(&mut self, rect: [f32; 4], nearest: f32) -> bool {
-        if self.cols_cos.len() < wide::LANES {
-            return self.hides_rect_lanes(rect, nearest, |_, _| None);
-        }
-        self.hides_rect_lanes(rect, nearest, |depth, run| {
-            // SAFETY: the CPU has AVX2 (this function's contract), and the
-            // row has a window of lanes.
-            (run.len() <= 2 * wide::LANES)
-                .then(|| unsafe { wide::covered_nearer(depth, run, nearest) })
-        })
+        self.hides_rect_lanes(rect, nearest)
     }
 
-    /// Whether every cell `rect` holds is covered nearer than `nearest`,
-    /// a run's answer left to `short` where it gives one (the tiles'
-    /// farthest depths are only a cache: the answer is the same).
     #[inline(always)]
-    fn hides_rect_lanes(
-        &mut self,
-        rect: [f32; 4],
-        nearest: f32,
-        short: impl Fn(&[f32], std::ops::Range<usize>) -> Option<bool>,
-    ) -> bool {
+    fn hides_rect_lanes(&mut self, rect: [f32; 4], nearest: f32) -> bool {
         let cols = self.res.cols as usize;
         let (p0, p1) = row_span(self.res, rect, 0..self.res.rows as usize);
         let farthest = |a: f32, d: &f32| a.max(*d);
@@ -248,9 +231,6 @@ impl OcclusionMap {
             let depth = &self.depth[p * cols..(p + 1) * cols];
             let coarse = &mut self.coarse[p * tiles(cols)..(p + 1) * tiles(cols)];
             runs.iter().all(|run| {
-                if let Some(hidden) = short(depth, run.clone()) {
-                    return hidden;
-                }
                 let (first, end) = (run.start.div_ceil(TILE), run.end / TILE);
                 let far = if first < end {
                     refresh(&mut coarse[first..end], depth, first);
@@ -475,30 +455,6 @@ mod wide {
         true
     }
 
-    /// Whether every cell of `run` in the row `depth` is covered nearer
-    /// than `nearest` by the margin: the farthest's test, lane by lane
-    /// (rounding is monotone, so every lane's product is below `nearest`
-    /// exactly where the farthest's is).
-    ///
-    /// # Safety
-    /// The CPU must have AVX2, and the row at least [`LANES`] columns.
-    #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn covered_nearer(
-        depth: &[f32],
-        run: std::ops::Range<usize>,
-        nearest: f32,
-    ) -> bool {
-        let (margin, nearest) = (_mm256_set1_ps(1.0 + DEPTH_MARGIN), _mm256_set1_ps(nearest));
-        for w in windows(run.clone(), depth.len()) {
-            let cover = _mm256_mul_ps(_mm256_loadu_ps(depth[w..w + LANES].as_ptr()), margin);
-            let nearer = _mm256_cmp_ps::<_CMP_LT_OQ>(cover, nearest);
-            if _mm256_movemask_ps(_mm256_andnot_ps(nearer, in_run(w, &run))) != 0 {
-                return false;
-            }
-        }
-        true
-    }
-
     /// [`super::Band::add`]'s cell loop over `run` of `row` a window at
     /// a time.
     ///
@@ -705,7 +661,7 @@ mod tests {
         }
     }
 
-    /// A quad seen from the origin as `gpu::proxies` draws a front face:
+    /// A quad seen from the origin as `raster::proxies` draws a front face:
     /// inward edge normals and the plane.
     fn quad(d: [[f32; 3]; 4]) -> ([[f32; 3]; 4], [f32; 4]) {
         let v = d.map(glam::Vec3::from);
@@ -866,7 +822,7 @@ mod tests {
         }
         let mut rng = crate::rng::Rng(0x9e37_79b9_7f4a_7c15);
         let mut uniform = move || rng.unit() as f32;
-        let (mut verdicts, mut rect_verdicts) = ([0, 0], [0, 0]);
+        let mut verdicts = [0, 0];
         for r in [
             Resolution { rows: 24, cols: 96 },
             Resolution {
@@ -904,11 +860,6 @@ mod tests {
                     let got = unsafe { wide.hides_avx2(&piece, nearest) };
                     assert_eq!(got, want, "piece {k} at {nearest} in {r}");
                     verdicts[usize::from(want)] += 1;
-                    let want = scalar.hides_rect_lanes(rect, nearest, |_, _| None);
-                    // SAFETY: the CPU has AVX2, just tested.
-                    let got = unsafe { wide.hides_rect_avx2(rect, nearest) };
-                    assert_eq!(got, want, "rectangle {k} at {nearest} in {r}");
-                    rect_verdicts[usize::from(want)] += 1;
                 }
                 scalar.whole_band().add_lanes(&piece, cover_run);
                 // SAFETY: the CPU has AVX2, just tested.
@@ -919,10 +870,6 @@ mod tests {
                     bits(&scalar) == bits(&wide),
                     "piece {k} in {r}: the maps differ"
                 );
-                // (The tiles are a cache that the rectangles' tests fill
-                // as they go; found afresh, they agree.)
-                scalar.refresh();
-                wide.refresh();
                 assert!(
                     scalar.coarse == wide.coarse,
                     "piece {k} in {r}: the tiles differ"
@@ -934,10 +881,6 @@ mod tests {
         assert!(
             verdicts[0] > 50 && verdicts[1] > 50,
             "{verdicts:?}: both verdicts"
-        );
-        assert!(
-            rect_verdicts[0] > 50 && rect_verdicts[1] > 50,
-            "{rect_verdicts:?}: both rectangle verdicts"
         );
     }
 

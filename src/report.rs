@@ -388,20 +388,38 @@ pub struct Parallel {
     pub load_balance_cpu: LoadBalance,
 }
 
+/// How a solve was spread over its ranks: how many, the hemisphere's tiles
+/// over their grid, the exchange, and the hemisphere's resolution.
+#[derive(Clone, Copy, Debug)]
+pub struct Decomposition {
+    /// Ranks.
+    pub ranks: usize,
+    /// The tiles and the rank grid.
+    pub layout: crate::hemisphere::TileLayout,
+    /// How form factors met.
+    pub exchange: crate::parallel::Exchange,
+    /// The hemisphere's resolution.
+    pub resolution: Resolution,
+}
+
 impl Parallel {
-    /// Assembles the parallel section.
-    #[allow(clippy::too_many_arguments)]
+    /// Assembles the parallel section of a solve spread as `d` says, over
+    /// `elements` elements, `shots` shots, with every rank's statistics
+    /// and the shots' load balance.
     pub fn new(
-        ranks: usize,
-        layout: crate::hemisphere::TileLayout,
-        exchange: crate::parallel::Exchange,
-        res: Resolution,
+        d: Decomposition,
         elements: usize,
         shots: u64,
         per_rank: Vec<RankStats>,
         load_balance: LoadBalance,
     ) -> Self {
         use crate::parallel::Exchange;
+        let Decomposition {
+            ranks,
+            layout,
+            exchange,
+            resolution: res,
+        } = d;
         let n = ranks as f64;
         let formula = match exchange {
             _ if ranks == 1 => Some(0.0),

@@ -5,6 +5,18 @@
 use crate::rng::Rng;
 use glam::Vec3;
 
+/// Where shadow rays start: a point just off a surface (`origin`), the
+/// surface's normal there, and its polygon (which the rays skip).
+#[derive(Clone, Copy)]
+pub struct RayStart {
+    /// The point, moved off its surface along the normal.
+    pub origin: Vec3,
+    /// The surface's normal.
+    pub normal: Vec3,
+    /// The surface's polygon.
+    pub polygon: u32,
+}
+
 /// Points per element along each axis for its mean irradiance, from lights
 /// and from emitting surfaces alike: the element means are taken out of the
 /// interpolated rest, so their noise would show as blotches.

@@ -8,16 +8,21 @@
 //! the shooter's frame; the GPU rasterises the rectangles and tests every cell
 //! exactly. Pipelines, buffers and geometry are created once.
 
-use super::proxies::{
-    in_view, Agree, Instance, Lookup, Ownership, Proxies, ProxyShapes, Scatter, TilePlace,
-};
 use super::target::RenderTarget;
 use super::GpuError;
 use crate::hemisphere::{Resolution, TileLayout, EMPTY};
 use crate::mesh::{Mesh, ShooterFrame};
+use crate::raster::proxies::{
+    in_view, Agree, Instance, Lookup, Ownership, Proxies, ProxyShapes, Scatter, TilePlace,
+};
 use bytemuck::{Pod, Zeroable};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+mod device;
+mod tess;
+use device::{buffer, direction_buffer, item_bind_group, item_pipeline, rect_pipeline};
+use tess::Tessellation;
 
 /// The WGSL source of the hemisphere pipeline.
 pub const SHADER: &str = include_str!("../../shaders/hemisphere.wgsl");
@@ -44,27 +49,6 @@ struct PieceGpu {
     axis: [f32; 4],
     bilinear: [f32; 4],
     grid: [u32; 4],
-}
-
-/// A vertex of the tessellated projection (see the shader's `TessVertex`).
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct TessVertex {
-    p: [f32; 3],
-    x_override: f32,
-    x_offset: f32,
-    piece: u32,
-}
-
-/// The tessellated projection's pipeline and per-shot data.
-struct Tessellation {
-    pipeline: wgpu::RenderPipeline,
-    group: wgpu::BindGroup,
-    pieces_buf: wgpu::Buffer,
-    vertex_buf: Option<wgpu::Buffer>,
-    tolerance: f32,
-    pieces: Vec<PieceGpu>,
-    vertices: Vec<TessVertex>,
 }
 
 /// Time spent in the phases of one rasterisation.
@@ -145,7 +129,7 @@ pub struct HemisphereRasterizer {
     elements: usize,
     /// The exact projection drawn on the CPU instead of the device, when
     /// chosen (see [`HemisphereRasterizer::set_software`]).
-    software: Option<super::software::Software>,
+    software: Option<crate::raster::software::Software>,
 }
 
 impl HemisphereRasterizer {
@@ -264,111 +248,6 @@ impl HemisphereRasterizer {
         })
     }
 
-    /// Switches to the tessellated projection: pieces are cut into triangles
-    /// until every edge's equal-angle image is within `tolerance` cells of
-    /// its chord, and the vertex shader projects them (see the shader). Builds
-    /// its pipeline and buffers once.
-    pub fn use_tessellation(
-        &mut self,
-        device: &wgpu::Device,
-        tolerance: f32,
-    ) -> Result<(), GpuError> {
-        if !(tolerance.is_finite() && tolerance > 0.0) {
-            return Err(GpuError::Setting(format!(
-                "tessellation tolerance {tolerance} must be a positive number of cells"
-            )));
-        }
-        let pipeline = item_pipeline(
-            device,
-            &self.module,
-            ("vs_tess", "fs_tess"),
-            wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<TessVertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![
-                    0 => Float32x3, 1 => Float32, 2 => Float32, 3 => Uint32
-                ],
-            },
-            wgpu::PrimitiveTopology::TriangleList,
-        );
-        let piece_bytes =
-            (self.proxies.corners.len().max(1) * std::mem::size_of::<PieceGpu>()) as u64;
-        let pieces = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("pieces"),
-            size: piece_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let group = item_bind_group(
-            device,
-            &pipeline,
-            &[&self.uniform, &self.coverage_buf, &self.trig, &pieces],
-        );
-        self.tess = Some(Tessellation {
-            pipeline,
-            group,
-            pieces_buf: pieces,
-            vertex_buf: None,
-            tolerance,
-            pieces: Vec::new(),
-            vertices: Vec::new(),
-        });
-        Ok(())
-    }
-
-    /// Fills the tessellation's pieces and triangles for every proxy the
-    /// shooter can see, in proxy order (so depth ties break alike every run).
-    fn collect_triangles(&mut self, shooter: &ShooterFrame) {
-        let Some(t) = self.tess.as_mut() else {
-            return;
-        };
-        t.pieces.clear();
-        t.vertices.clear();
-        let (outside, corners) = (&self.outside, &self.proxies.corners);
-        for (k, poly) in self.proxies.polygons.iter().enumerate() {
-            if !in_view(k, poly, outside, shooter) {
-                continue;
-            }
-            let n = shooter.to_local(poly.normal);
-            let lookup = poly.quad.map_or_else(Lookup::default, |q| {
-                Lookup::new(&self.proxies.quads[q as usize], shooter, n)
-            });
-            for i in poly.proxies.clone() {
-                let d = corners[i as usize].map(|c| shooter.to_local(c - shooter.centre));
-                if d.iter().all(|c| c.z <= 0.0) {
-                    continue;
-                }
-                let offset = n.dot(d[0]);
-                let piece = t.pieces.len() as u32;
-                t.pieces.push(PieceGpu {
-                    plane: [n.x, n.y, n.z, offset],
-                    item: [
-                        self.proxies.element[i as usize],
-                        (offset >= 0.0) as u32,
-                        0,
-                        0,
-                    ],
-                    origin: lookup.origin,
-                    axis: lookup.axis,
-                    bilinear: lookup.bilinear,
-                    grid: lookup.grid,
-                });
-                let before = t.vertices.len();
-                crate::hemisphere::tessellate(&d, self.res, t.tolerance, |v| {
-                    t.vertices.push(TessVertex {
-                        p: v.p.to_array(),
-                        x_override: v.x_override,
-                        x_offset: v.x_offset,
-                        piece,
-                    })
-                });
-                if t.vertices.len() == before {
-                    t.pieces.pop();
-                }
-            }
-        }
-    }
-
     /// Whether shots skip the back faces of closed solids they are outside
     /// of (on by default; the item buffer is the same either way, cell for
     /// cell, but for rays grazing a silhouette edge).
@@ -396,7 +275,7 @@ impl HemisphereRasterizer {
     }
 
     /// Whether the exact projection's cells are drawn on the CPU
-    /// (`super::software`) rather than by the device: where the device is
+    /// (`raster::software`) rather than by the device: where the device is
     /// itself a CPU rasteriser (lavapipe), the same test costs a fraction
     /// there. The tessellated projection is always the device's, and so
     /// is a mesh with an element grid of 2^20 or more along an edge.
@@ -406,9 +285,9 @@ impl HemisphereRasterizer {
             .proxies
             .quads
             .iter()
-            .all(|q| super::software::fits(q.grid));
+            .all(|q| crate::raster::software::fits(q.grid));
         self.software =
-            (on && fits).then(|| super::software::Software::new(self.res, self.elements));
+            (on && fits).then(|| crate::raster::software::Software::new(self.res, self.elements));
     }
 
     /// Whether shots draw on the CPU ([`HemisphereRasterizer::set_software`]).
@@ -707,6 +586,47 @@ impl HemisphereRasterizer {
     ) -> Result<RasterStats, GpuError> {
         let start = Instant::now();
         self.packed = false;
+        let (collected, lattice) = self.find_rects(shooter, layout, own, peers);
+        let bounds = start.elapsed();
+        let (rasterise, readback) = if self.software.is_some() && self.tess.is_none() {
+            self.draw_on_cpu(layout, own, items);
+            (start.elapsed() - bounds, Duration::ZERO)
+        } else {
+            self.upload(device, queue, layout, own, lattice)?;
+            let submission = self.submit(device, queue);
+            let waited =
+                self.read_items(device, submission.clone(), layout, own, lattice, items)?;
+            self.read_coverage(device, submission)?;
+            let read_start = waited.unwrap_or_else(Instant::now);
+            (read_start - start - bounds, read_start.elapsed())
+        };
+        Ok(RasterStats {
+            bounds,
+            rects: match &self.tess {
+                Some(t) => (t.vertices.len() / 3) as u32,
+                None => collected.rects as u32,
+            },
+            bounded: collected.bounded as u32,
+            occluded: collected.culled.map_or(0, |c| c.rects as u32),
+            skipped: collected.skipped as u32,
+            rasterise,
+            readback,
+        })
+    }
+
+    /// A shot's first half, on the CPU: this rank's tiles as the bounds
+    /// read them, the shooter's side of each closed solid, and the
+    /// rectangles (or the tessellated projection's triangles) to draw,
+    /// with the occlusion cull and the ranks' deal where they apply.
+    /// Returns what was collected and whether the rank's cells are drawn
+    /// packed (1 x 1 tiles over several ranks).
+    fn find_rects(
+        &mut self,
+        shooter: &ShooterFrame,
+        layout: &TileLayout,
+        own: (u32, u32),
+        peers: Option<Peers<'_>>,
+    ) -> (crate::raster::proxies::Collected, bool) {
         // With 1 x 1 tiles over several ranks, draw only this rank's cells,
         // packed (see the shader); otherwise draw all and discard others' cells.
         // The tessellated projection always draws the full image: packing
@@ -748,7 +668,7 @@ impl HemisphereRasterizer {
             None => false,
         };
         let cull = self.cull_occluded && !waiting && agree.is_some();
-        let mut collected = super::proxies::Collected::default();
+        let mut collected = crate::raster::proxies::Collected::default();
         if self.tess.is_some() {
             self.collect_triangles(shooter);
         } else {
@@ -771,34 +691,10 @@ impl HemisphereRasterizer {
                 self.cull_waits.insert(shooter.polygon, CULL_RETRY);
             }
         }
-        let bounds = start.elapsed();
-        let (rasterise, readback) = if self.software.is_some() && self.tess.is_none() {
-            self.draw_on_cpu(layout, own, items);
-            (start.elapsed() - bounds, Duration::ZERO)
-        } else {
-            self.upload(device, queue, layout, own, lattice)?;
-            let submission = self.submit(device, queue);
-            let waited =
-                self.read_items(device, submission.clone(), layout, own, lattice, items)?;
-            self.read_coverage(device, submission)?;
-            let read_start = waited.unwrap_or_else(Instant::now);
-            (read_start - start - bounds, read_start.elapsed())
-        };
-        Ok(RasterStats {
-            bounds,
-            rects: match &self.tess {
-                Some(t) => (t.vertices.len() / 3) as u32,
-                None => collected.rects as u32,
-            },
-            bounded: collected.bounded as u32,
-            occluded: collected.culled.map_or(0, |c| c.rects as u32),
-            skipped: collected.skipped as u32,
-            rasterise,
-            readback,
-        })
+        (collected, lattice)
     }
 
-    /// Draws the shot's rectangles on the CPU (`super::software`) into
+    /// Draws the shot's rectangles on the CPU (`raster::software`) into
     /// `items`, and the coverage counts when counting.
     fn draw_on_cpu(&mut self, layout: &TileLayout, own: (u32, u32), items: &mut Vec<u32>) {
         if let Some(soft) = self.software.as_mut() {
@@ -845,139 +741,3 @@ const DRAW_INSTANCES: u32 = 1 << 12;
 
 /// The rectangle buffer's first size (it grows to the largest shot).
 const INITIAL_INSTANCE_BYTES: u64 = 1 << 20;
-
-/// A buffer of `size` bytes for `usage`, not mapped.
-fn buffer(
-    device: &wgpu::Device,
-    label: &str,
-    size: u64,
-    usage: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage,
-        mapped_at_creation: false,
-    })
-}
-
-/// The cell directions from f64 (`hemisphere::direction_table`), the same
-/// on every driver, as the shader's uniform table: entry k holds row k's
-/// (sin phi, cos phi) and column k's (cos theta, sin theta).
-fn direction_buffer(device: &wgpu::Device, res: Resolution) -> Result<wgpu::Buffer, GpuError> {
-    let table = crate::hemisphere::direction_table(res);
-    let (rows, cols) = table.split_at(res.rows as usize);
-    let most = crate::hemisphere::MAX_COUNT as usize;
-    if rows.len() > most || cols.len() > most {
-        return Err(GpuError::TooLarge(format!(
-            "hemisphere {res}: the shader's direction table holds at most {most} rows and columns"
-        )));
-    }
-    let mut entries = vec![[0.0f32; 4]; most];
-    for (k, e) in entries.iter_mut().enumerate() {
-        if let Some(r) = rows.get(k) {
-            e[..2].copy_from_slice(r);
-        }
-        if let Some(c) = cols.get(k) {
-            e[2..].copy_from_slice(c);
-        }
-    }
-    let trig = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("cell directions"),
-        size: std::mem::size_of_val(entries.as_slice()) as u64,
-        usage: wgpu::BufferUsages::UNIFORM,
-        mapped_at_creation: true,
-    });
-    trig.slice(..)
-        .get_mapped_range_mut()
-        .map_err(|e| GpuError::Failed(e.to_string()))?
-        .copy_from_slice(bytemuck::cast_slice(&entries));
-    trig.unmap();
-    Ok(trig)
-}
-
-/// The exact projection's pipeline: one instanced rectangle per piece.
-fn rect_pipeline(device: &wgpu::Device, module: &wgpu::ShaderModule) -> wgpu::RenderPipeline {
-    item_pipeline(
-        device,
-        module,
-        ("vs", "fs"),
-        wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<Instance>() as u64,
-            step_mode: wgpu::VertexStepMode::Instance,
-            attributes: &wgpu::vertex_attr_array![
-                0 => Float32x4, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3,
-                4 => Float32x3, 5 => Float32x4, 6 => Uint32x2, 7 => Float32x4,
-                8 => Float32x4, 9 => Float32x4, 10 => Uint32x4
-            ],
-        },
-        wgpu::PrimitiveTopology::TriangleStrip,
-    )
-}
-
-/// A pipeline that draws element ids into the R32Uint item buffer with a
-/// depth test (both projections: the entry points and vertex layout differ).
-fn item_pipeline(
-    device: &wgpu::Device,
-    module: &wgpu::ShaderModule,
-    (vs, fs): (&str, &str),
-    vertices: wgpu::VertexBufferLayout,
-    topology: wgpu::PrimitiveTopology,
-) -> wgpu::RenderPipeline {
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(vs),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some(vs),
-            compilation_options: Default::default(),
-            buffers: &[Some(vertices)],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology,
-            cull_mode: None,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some(fs),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: wgpu::TextureFormat::R32Uint,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
-}
-
-/// Group 0 of `pipeline`: `buffers` at bindings 0, 1, 2, ... in order.
-fn item_bind_group(
-    device: &wgpu::Device,
-    pipeline: &wgpu::RenderPipeline,
-    buffers: &[&wgpu::Buffer],
-) -> wgpu::BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = buffers
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            resource: b.as_entire_binding(),
-        })
-        .collect();
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("hemisphere"),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    })
-}

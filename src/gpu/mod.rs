@@ -5,14 +5,11 @@
 //! doing work with `&Device, &Queue`, so tests can share one device.
 
 mod hemisphere;
-mod proxies;
-mod software;
-pub use proxies::{Agree, ProxyShapes, Scatter};
 mod target;
 mod view;
 
 pub use hemisphere::{HemisphereRasterizer, Peers, RasterStats};
-pub use view::{render_view, view_depth_range, Shading, ViewRenderer, ViewSettings};
+pub use view::{render_view, view_depth_range, Shading, Shown, ViewRenderer, ViewSettings};
 
 use std::time::Duration;
 

@@ -254,23 +254,30 @@ impl ViewRenderer {
         camera: &Camera,
         settings: &ViewSettings,
     ) -> Result<Vec<[f32; 3]>, GpuError> {
-        self.render_masked(device, queue, mesh, radiance, None, camera, settings)
+        let shown = Shown {
+            mesh,
+            radiance,
+            hidden: None,
+        };
+        self.render_masked(device, queue, shown, camera, settings)
     }
 
-    /// [`ViewRenderer::render`], where smooth shading leaves the elements
-    /// marked `hidden` (no light reached them) out of their vertices' values
-    /// ([`crate::interpolate::vertex_values`]).
-    #[allow(clippy::too_many_arguments)]
+    /// [`ViewRenderer::render`] of what `shown` says, where smooth shading
+    /// leaves the elements marked hidden (no light reached them) out of
+    /// their vertices' values ([`crate::interpolate::vertex_values`]).
     pub fn render_masked(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        mesh: &Mesh,
-        radiance: &[[f32; 3]],
-        hidden: Option<&[bool]>,
+        shown: Shown<'_>,
         camera: &Camera,
         settings: &ViewSettings,
     ) -> Result<Vec<[f32; 3]>, GpuError> {
+        let Shown {
+            mesh,
+            radiance,
+            hidden,
+        } = shown;
         let ss = settings.supersample.max(1);
         let (w, h) = (settings.width * ss, settings.height * ss);
         let max_dim = device.limits().max_texture_dimension_2d;
@@ -293,18 +300,8 @@ impl ViewRenderer {
             .vertices
             .write(device, queue, bytemuck::cast_slice(&verts))
             .ok_or_else(|| GpuError::Failed("no vertex buffer".into()))?;
-        let lines: Vec<Vertex> = if settings.wireframe {
-            mesh.elements
-                .iter()
-                .flat_map(|e| {
-                    let n = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
-                    (0..n).flat_map(move |k| [e.corners[k], e.corners[(k + 1) % n]])
-                })
-                .map(|p| Vertex {
-                    pos: p.to_array(),
-                    radiance: [0.0; 3],
-                })
-                .collect()
+        let lines = if settings.wireframe {
+            wire_lines(mesh)
         } else {
             Vec::new()
         };
@@ -344,17 +341,55 @@ impl ViewRenderer {
         }
         target.copy_out(&mut enc);
         let submission = queue.submit([enc.finish()]);
-        let mut out = vec![[0.0f32; 3]; (settings.width * settings.height) as usize];
-        let norm = 1.0 / (ss * ss) as f32;
-        target.read_rows(device, submission, |y, row| {
-            for (x, px) in row.chunks_exact(16).enumerate() {
-                let o = &mut out[(y as u32 / ss * settings.width + x as u32 / ss) as usize];
-                for c in 0..3 {
-                    let b = &px[c * 4..c * 4 + 4];
-                    o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
-                }
-            }
-        })?;
-        Ok(out)
+        read_image(device, target, submission, settings)
     }
+}
+
+/// What a view shows: the mesh, each element's radiance, and the elements
+/// no light reached (left out of smooth shading's vertex values).
+#[derive(Clone, Copy)]
+pub struct Shown<'a> {
+    /// The mesh.
+    pub mesh: &'a Mesh,
+    /// Per element, its radiance.
+    pub radiance: &'a [[f32; 3]],
+    /// Per element, whether no light reached it.
+    pub hidden: Option<&'a [bool]>,
+}
+
+/// The elements' edges as line segments (the wireframe).
+fn wire_lines(mesh: &Mesh) -> Vec<Vertex> {
+    mesh.elements
+        .iter()
+        .flat_map(|e| {
+            let n = if e.vertices[3] == e.vertices[2] { 3 } else { 4 };
+            (0..n).flat_map(move |k| [e.corners[k], e.corners[(k + 1) % n]])
+        })
+        .map(|p| Vertex {
+            pos: p.to_array(),
+            radiance: [0.0; 3],
+        })
+        .collect()
+}
+
+/// The drawn target read back and box-filtered down to the image's size.
+fn read_image(
+    device: &wgpu::Device,
+    target: &RenderTarget,
+    submission: wgpu::SubmissionIndex,
+    settings: &ViewSettings,
+) -> Result<Vec<[f32; 3]>, GpuError> {
+    let ss = settings.supersample.max(1);
+    let mut out = vec![[0.0f32; 3]; (settings.width * settings.height) as usize];
+    let norm = 1.0 / (ss * ss) as f32;
+    target.read_rows(device, submission, |y, row| {
+        for (x, px) in row.chunks_exact(16).enumerate() {
+            let o = &mut out[(y as u32 / ss * settings.width + x as u32 / ss) as usize];
+            for c in 0..3 {
+                let b = &px[c * 4..c * 4 + 4];
+                o[c] += f32::from_le_bytes([b[0], b[1], b[2], b[3]]) * norm;
+            }
+        }
+    })?;
+    Ok(out)
 }

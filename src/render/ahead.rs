@@ -14,8 +14,6 @@
 //!
 //! The shot loop's thread draws too: it draws its own row when nobody has
 //! started it, and while the helper thread draws it, the next wanted row.
-//! Whether drawing ahead pays is measured as the solve goes ([`Probe`]):
-//! in a big scene it did not.
 
 use super::cache::RowKey;
 use super::options::{RenderError, RenderOptions};
@@ -42,183 +40,6 @@ const WAIT_LIMIT: Duration = Duration::from_secs(600);
 
 /// A row someone wants drawn: its key and its hemisphere's centre.
 type Want = (RowKey, glam::Vec3);
-
-/// Shots a window lasts.
-const WINDOW: u32 = 32;
-
-/// Whether each probe window draws ahead, after one window of warm-up:
-/// ABBA BAAB, which cancels a steady drift of the shots' cost and a
-/// curving one.
-const PROBE: [bool; 8] = [true, false, false, true, false, true, true, false];
-
-/// When the probe may decide early: after its first pair of windows (AB)
-/// where one way took at most 0.7 of the other's time, or after its first
-/// two pairs (AB, BA) where in each the same way took at most 0.8 of the
-/// other's. In the 4096-cube room drawing ahead takes 0.46-0.65 of the
-/// other way's time, and the probe's in-shot windows cost 9 % of its
-/// 640-shot bench; a closer call, or pairs that disagree, take all eight
-/// windows (Sponza's first probe does).
-const EARLY: [(usize, f64); 2] = [(1, 0.7), (2, 0.8)];
-
-/// Windows the measured choice holds before it measures again; doubled
-/// each time the probe agrees with the choice it held, up to [`MOST_HOLD`]
-/// (a probe spends half its shots the slower way).
-const HOLD: u32 = 16;
-const MOST_HOLD: u32 = 256;
-
-/// Whether drawing ahead pays, measured as the solve goes: rows drawn
-/// ahead for a runner-up that does not shoot next are lost, and in a big
-/// scene two rows drawn at once slow each other, so the loss can outweigh
-/// the gain (Sponza's first 128 shots, each way throughout: 4.07 s drawing
-/// ahead against 3.07 s; the 4096-cube room 9.8-10.1 ms a shot ahead
-/// against 12.8-14.8 ms). A cycle is one window of warm-up in the way
-/// held so far (a switch of ways, or the solve's start, costs the window
-/// after it: its shots are the solve's first, or rows drawn ahead are
-/// still being taken), then the [`PROBE`] windows, whose times are summed
-/// each way; the faster way holds for [`HOLD`] windows or more. A window's
-/// cost varies with its shooters by half or more: one window a way, the
-/// first counted, chose each row in its shot in the 4096-cube room, 30 %
-/// slower. Still fooled by a sudden drop: Sponza's shots cost a tenth
-/// after its first 130, so its probe measures ahead as faster, and its
-/// solve pays 0.3-0.8 s (docs/notebook/shot-speed.md "Rows drawn ahead"). Windows of 16 shots,
-/// ABBA four times, measured the switches more than the ways. Only time
-/// depends on it: the rows are the same either way.
-#[derive(Debug)]
-struct Probe {
-    /// Windows done in this cycle (0: warm-up; then probing until decided).
-    window: u32,
-    /// Shots into the current window and when it began.
-    shots: u32,
-    began: Option<std::time::Instant>,
-    /// The probe's time drawing ahead and drawing in the shot.
-    spent: [Duration; 2],
-    /// Each probe window's time, in [`PROBE`]'s order.
-    windows: [Duration; PROBE.len()],
-    /// The way chosen by the last probe.
-    chosen: bool,
-    /// Once this cycle's probe has chosen: the window its hold ends at.
-    until: Option<u32>,
-    /// How long the last choice held; 0 before the first.
-    hold: u32,
-}
-
-impl Default for Probe {
-    fn default() -> Self {
-        Self {
-            window: 0,
-            shots: 0,
-            began: None,
-            spent: [Duration::ZERO; 2],
-            windows: [Duration::ZERO; PROBE.len()],
-            chosen: true,
-            until: None,
-            hold: 0,
-        }
-    }
-}
-
-impl Probe {
-    /// Notes a shot starting; returns whether it draws ahead.
-    fn shot(&mut self) -> bool {
-        self.shot_at(std::time::Instant::now())
-    }
-
-    /// [`Probe::shot`], the shot starting at `now`.
-    fn shot_at(&mut self, now: std::time::Instant) -> bool {
-        let began = *self.began.get_or_insert(now);
-        if self.shots == WINDOW {
-            let ahead = self.ahead();
-            let took = now - began;
-            log::trace!("window {}: {took:?} {}", self.window, way(ahead));
-            if self.probing() {
-                self.spent[usize::from(!ahead)] += took;
-                self.windows[self.window as usize - 1] = took;
-            }
-            self.window += 1;
-            let probed = self.window as usize - 1;
-            if self.until.is_none() && (probed == PROBE.len() || self.decisive(probed)) {
-                self.decide();
-            }
-            if self.until == Some(self.window) {
-                self.window = 0;
-                self.spent = [Duration::ZERO; 2];
-                self.windows = [Duration::ZERO; PROBE.len()];
-                self.until = None;
-            }
-            self.shots = 0;
-            self.began = Some(now);
-        }
-        self.shots += 1;
-        self.ahead()
-    }
-
-    /// Ends this cycle's probe: the faster way holds, longer when it is the
-    /// way held before.
-    fn decide(&mut self) {
-        let faster = self.spent[0] <= self.spent[1];
-        self.hold = if self.hold > 0 && faster == self.chosen {
-            (2 * self.hold).min(MOST_HOLD)
-        } else {
-            HOLD
-        };
-        self.chosen = faster;
-        self.until = Some(self.window + self.hold);
-        log::debug!(
-            "drawing ahead: {:?} against {:?} drawing each row in its shot; {} for {} windows",
-            self.spent[0],
-            self.spent[1],
-            way(self.chosen),
-            self.hold
-        );
-    }
-
-    /// Whether the first `probed` probe windows are the pairs of an
-    /// [`EARLY`] decision, each pair finding the same way faster by its
-    /// margin or more.
-    fn decisive(&self, probed: usize) -> bool {
-        let Some(&(pairs, margin)) = EARLY.iter().find(|e| 2 * e.0 == probed) else {
-            return false;
-        };
-        let faster = |pair: usize| {
-            let (mut t, k) = ([0.0; 2], 2 * pair);
-            for (w, &ahead) in PROBE[k..k + 2].iter().enumerate() {
-                t[usize::from(!ahead)] = self.windows[k + w].as_secs_f64();
-            }
-            if t[0] <= margin * t[1] {
-                Some(true)
-            } else if t[1] <= margin * t[0] {
-                Some(false)
-            } else {
-                None
-            }
-        };
-        let first = faster(0);
-        first.is_some() && (1..pairs).all(|p| faster(p) == first)
-    }
-
-    /// Whether the current window is one of the probe's.
-    fn probing(&self) -> bool {
-        self.until.is_none() && self.window >= 1
-    }
-
-    /// Whether the current window draws ahead.
-    fn ahead(&self) -> bool {
-        if self.probing() {
-            PROBE[self.window as usize - 1]
-        } else {
-            self.chosen
-        }
-    }
-}
-
-/// A way of drawing, in words.
-fn way(ahead: bool) -> &'static str {
-    if ahead {
-        "ahead"
-    } else {
-        "in the shot"
-    }
-}
 
 /// What the shot loop and the helper share.
 #[derive(Default)]
@@ -290,7 +111,6 @@ impl Board {
 pub struct Ahead {
     board: Mutex<Board>,
     turn: Condvar,
-    probe: Mutex<Probe>,
 }
 
 impl Ahead {
@@ -420,18 +240,15 @@ impl Ahead {
         next: impl FnOnce(&GpuFormFactors) -> Vec<Want>,
         out: &mut Vec<Transfer>,
     ) -> Result<(), RenderError> {
-        let ahead = self.probe.lock().unwrap_or_else(|e| e.into_inner()).shot();
         source.form_factors_by(shooter, region, out, |source, key, centre| {
-            let next = ahead.then(|| next(source));
+            let next = next(source);
             {
                 let mut board = self.lock();
                 board.wanted.clear();
-                if let Some(next) = next {
-                    board.wanted.push((key, centre));
-                    board
-                        .wanted
-                        .extend(next.iter().filter(|(k, _)| *k != key).copied());
-                }
+                board.wanted.push((key, centre));
+                board
+                    .wanted
+                    .extend(next.iter().filter(|(k, _)| *k != key).copied());
                 board.prune();
             }
             self.turn.notify_all();
@@ -493,115 +310,5 @@ impl Ahead {
                 ));
             }
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::time::Instant;
-
-    /// Runs `windows` windows of shots through a new probe, each shot
-    /// costing what `cost` says of its way and its window; returns each
-    /// window's way, checking that every shot of a window takes it.
-    fn run(windows: u32, cost: impl Fn(bool, u32) -> Duration) -> Vec<bool> {
-        let mut probe = Probe::default();
-        let mut at = Instant::now();
-        (0..windows)
-            .map(|w| {
-                let ways: Vec<bool> = (0..WINDOW)
-                    .map(|_| {
-                        let ahead = probe.shot_at(at);
-                        at += cost(ahead, w);
-                        ahead
-                    })
-                    .collect();
-                assert!(
-                    ways.iter().all(|&a| a == ways[0]),
-                    "window {w} changed ways"
-                );
-                ways[0]
-            })
-            .collect()
-    }
-
-    /// A shot's time: `base` microseconds, `slow` times more the slower way.
-    fn shot(ahead: bool, ahead_faster: bool, base: f64, slow: f64) -> Duration {
-        let factor = if ahead == ahead_faster { 1.0 } else { slow };
-        Duration::from_micros((base * factor) as u64)
-    }
-
-    const P: usize = PROBE.len();
-
-    #[test]
-    fn the_probe_chooses_the_faster_way_whatever_the_first_window_costs() {
-        for ahead_faster in [true, false] {
-            // The solve's first window costs 20x (drawn ahead), and the
-            // shots' cost drifts up as the solve goes; the faster way is
-            // 10 % faster.
-            let ways = run(P as u32 + 6, |ahead, w| {
-                let base = if w == 0 {
-                    20_000.0
-                } else {
-                    1_000.0 + 10.0 * w as f64
-                };
-                shot(ahead, ahead_faster, base, 1.1)
-            });
-            assert!(ways[0], "the warm-up draws ahead");
-            assert_eq!(ways[1..=P], PROBE, "the probe's windows");
-            assert!(
-                ways[P + 1..].iter().all(|&a| a == ahead_faster),
-                "held: the faster way (ahead faster: {ahead_faster})"
-            );
-        }
-    }
-
-    #[test]
-    fn the_probe_decides_early_only_where_its_pairs_agree_by_far() {
-        // The in-shot way's cost against ahead's in the first pair and the
-        // second: 2x in the first decides after it; 1.33x (0.75) in both
-        // after two pairs; 1.33x then a coin toss, or 1.18x (0.85), takes
-        // all eight windows.
-        for (first, second, probed) in [
-            (2.0, 1.0, 2),
-            (1.33, 1.33, 4),
-            (1.33, 1.0, P),
-            (1.18, 1.18, P),
-        ] {
-            let ways = run(P as u32 + 3, |ahead, w| {
-                let factor = if (3..5).contains(&w) { second } else { first };
-                shot(ahead, true, 1_000.0, factor)
-            });
-            let early = probed < P;
-            assert_eq!(ways[1..=probed], PROBE[..probed], "the probe's windows");
-            assert!(
-                ways[probed + 1..].iter().all(|&a| a),
-                "held ahead (early: {early})"
-            );
-        }
-    }
-
-    #[test]
-    fn the_probe_measures_again_after_holding_and_holds_longer_when_it_agrees() {
-        let hold = HOLD as usize;
-        // One way twice as fast: decided after the first pair.
-        let cycle = |warm: bool, hold: usize, held: bool| {
-            let mut c = vec![warm];
-            c.extend(&PROBE[..2]);
-            c.extend(vec![held; hold]);
-            c
-        };
-        // Ahead holds, the probe agrees and it holds twice as long; then
-        // drawing ahead turns twice as slow: the next probe switches, and
-        // the one after agrees.
-        let mut want = cycle(true, hold, true);
-        want.extend(cycle(true, 2 * hold, true));
-        let switch = want.len() as u32;
-        want.extend(cycle(true, hold, false));
-        want.extend(cycle(false, 2 * hold, false));
-        let ways = run(want.len() as u32, |ahead, w| {
-            shot(ahead, w < switch, 1_000.0, 2.0)
-        });
-        assert_eq!(ways, want);
     }
 }

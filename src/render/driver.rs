@@ -15,8 +15,8 @@ use crate::mesh::Mesh;
 use crate::parallel::{Collectives, Exchange, Single, ThreadComm, Traffic};
 use crate::render::image::{solution_image, view_for};
 use crate::report::{
-    self, Counts, LoadBalance, Parallel, RankStats, Refinement, Report, Settings, Timings,
-    TracePoint,
+    self, Counts, Decomposition, LoadBalance, Parallel, RankStats, Refinement, Report, Settings,
+    Timings, TracePoint,
 };
 use crate::scene::Scene;
 use crate::settings::Projection;
@@ -35,6 +35,24 @@ pub struct Rendered {
     pub report: Report,
     /// The solve stopped early because it was interrupted.
     pub interrupted: bool,
+}
+
+/// What every step of a render is given: the device, the scene, the
+/// options and the ranks (every rank holds the same).
+#[derive(Clone, Copy)]
+struct Job<'a> {
+    gpu: &'a Gpu,
+    scene: &'a Scene,
+    opts: &'a RenderOptions,
+    comm: &'a dyn Collectives,
+}
+
+/// Where the final solve starts: the passes' summary and trace, and an
+/// interrupted pass's state to go on from.
+struct Start<'r> {
+    refinement: &'r Refinement,
+    passes: Vec<TracePoint>,
+    handoff: Option<Handoff>,
 }
 
 /// Solves `scene` in this process and renders its camera view. `load_time` is
@@ -87,13 +105,16 @@ pub fn render_ranks(
 /// The mesh to solve: a checkpoint's (whose fingerprint must match), or
 /// the refinement passes' (see [`refined_mesh`]).
 fn solve_mesh(
-    gpu: &Gpu,
-    scene: &Scene,
-    opts: &RenderOptions,
-    comm: &dyn Collectives,
+    job: Job<'_>,
     fingerprint: &str,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Refined, RenderError> {
+    let Job {
+        gpu,
+        scene,
+        opts,
+        comm,
+    } = job;
     let Some(c) = &opts.resume else {
         return refined_mesh(gpu, scene, opts, comm, progress);
     };
@@ -117,11 +138,16 @@ fn solve_mesh(
 /// A solver at the start of the final solve (or where a checkpoint left
 /// it), its trace so far, and the solve seconds already spent.
 fn start_solver<'m>(
+    job: Job<'_>,
     mesh: &'m LitMesh,
-    opts: &RenderOptions,
-    comm: &dyn Collectives,
-    (refinement, passes, handoff): (&Refinement, Vec<TracePoint>, Option<Handoff>),
+    start: Start<'_>,
 ) -> Result<(Solver<'m>, Trace<'m>, f64), RenderError> {
+    let Job { opts, comm, .. } = job;
+    let Start {
+        refinement,
+        passes,
+        handoff,
+    } = start;
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     solver.set_overshoot(opts.overshoot);
     // An interrupted pass's solution is where the solve goes on from (and
@@ -168,19 +194,20 @@ struct Solved<'m> {
     ambient_traffic: Traffic,
 }
 
-/// Runs the final solve with the trace, progress and checkpoint hooks.
-#[allow(clippy::too_many_arguments)]
+/// Runs the final solve with the trace, progress and checkpoint hooks;
+/// `trace` and `so_far` are where it starts (the passes', or a checkpoint's).
 fn final_solve<'m>(
-    scene: &Scene,
-    mesh: &'m LitMesh,
-    opts: &RenderOptions,
-    comm: &dyn Collectives,
+    job: Job<'_>,
     source: &mut GpuFormFactors,
     solver: &mut Solver<'m>,
     (trace, so_far): (Trace<'m>, f64),
     header: Header,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Solved<'m>, RenderError> {
+    let Job {
+        scene, opts, comm, ..
+    } = job;
+    let mesh = solver.mesh();
     let solve_start = Instant::now()
         .checked_sub(Duration::from_secs_f64(so_far))
         .unwrap_or_else(Instant::now);
@@ -238,16 +265,13 @@ pub fn render_on(
 ) -> Result<Option<Rendered>, RenderError> {
     opts.validate()?;
     scene.check_lit()?;
-    if comm.rank() == 0 && opts.batch > 1 && comm.size() > opts.batch {
-        // Not an error: the split shots' groups, the transport's rays and
-        // the landing still go to every rank (docs/scaling.md).
-        log::warn!(
-            "--batch {} on {} ranks: a batch's rows keep at most {} ranks drawing; a batch of at least the rank count uses them all (the numbers depend on --batch, not on the ranks)",
-            opts.batch,
-            comm.size(),
-            opts.batch
-        );
-    }
+    let job = Job {
+        gpu,
+        scene,
+        opts,
+        comm,
+    };
+    warn_batch_below_ranks(job);
     let mut timings = Timings {
         load: load_time.as_secs_f64(),
         ..Default::default()
@@ -261,7 +285,7 @@ pub fn render_on(
         trace: passes,
         bookkeeping,
         interrupted,
-    } = solve_mesh(gpu, scene, opts, comm, &fingerprint, progress)?;
+    } = solve_mesh(job, &fingerprint, progress)?;
     // The passes' solves count as solve time, below; their traces' bookkeeping nowhere.
     timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds - bookkeeping).max(0.0);
     if comm.rank() == 0 {
@@ -273,8 +297,12 @@ pub fn render_on(
     let mut source = GpuFormFactors::for_solve(gpu, &mesh, opts, (comm, &one), scene.extent())?;
     timings.setup = t.elapsed().as_secs_f64();
     crate::report::log_memory("the rasteriser's set-up");
-    let (mut solver, trace, so_far) =
-        start_solver(&mesh, opts, comm, (&refinement, passes, interrupted))?;
+    let start = Start {
+        refinement: &refinement,
+        passes,
+        handoff: interrupted,
+    };
+    let (mut solver, trace, so_far) = start_solver(job, &mesh, start)?;
     crate::report::log_memory("the solver's set-up");
     let header = Header {
         scene: scene.name.clone(),
@@ -290,10 +318,7 @@ pub fn render_on(
     let before = comm.traffic();
     let cpu_start = crate::parallel::process_cpu_seconds();
     let solved = final_solve(
-        scene,
-        &mesh,
-        opts,
-        comm,
+        job,
         &mut source,
         &mut solver,
         (trace, so_far),
@@ -327,7 +352,7 @@ pub fn render_on(
     phase_timings(&mut timings, &gathered.phases, &solved.stats, shots);
     let (solver, parallel) = gathered.parallel(layout, opts, &mesh);
     let interrupted = solved.stats.interrupted;
-    let (image, mut report) = finish(gpu, scene, &mesh, opts, &solver, timings, parallel, solved)?;
+    let (image, mut report) = finish(job, &solver, timings, parallel, solved)?;
     report.refinement = refinement;
     let radiosity = solver.display_radiosity(opts.ambient);
     drop(solver);
@@ -338,6 +363,21 @@ pub fn render_on(
         report,
         interrupted,
     }))
+}
+
+/// Says, on rank 0, when a batch is smaller than the rank count.
+fn warn_batch_below_ranks(job: Job<'_>) {
+    let Job { opts, comm, .. } = job;
+    if comm.rank() == 0 && opts.batch > 1 && comm.size() > opts.batch {
+        // Not an error: the split shots' groups, the transport's rays and
+        // the landing still go to every rank (docs/scaling.md).
+        log::warn!(
+            "--batch {} on {} ranks: a batch's rows keep at most {} ranks drawing; a batch of at least the rank count uses them all (the numbers depend on --batch, not on the ranks)",
+            opts.batch,
+            comm.size(),
+            opts.batch
+        );
+    }
 }
 
 /// A camera image: width, height and linear radiance pixels, top row first.
@@ -378,11 +418,14 @@ impl<'m> Gathered<'m> {
         opts: &RenderOptions,
         mesh: &Mesh,
     ) -> (Solver<'m>, Parallel) {
-        let mut parallel = Parallel::new(
-            self.per_rank.len(),
+        let d = Decomposition {
+            ranks: self.per_rank.len(),
             layout,
-            opts.exchange,
-            opts.resolution,
+            exchange: opts.exchange,
+            resolution: opts.resolution,
+        };
+        let mut parallel = Parallel::new(
+            d,
             mesh.elements.len(),
             self.whole.shots(),
             self.per_rank,
@@ -553,17 +596,17 @@ fn phase_timings(timings: &mut Timings, t: &PhaseTimes, stats: &LoopStats, shots
 }
 
 /// Rank 0's end of a render: the image, and the report with its trace.
-#[allow(clippy::too_many_arguments)]
 fn finish(
-    gpu: &Gpu,
-    scene: &Scene,
-    mesh: &Mesh,
-    opts: &RenderOptions,
+    job: Job<'_>,
     solver: &Solver,
     mut timings: Timings,
     parallel: Parallel,
     solved: Solved,
 ) -> Result<(Option<Image>, Report), RenderError> {
+    let Job {
+        gpu, scene, opts, ..
+    } = job;
+    let mesh = solver.mesh();
     let t = Instant::now();
     let camera = scene.camera.unwrap_or_else(|| scene.default_camera());
     let height = opts.image_height(camera.aspect);
@@ -576,16 +619,12 @@ fn finish(
     };
     timings.image = t.elapsed().as_secs_f64();
     let shots = solver.shots();
-    let mut report = build_report(
-        scene,
-        mesh,
-        opts,
-        solver,
-        gpu,
-        [opts.width, height],
+    let run = RunRecord {
+        image_size: [opts.width, height],
         timings,
         parallel,
-    );
+    };
+    let mut report = build_report(scene, mesh, opts, solver, gpu, run);
     report.convergence = solved.trace.finish(&report, solved.solve);
     if solved.stats.interrupted {
         report.warnings.push(match &opts.checkpoint {
@@ -600,18 +639,31 @@ fn finish(
     Ok((image, report))
 }
 
+/// What a run measured beside its solution: the image's size, the phases'
+/// timings and the ranks' section.
+pub struct RunRecord {
+    /// The camera image's width and height (0 wide: none).
+    pub image_size: [u32; 2],
+    /// The phases' seconds.
+    pub timings: Timings,
+    /// The ranks, their statistics and the exchange.
+    pub parallel: Parallel,
+}
+
 /// The report of a (gathered) solution: settings, counts, progress and surfaces.
-#[allow(clippy::too_many_arguments)]
 pub fn build_report(
     scene: &Scene,
     mesh: &Mesh,
     opts: &RenderOptions,
     solver: &Solver,
     gpu: &Gpu,
-    image_size: [u32; 2],
-    timings: Timings,
-    parallel: Parallel,
+    run: RunRecord,
 ) -> Report {
+    let RunRecord {
+        image_size,
+        timings,
+        parallel,
+    } = run;
     let unshot_fraction = solver.unshot_fraction();
     Report {
         scene: scene.name.clone(),
@@ -671,14 +723,11 @@ pub fn build_report(
 
 /// The `parallel` section of a one-process solve.
 pub fn single_process(res: Resolution, elements: usize, shots: u64) -> Parallel {
-    Parallel::new(
-        1,
-        TileLayout::whole(res),
-        Exchange::Hemispheres,
-        res,
-        elements,
-        shots,
-        Vec::new(),
-        LoadBalance::default(),
-    )
+    let d = Decomposition {
+        ranks: 1,
+        layout: TileLayout::whole(res),
+        exchange: Exchange::Hemispheres,
+        resolution: res,
+    };
+    Parallel::new(d, elements, shots, Vec::new(), LoadBalance::default())
 }

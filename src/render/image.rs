@@ -7,7 +7,7 @@
 //! still average to the solution's value.
 
 use crate::direct::DirectLight;
-use crate::gpu::{view_depth_range, Gpu, GpuError, Shading, ViewRenderer, ViewSettings};
+use crate::gpu::{view_depth_range, Gpu, GpuError, Shading, Shown, ViewRenderer, ViewSettings};
 use crate::mesh::Mesh;
 use crate::render::options::RenderOptions;
 use crate::scene::{Camera, Scene};
@@ -100,7 +100,12 @@ pub fn camera_image(
     let unlit = parts.unlit.as_deref();
     let radiance = parts.radiance;
     if shadow_rays == 0 {
-        return renderer.render_masked(device, queue, mesh, radiance, unlit, camera, view);
+        let shown = Shown {
+            mesh,
+            radiance,
+            hidden: unlit,
+        };
+        return renderer.render_masked(device, queue, shown, camera, view);
     }
     let strata = (shadow_rays as f64).sqrt().ceil() as u32;
     // The mesh's hierarchy holds the same polygons (built once per mesh).
@@ -145,7 +150,12 @@ pub fn camera_image(
             }
         }
     }
-    let mut pixels = renderer.render_masked(device, queue, mesh, &rest, unlit, camera, view)?;
+    let shown = Shown {
+        mesh,
+        radiance: &rest,
+        hidden: unlit,
+    };
+    let mut pixels = renderer.render_masked(device, queue, shown, camera, view)?;
     for ((p, d), t) in pixels.iter_mut().zip(&traced.direct).zip(&traced.texture) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution

@@ -29,7 +29,9 @@ pub mod tiers;
 pub mod trace;
 pub mod write;
 
-pub use driver::{build_report, render, render_on, render_ranks, single_process, Rendered};
+pub use driver::{
+    build_report, render, render_on, render_ranks, single_process, Rendered, RunRecord,
+};
 pub use hooks::Progress;
 pub use options::{
     CheckpointPlan, DealBounds, FormFactorMethod, Projection, Rasteriser, RenderError,

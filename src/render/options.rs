@@ -48,7 +48,7 @@ pub struct RenderOptions {
     /// same bits either way).
     pub look_ahead: bool,
     /// Whether the ranks of a run deal the polygons' bounds between them
-    /// (`gpu::Scatter`; the same bits either way).
+    /// (`raster::Scatter`; the same bits either way).
     pub deal_bounds: DealBounds,
     /// How a batched solve's ranks deal a batch's rows (the same bits
     /// either way).

@@ -60,6 +60,96 @@ pub fn refined_mesh(
 /// Who is shown a pass's solution: called with the pass and its solver.
 pub type ShowPass<'a> = &'a mut dyn FnMut(u32, &Solver);
 
+/// What the passes decided so far: each polygon's patch-grid factor, why
+/// polygons were refined, and the summary the report gives.
+struct Tally {
+    factors: Vec<u32>,
+    summary: Refinement,
+    trace: Vec<TracePoint>,
+    bookkeeping: f64,
+    shooters: Vec<bool>,
+    receivers: Vec<bool>,
+    shading: Vec<bool>,
+}
+
+impl Tally {
+    fn new(polygons: usize) -> Self {
+        Self {
+            factors: vec![1; polygons],
+            summary: Refinement::default(),
+            trace: Vec::new(),
+            bookkeeping: 0.0,
+            shooters: vec![false; polygons],
+            receivers: vec![false; polygons],
+            shading: vec![false; polygons],
+        }
+    }
+
+    /// Counts a pass's shots, time and trace.
+    fn add_pass(&mut self, measured: &mut Measured) {
+        self.summary.passes += 1;
+        self.summary.shots += measured.shots;
+        self.summary.seconds += measured.seconds;
+        self.trace.append(&mut measured.trace);
+        self.bookkeeping += measured.bookkeeping;
+    }
+
+    /// Doubles the patch grids a pass decided on; returns how many.
+    fn apply(&mut self, decided: &[refine::Decision]) -> usize {
+        let mut changed = 0;
+        for (i, d) in decided.iter().enumerate() {
+            if d.refine() {
+                self.factors[i] *= 2;
+                changed += 1;
+            }
+            self.shading[i] |= d.shading;
+            self.summary.shading_refinements += d.shading as u32;
+            self.shooters[i] |= d.shooter;
+            self.receivers[i] |= d.receiver;
+            self.summary.shooter_refinements += d.shooter as u32;
+            self.summary.receiver_refinements += d.receiver as u32;
+        }
+        changed
+    }
+
+    /// What the passes leave the final solve, on `mesh`.
+    fn finish(mut self, mesh: LitMesh, interrupted: Option<Handoff>) -> Refined {
+        // An interrupted pass's summary keeps no polygon counts, as before.
+        if interrupted.is_none() {
+            let count = |v: &[bool]| v.iter().filter(|&&x| x).count() as u32;
+            self.summary.shooter_polygons = count(&self.shooters);
+            self.summary.receiver_polygons = count(&self.receivers);
+            self.summary.shading_polygons = count(&self.shading);
+        }
+        self.summary.end = [mesh.patches.len(), mesh.elements.len()];
+        self.summary.interrupted = interrupted.is_some();
+        Refined {
+            mesh,
+            refinement: self.summary,
+            factors: self.factors,
+            trace: self.trace,
+            bookkeeping: self.bookkeeping,
+            interrupted,
+        }
+    }
+}
+
+/// Logs what pass `pass` (from 0) decided, on rank 0.
+fn log_pass(pass: u32, mesh: &LitMesh, shots: u64, decided: &[refine::Decision]) {
+    let count = |f: fn(&refine::Decision) -> bool| decided.iter().filter(|d| f(d)).count();
+    let changed = count(|d| d.refine());
+    let (s, r, sh) = (
+        count(|d| d.shooter),
+        count(|d| d.receiver),
+        count(|d| d.shading),
+    );
+    log::info!(
+        "refinement pass {}: {} patches, {shots} shots; {changed} polygons refined ({s} for their shooters, {r} for uneven receivers, {sh} for their shading)",
+        pass + 1,
+        mesh.patches.len(),
+    );
+}
+
 /// [`refined_mesh`], calling `show` on rank 0 with the pass number and its
 /// solver (rank 0's share; one process's is whole) after every pass shot:
 /// how the viewer shows a pass's solution as it comes.
@@ -71,28 +161,23 @@ pub fn refined_mesh_shown(
     progress: &mut dyn FnMut(&Progress),
     show: ShowPass<'_>,
 ) -> Result<Refined, RenderError> {
+    let run = PassRun {
+        gpu,
+        scene,
+        opts,
+        comm,
+    };
     let settings = opts.mesh_settings();
-    let n = scene.polygons.len();
-    let mut factors = vec![1u32; n];
-    let mut summary = Refinement::default();
-    let mut trace = Vec::new();
-    let mut bookkeeping = 0.0;
-    let levels = settings.refine;
-    let mut shooters = vec![false; n];
-    let mut receivers = vec![false; n];
-    let mut shading = vec![false; n];
-    // The last pass's mesh, when it asked for nothing more (the final
-    // mesh would be built the same: building it again costs its light field).
-    let mut last = None;
+    let mut tally = Tally::new(scene.polygons.len());
     // The last pass's light field: the next mesh casts rays only for the
     // polygons refined since.
     let mut kept = None;
-    for pass in 0..levels {
+    for pass in 0..settings.refine {
         let mut mesh = crate::parallel::built_once(comm, || {
-            LitMesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
+            LitMesh::build_refined_from(scene, &settings, &tally.factors, kept.as_ref())
         });
         if pass == 0 {
-            summary.start = [mesh.patches.len(), mesh.elements.len()];
+            tally.summary.start = [mesh.patches.len(), mesh.elements.len()];
         }
         crate::report::log_memory("a pass's mesh");
         // Every pass shows its solution from its first shot, so the
@@ -102,26 +187,16 @@ pub fn refined_mesh_shown(
             shared_transport(&mesh, PASS_RAY_BUDGET, comm);
         }
         let transport = t.elapsed().as_secs_f64();
-        summary.seconds += transport;
-        summary.transport_seconds += transport;
-        let measured = one_pass(
-            gpu,
-            scene,
-            &mesh,
-            opts,
-            comm,
-            (pass, summary.seconds),
-            (&mut *progress, &mut *show),
-        )?;
+        tally.summary.seconds += transport;
+        tally.summary.transport_seconds += transport;
+        let at = PassAt {
+            pass,
+            before: tally.summary.seconds,
+        };
+        let mut measured = one_pass(&run, &mesh, at, &mut *progress, &mut *show)?;
         crate::report::log_memory("a pass's solve");
-        summary.passes += 1;
-        summary.shots += measured.shots;
-        summary.seconds += measured.seconds;
-        trace.extend(measured.trace);
-        bookkeeping += measured.bookkeeping;
+        tally.add_pass(&mut measured);
         if let Some(handoff) = measured.interrupted {
-            summary.interrupted = true;
-            summary.end = [mesh.patches.len(), mesh.elements.len()];
             if comm.rank() == 0 {
                 log::warn!(
                     "interrupted during refinement pass {} (after {} shots): its solution on its mesh is kept, refined no further",
@@ -129,67 +204,24 @@ pub fn refined_mesh_shown(
                     measured.shots
                 );
             }
-            return Ok(Refined {
-                mesh,
-                refinement: summary,
-                factors,
-                trace,
-                bookkeeping,
-                interrupted: Some(handoff),
-            });
-        }
-        let decided = measured.decided;
-        let mut changed = 0;
-        for (i, d) in decided.iter().enumerate() {
-            if d.refine() {
-                factors[i] *= 2;
-                changed += 1;
-            }
-            shading[i] |= d.shading;
-            summary.shading_refinements += d.shading as u32;
-            shooters[i] |= d.shooter;
-            receivers[i] |= d.receiver;
-            summary.shooter_refinements += d.shooter as u32;
-            summary.receiver_refinements += d.receiver as u32;
+            return Ok(tally.finish(mesh, Some(handoff)));
         }
         if comm.rank() == 0 {
-            let (s, r, sh) = (
-                decided.iter().filter(|d| d.shooter).count(),
-                decided.iter().filter(|d| d.receiver).count(),
-                decided.iter().filter(|d| d.shading).count(),
-            );
-            log::info!(
-                "refinement pass {}: {} patches, {} shots; {changed} polygons refined ({s} for their shooters, {r} for uneven receivers, {sh} for their shading)",
-                pass + 1,
-                mesh.patches.len(),
-                measured.shots,
-            );
+            log_pass(pass, &mesh, measured.shots, &measured.decided);
         }
-        if changed == 0 {
-            // The final solve estimates its own transport, with the full budget.
+        if tally.apply(&measured.decided) == 0 {
+            // The last pass's mesh is the final one (building it again
+            // would cost its light field); the final solve estimates its
+            // own transport, with the full budget.
             mesh.ambient.take();
-            last = Some(mesh);
-            break;
+            return Ok(tally.finish(mesh, None));
         }
         kept = Some(mesh.take_field());
     }
-    summary.shooter_polygons = shooters.iter().filter(|&&x| x).count() as u32;
-    summary.receiver_polygons = receivers.iter().filter(|&&x| x).count() as u32;
-    summary.shading_polygons = shading.iter().filter(|&&x| x).count() as u32;
-    let mesh = last.unwrap_or_else(|| {
-        crate::parallel::built_once(comm, || {
-            LitMesh::build_refined_from(scene, &settings, &factors, kept.as_ref())
-        })
+    let mesh = crate::parallel::built_once(comm, || {
+        LitMesh::build_refined_from(scene, &settings, &tally.factors, kept.as_ref())
     });
-    summary.end = [mesh.patches.len(), mesh.elements.len()];
-    Ok(Refined {
-        mesh,
-        refinement: summary,
-        factors,
-        trace,
-        bookkeeping,
-        interrupted: None,
-    })
+    Ok(tally.finish(mesh, None))
 }
 
 /// Whether a solve of `mesh` with `opts` needs the ambient transport: the
@@ -307,18 +339,38 @@ pub struct Handoff {
     pub energy: [f64; 3],
 }
 
-/// One coarse solve of `mesh`, pass `pass`, after `before` seconds of solve:
-/// which polygons' patch grids to double (and why), its shots, seconds and
-/// trace.
+/// What every pass is solved with: the device, the scene, the options and
+/// the ranks.
+struct PassRun<'a> {
+    gpu: &'a Gpu,
+    scene: &'a Scene,
+    opts: &'a RenderOptions,
+    comm: &'a dyn Collectives,
+}
+
+/// Where a pass stands: its number and the solve seconds before it.
+#[derive(Clone, Copy)]
+struct PassAt {
+    pass: u32,
+    before: f64,
+}
+
+/// One coarse solve of `mesh`, pass `at.pass`, after `at.before` seconds of
+/// solve: which polygons' patch grids to double (and why), its shots,
+/// seconds and trace.
 fn one_pass(
-    gpu: &Gpu,
-    scene: &Scene,
+    run: &PassRun<'_>,
     mesh: &LitMesh,
-    opts: &RenderOptions,
-    comm: &dyn Collectives,
-    (pass, before): (u32, f64),
-    (progress, show): (&mut dyn FnMut(&Progress), ShowPass<'_>),
+    at: PassAt,
+    progress: &mut dyn FnMut(&Progress),
+    show: ShowPass<'_>,
 ) -> Result<Measured, RenderError> {
+    let PassRun {
+        gpu,
+        scene,
+        opts,
+        comm,
+    } = *run;
     // A batched solve's passes are batched too, each rank drawing whole
     // hemispheres for its rows (as the final solve's: see
     // `ShotLoop::batched`), so the ranks divide the passes as they divide
@@ -343,11 +395,11 @@ fn one_pass(
         interrupt: opts.interrupt.as_deref(),
         trace: Trace::default(),
         solve_start: started
-            .checked_sub(Duration::from_secs_f64(before))
+            .checked_sub(Duration::from_secs_f64(at.before))
             .unwrap_or(started),
         started,
         progress,
-        show: (pass, show),
+        show: (at.pass, show),
     };
     let stats = shoot_until(
         mesh,
@@ -363,63 +415,64 @@ fn one_pass(
         .saturating_sub(hooks.trace.spent)
         .as_secs_f64();
     let bookkeeping = hooks.trace.spent.as_secs_f64();
-    let mut points = hooks.trace.points;
-    for p in &mut points {
-        p.pass = Some(pass);
+    let mut trace = hooks.trace.points;
+    for p in &mut trace {
+        p.pass = Some(at.pass);
     }
+    let mut measured = Measured {
+        decided: Vec::new(),
+        shots: solver.shots(),
+        seconds,
+        trace,
+        bookkeeping,
+        interrupted: None,
+    };
     if stats.interrupted {
         // Every rank stopped at the same shot (the vote): its solution
         // is what the render keeps, on this pass's mesh, refined no further.
-        return Ok(Measured {
-            decided: Vec::new(),
-            shots: solver.shots(),
-            seconds,
-            trace: points,
-            bookkeeping,
-            interrupted: Some(Handoff {
-                state: solver.state(),
-                energy: solver.energy_record(),
-            }),
+        measured.interrupted = Some(Handoff {
+            state: solver.state(),
+            energy: solver.energy_record(),
         });
+        return Ok(measured);
     }
-    // Every rank saw its own receivers' penumbrae and holds its own
-    // patches' light: sum them (exactly: fixed point, the rest are 0).
+    let patches = patch_stats(run, mesh, &solver, &source.penumbra, &stats.patch_power);
+    let settings = opts.mesh_settings();
+    measured.decided = refine::decide(
+        mesh,
+        &patches,
+        solver.emitted_power(),
+        settings.receiver_tol,
+        settings.shading_tol,
+    );
+    Ok(measured)
+}
+
+/// What a pass measured of each patch, summed over the ranks: its power,
+/// the penumbrae it cast (`penumbra`, per patch of this rank's rows), how
+/// unevenly it holds its light and how badly a uniform patch would shade.
+/// Every rank saw its own receivers' penumbrae and holds its own patches'
+/// light, so the sums are exact (fixed point, the others' shares 0).
+fn patch_stats(
+    run: &PassRun<'_>,
+    mesh: &LitMesh,
+    solver: &Solver,
+    penumbra: &[[u64; 2]],
+    patch_power: &[f64],
+) -> Vec<PatchStats> {
     let emitted = solver.emitted_power();
     let one = crate::formfactor::SHARE_ONE;
-    let mut sums: Vec<u64> = source.penumbra.iter().flatten().copied().collect();
+    let mut sums: Vec<u64> = penumbra.iter().flatten().copied().collect();
     sums.extend(solver.patch_unevenness().iter().map(|&w| {
         let share = if emitted > 0.0 { w / emitted } else { 0.0 };
         crate::numeric::round_u64(share.clamp(0.0, 1.0) * one)
     }));
-    let settings = opts.mesh_settings();
-    // The shading error needs neighbours' values across patches (and
-    // ranks): rank 0 judges the whole solution; the others add zeros.
-    let mut shading = vec![0u64; mesh.patches.len()];
-    if settings.shading_tol > 0.0 {
-        let whole = gather_whole(
-            comm,
-            &solver,
-            Extra {
-                direct: true,
-                ..Extra::default()
-            },
-        );
-        // (A pass's solver always knows its direct part.)
-        if let Some((whole, direct)) = whole.as_ref().and_then(|w| Some((w, w.direct()?))) {
-            let radiosity = whole.display_radiosity(crate::settings::AmbientTerm::Off);
-            let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
-            for (s, e) in shading.iter_mut().zip(errors) {
-                *s = crate::numeric::round_u64(e.clamp(0.0, SHADING_CAP) * one);
-            }
-        }
-    }
-    sums.extend(shading);
-    comm.reduce_broadcast_sum(&mut sums);
+    sums.extend(shading_errors(run, mesh, solver));
+    run.comm.reduce_broadcast_sum(&mut sums);
     let n = mesh.patches.len();
     let (penumbra, rest) = sums.split_at(2 * n);
     let (uneven, shading) = rest.split_at(n);
-    let patches: Vec<PatchStats> = stats
-        .patch_power
+    patch_power
         .iter()
         .zip(penumbra.chunks_exact(2))
         .zip(uneven.iter().zip(shading))
@@ -429,20 +482,31 @@ fn one_pass(
             uneven: u as f64 / one * emitted,
             shading: s as f64 / one,
         })
-        .collect();
-    let decided = refine::decide(
-        mesh,
-        &patches,
-        emitted,
-        settings.receiver_tol,
-        settings.shading_tol,
-    );
-    Ok(Measured {
-        decided,
-        shots: solver.shots(),
-        seconds,
-        trace: points,
-        bookkeeping,
-        interrupted: None,
-    })
+        .collect()
+}
+
+/// Per patch, how badly the image would shade it (fixed point). The
+/// shading error needs neighbours' values across patches (and ranks):
+/// rank 0 judges the whole solution; the others add zeros.
+fn shading_errors(run: &PassRun<'_>, mesh: &LitMesh, solver: &Solver) -> Vec<u64> {
+    let mut shading = vec![0u64; mesh.patches.len()];
+    if run.opts.mesh_settings().shading_tol <= 0.0 {
+        return shading;
+    }
+    let extra = Extra {
+        direct: true,
+        ..Extra::default()
+    };
+    let whole = gather_whole(run.comm, solver, extra);
+    // (A pass's solver always knows its direct part.)
+    if let Some((whole, direct)) = whole.as_ref().and_then(|w| Some((w, w.direct()?))) {
+        let emitted = solver.emitted_power();
+        let radiosity = whole.display_radiosity(crate::settings::AmbientTerm::Off);
+        let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
+        let one = crate::formfactor::SHARE_ONE;
+        for (s, e) in shading.iter_mut().zip(errors) {
+            *s = crate::numeric::round_u64(e.clamp(0.0, SHADING_CAP) * one);
+        }
+    }
+    shading
 }

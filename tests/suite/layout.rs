@@ -185,3 +185,38 @@ fn the_cycle_check_finds_a_cycle() {
     assert_eq!(found.len(), 1, "{found:?}");
     assert_eq!(found[0].len(), 2, "{found:?}");
 }
+
+/// The library's files that name `crate_name` (`wgpu::`, `mpi::`) in code.
+fn files_naming(crate_name: &str) -> Vec<String> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut naming: Vec<String> = files
+        .iter()
+        .filter(|f| {
+            let text = std::fs::read_to_string(f).expect("read");
+            text.lines()
+                .filter(|l| !l.trim_start().starts_with("//"))
+                .any(|l| l.contains(&format!("{crate_name}::")))
+        })
+        .map(|f| {
+            f.strip_prefix(&src)
+                .expect("under src")
+                .display()
+                .to_string()
+        })
+        .collect();
+    naming.sort();
+    naming
+}
+
+#[test]
+fn only_gpu_uses_wgpu_and_only_comm_uses_mpi() {
+    let wgpu = files_naming("wgpu");
+    assert!(
+        wgpu.iter().all(|f| f.starts_with("gpu/")),
+        "wgpu outside src/gpu/: {wgpu:?}"
+    );
+    assert!(!wgpu.is_empty());
+    assert_eq!(files_naming("mpi"), ["comm.rs"]);
+}

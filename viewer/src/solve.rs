@@ -445,7 +445,12 @@ fn save<W: Fn()>(
         ..Default::default()
     };
     let parallel = single_process(opts.resolution, mesh.elements.len(), solver.shots());
-    let mut report = build_report(scene, mesh, opts, solver, gpu, [w, h], timings, parallel);
+    let run = radiosity::render::RunRecord {
+        image_size: [w, h],
+        timings,
+        parallel,
+    };
+    let mut report = build_report(scene, mesh, opts, solver, gpu, run);
     report.convergence = pub_.trace.ending_with(&report, seconds);
     let paths = OutputPaths {
         image: Some(req.stem.with_extension("exr")),

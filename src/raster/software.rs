@@ -25,7 +25,7 @@ use std::ops::Range;
 const EDGE_TOL: f32 = 1.0e-6;
 
 /// The CPU's drawing state, kept from shot to shot.
-pub(super) struct Software {
+pub(crate) struct Software {
     res: Resolution,
     /// Per row (sin phi, cos phi), then per column (cos theta, sin theta):
     /// the shader's table (`hemisphere::direction_table`).
@@ -130,7 +130,7 @@ const DIV_BY_EXACT: u32 = 1 << 20;
 /// Whether an element grid (elements along u and v, ...) is short enough
 /// to be drawn here (see [`div_by`]); a mesh with a longer one is drawn
 /// by the device.
-pub(super) fn fits(grid: [u32; 4]) -> bool {
+pub(crate) fn fits(grid: [u32; 4]) -> bool {
     grid[0] < DIV_BY_EXACT && grid[1] < DIV_BY_EXACT
 }
 
@@ -342,7 +342,7 @@ type Band<'a> = Vec<(u32, &'a mut [u32], &'a mut [f32])>;
 
 impl Software {
     /// The drawing state for hemispheres of `res` over `elements` elements.
-    pub(super) fn new(res: Resolution, elements: usize) -> Self {
+    pub(crate) fn new(res: Resolution, elements: usize) -> Self {
         let table = crate::hemisphere::direction_table(res);
         let (rows, cols) = table.split_at(res.rows as usize);
         Self {
@@ -372,7 +372,7 @@ impl Software {
     /// give). Returns whether it packed them.
     // The shot's parts, each needed: see `HemisphereRasterizer::render`.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn draw(
+    pub(crate) fn draw(
         &mut self,
         instances: &[Instance],
         far: f32,
