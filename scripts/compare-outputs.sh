@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Same numbers? Renders a fixed set of built-in scenes (1 and 2 ranks, both
-# form-factor methods, every exchange, both projections, overshooting, bake,
+# form-factor methods, every exchange, both projections, bake,
 # a checkpoint after every shot) with two builds of `radiosity` and compares
 # the outputs bit for bit: reports (less timings, paths and the device),
 # EXR, PNG, the bake, and the checkpoint (its state's bits and its header
@@ -20,11 +20,11 @@ run_set() {
   }
   run cornell1 "$bin" render cornell
   run cornell2 $mpi "$bin" render cornell
-  run cornellH1 "$bin" render cornell --form-factor hemisphere --overshoot
-  run cornellH2 $mpi "$bin" render cornell --form-factor hemisphere --overshoot --exchange sparse
+  run cornellH1 "$bin" render cornell --form-factor hemisphere
+  run cornellH2 $mpi "$bin" render cornell --form-factor hemisphere --exchange sparse
   run cubes1 "$bin" render cubes-3
   run cubes2 $mpi "$bin" render cubes-3 --exchange form-factors --tile 4x4
-  run cubesO2 $mpi "$bin" render cubes-3 --overshoot --no-cache
+  run cubesO2 $mpi "$bin" render cubes-3 --no-cache
   run b1 "$bin" render cubes-b1 --max-shots 20 --width 128
   run b1x2 $mpi "$bin" render cubes-b1 --max-shots 20 --width 128
   run tess1 "$bin" render cornell --projection tessellated --max-shots 400

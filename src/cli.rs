@@ -136,14 +136,6 @@ pub struct SolveArgs {
     /// elements takes visibility from a hemisphere of its own.
     #[arg(long)]
     no_split: bool,
-    /// Overshoot: each shooter shoots its unshot radiosity plus its
-    /// reflectance times the ambient term (the light it can still expect),
-    /// taking back later what it shot ahead (Feda & Purgathofer 1992). About
-    /// half the shots to the same error, but not less time on lavapipe (most
-    /// of a solve's time is each patch's first, rasterised shot): docs/method/form-factors.md
-    /// "Overshooting".
-    #[arg(long)]
-    overshoot: bool,
     /// Hemisphere resolution of weak shooters (see --coarse-below): they
     /// matter little, and a coarse hemisphere costs a fraction of the time.
     /// Default: half --resolution along each axis, but no coarser than
@@ -213,7 +205,6 @@ impl SolveArgs {
             cache_rows: !self.no_cache,
             memory_budget: (f64::from(self.memory) * 1e9) as u64,
             split_shots: !self.no_split,
-            overshoot: self.overshoot,
             coarse: self.coarse_resolution,
             coarse_below: self.coarse_below,
             transport_below: self.transport_below,

@@ -165,8 +165,6 @@ pub struct Settings {
     pub ambient: bool,
     /// Which ambient term (see [`crate::settings::AmbientTerm`]).
     pub ambient_term: crate::settings::AmbientTerm,
-    /// Whether shooters overshoot by the ambient term.
-    pub overshoot: bool,
     /// The hemisphere resolution of weak shooters, and below what fraction
     /// of the emitted power a shooter is weak (absent: every shot at `resolution`).
     pub coarse: Option<(String, f64)>,

@@ -790,18 +790,6 @@ fn solver_curves(
             reference,
         )?);
     }
-    {
-        // Overshooting (Feda & Purgathofer 1992) against none.
-        let mut o = base.clone();
-        o.overshoot = !base.overshoot;
-        eprintln!("accuracy: {} hybrid, overshoot {}", scene.name, o.overshoot);
-        let label = if o.overshoot {
-            "hybrid 128x512, overshooting (--overshoot)"
-        } else {
-            "hybrid 128x512, no overshooting"
-        };
-        curves.push(run_curve(gpu, scene, &o, label.to_string(), reference)?);
-    }
     for &n in &args.patch_fractions {
         let p = scene.extent() / n.max(1.0);
         for method in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {

@@ -130,7 +130,7 @@ fn fuzz(cases: u64, seed: u64, flag_cases: u64) -> Result<()> {
 }
 
 /// Flags the fuzzer passes, with odd values.
-const FUZZ_FLAGS: [&str; 24] = [
+const FUZZ_FLAGS: [&str; 23] = [
     "--resolution",
     "--threshold",
     "--max-shots",
@@ -152,7 +152,6 @@ const FUZZ_FLAGS: [&str; 24] = [
     "--max-patches-per-edge",
     "--coarse-resolution",
     "--coarse-below",
-    "--overshoot",
     "--batch",
     "--ranks",
 ];

@@ -149,7 +149,6 @@ fn start_solver<'m>(
         handoff,
     } = start;
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
-    solver.set_overshoot(opts.overshoot);
     // An interrupted pass's solution is where the solve goes on from (and
     // the trace's schedule from its shots).
     let mut shots = 0;
@@ -341,8 +340,7 @@ pub fn render_on(
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
-    let Some(gathered) =
-        gather_to_root(comm, opts, &solver, &solved.stats, &source, (excluded, cpu))
+    let Some(gathered) = gather_to_root(comm, &solver, &solved.stats, &source, (excluded, cpu))
     else {
         return Ok(None);
     };
@@ -448,16 +446,14 @@ impl<'m> Gathered<'m> {
 /// the other ranks.
 fn gather_to_root<'m>(
     comm: &dyn Collectives,
-    opts: &RenderOptions,
     solver: &Solver<'m>,
     stats: &LoopStats,
     source: &GpuFormFactors,
     (excluded, cpu): (Traffic, f64),
 ) -> Option<Gathered<'m>> {
-    // With overshooting the unshot fraction sums elements' |unshot|.
     let extra = Extra {
-        element_unshot: opts.overshoot,
         direct: true,
+        ..Extra::default()
     };
     let whole = gather_whole(comm, solver, extra);
     let traffic = comm.traffic().since(excluded);
@@ -686,7 +682,6 @@ pub fn build_report(
             shadow_rays: opts.shadow_rays,
             ambient: opts.ambient.is_on(),
             ambient_term: opts.ambient,
-            overshoot: opts.overshoot,
             coarse: opts
                 .coarse_tier()
                 .map(|c| (c.to_string(), opts.coarse_below)),

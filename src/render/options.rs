@@ -97,10 +97,6 @@ pub struct RenderOptions {
     /// microseconds a shot. 0: never. `None`, the default: automatic
     /// ([`RenderOptions::transport_below_for`]).
     pub transport_below: Option<f64>,
-    /// Shooters overshoot by rho times the ambient term (Feda & Purgathofer
-    /// 1992): fewer shots to the same error, not less time on lavapipe
-    /// (off by default).
-    pub overshoot: bool,
     /// Shooters a step of the final solve (1: one at a time, the paper's
     /// decomposition of each shot over the ranks). Above 1 the strongest
     /// `batch` patches shoot from the same state, each rank drawing whole
@@ -153,7 +149,6 @@ impl Default for RenderOptions {
             cache_rows: true,
             memory_budget: DEFAULT_MEMORY_BUDGET,
             split_shots: true,
-            overshoot: false,
             coarse: None,
             coarse_below: DEFAULT_COARSE_BELOW,
             transport_below: None,
@@ -304,7 +299,8 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
         opts.form_factor.name(),
         mesh_text(&opts.mesh_settings()),
         opts.split_shots,
-        opts.overshoot,
+        // Where overshooting (removed) was: older checkpoints still resume.
+        false,
         opts.projection.name(),
         opts.tessellation_tolerance,
         option_text(opts.coarse_tier().map(|r| format!("\"{r}\""))),

@@ -10,8 +10,7 @@ use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::lit_mesh::LitMesh;
 use crate::parallel::{Collectives, Deal};
 use crate::solver::{
-    Candidate, FormFactorSource, NetUnshot, Shot, ShotRegion, Solver, StopRule, Transfer,
-    UNSHOT_ONE,
+    Candidate, FormFactorSource, Shot, ShotRegion, Solver, StopRule, Transfer, UNSHOT_ONE,
 };
 use std::time::{Duration, Instant};
 
@@ -117,8 +116,6 @@ struct Vote {
     /// The bytes of its pending cache row.
     pending_bytes: u64,
     flags: Flags,
-    /// Its signed unshot power per channel.
-    net: NetUnshot,
     /// The power the last shot delivered to its elements, over the emitted
     /// power, signed fixed point.
     delivered: i64,
@@ -127,7 +124,7 @@ struct Vote {
 impl Vote {
     /// f64 slots a vote takes in the all-gather. Every integer is below
     /// 2^53, so it travels exactly.
-    const LEN: usize = 18;
+    const LEN: usize = 14;
 
     fn pack(&self) -> [f64; Self::LEN] {
         let mut v = [0.0; Self::LEN];
@@ -136,11 +133,10 @@ impl Vote {
         if let Some(c) = self.candidate {
             v[1..1 + CANDIDATE_LEN].copy_from_slice(&pack_candidate(&c));
         }
-        v[11] = self.landed as f64;
-        v[12] = self.pending_bytes as f64;
-        v[13] = self.flags.bits() as f64;
-        v[14..17].copy_from_slice(&self.net.map(|x| x as f64));
-        v[17] = self.delivered as f64;
+        v[10] = self.landed as f64;
+        v[11] = self.pending_bytes as f64;
+        v[12] = self.flags.bits() as f64;
+        v[13] = self.delivered as f64;
         v
     }
 
@@ -149,11 +145,10 @@ impl Vote {
             unshot: v[0] as u64,
             // f32 -> f64 -> f32 is exact, so every rank gets the owner's point.
             candidate: unpack_candidate(&v[1..1 + CANDIDATE_LEN]),
-            landed: v[11] as u64,
-            pending_bytes: v[12] as u64,
-            flags: Flags::from_bits(v[13] as u32),
-            net: [v[14] as i64, v[15] as i64, v[16] as i64],
-            delivered: v[17] as i64,
+            landed: v[10] as u64,
+            pending_bytes: v[11] as u64,
+            flags: Flags::from_bits(v[12] as u32),
+            delivered: v[13] as i64,
         }
     }
 }
@@ -295,30 +290,16 @@ impl<'m> ShotLoop<'m> {
         if solver.done_at(&self.stop, unshot_fraction) {
             return Ok(Step::Stopped(Stopped::Done));
         }
-        // The whole solution's signed unshot power, summed exactly: every
-        // rank gets the same ambient term, whatever their number.
-        let mut net: NetUnshot = [0; 3];
-        for v in &votes {
-            for (n, x) in net.iter_mut().zip(v.net) {
-                *n += x;
-            }
-        }
-        let ambient = solver.ambient_from(net);
         if self.batch > 1 {
-            return self.step_batch(
-                source,
-                solver,
-                hooks,
-                (shot_start, unshot_fraction, ambient),
-            );
+            return self.step_batch(source, solver, hooks, (shot_start, unshot_fraction));
         }
         let best = Candidate::best(votes.iter().filter_map(|v| v.candidate));
         self.stats.select += shot_start.elapsed();
         let Some(best) = best.filter(|b| b.power >= self.floor) else {
             return Ok(Step::Stopped(Stopped::Floor));
         };
-        let mut region = self.region(solver, &best, ambient);
-        if source.by_transport(best.power) && !solver.overshoot() {
+        let mut region = self.region(solver, &best);
+        if source.by_transport(best.power) {
             self.join_group(solver, &best, &mut region);
         }
         let shot = self.shoot(source, solver, (&best, &region), ahead)?;
@@ -347,10 +328,8 @@ impl<'m> ShotLoop<'m> {
         chosen.sort_by(|a, b| b.power.total_cmp(&a.power).then(a.patch.cmp(&b.patch)));
         chosen.truncate(batch);
         chosen.retain(|c| c.power >= self.floor);
-        if !solver.overshoot() {
-            if let Some(at) = chosen.iter().position(|c| source.by_transport(c.power)) {
-                chosen.truncate(at.max(1));
-            }
+        if let Some(at) = chosen.iter().position(|c| source.by_transport(c.power)) {
+            chosen.truncate(at.max(1));
         }
         chosen
     }
@@ -390,12 +369,6 @@ impl<'m> ShotLoop<'m> {
             delivered: self.delivered,
             pending_bytes: source.pending_bytes(),
             flags: hooks.flags(),
-            // Only overshooting needs the ambient term during the loop.
-            net: if solver.overshoot() {
-                solver.local_net_unshot()
-            } else {
-                [0; 3]
-            },
         };
         let all = self.comm.all_gather_f64(&mine.pack());
         let votes: Vec<Vote> = all.chunks_exact(Vote::LEN).map(Vote::unpack).collect();
@@ -408,16 +381,16 @@ impl<'m> ShotLoop<'m> {
     /// How `best` shoots. Only the owner of a weighted shooter knows what
     /// each of its elements shoots: it tells the others (all know how many
     /// there are).
-    fn region(&self, solver: &Solver, best: &Candidate, ambient: [f64; 3]) -> ShotRegion {
+    fn region(&self, solver: &Solver, best: &Candidate) -> ShotRegion {
         if !best.weighted {
-            return solver.candidate_region(best, ambient);
+            return solver.candidate_region(best);
         }
         let rank = self.comm.rank();
         let owner = solver.patch_rank(best.patch);
         let m = self.mesh.patches[best.patch as usize].elements.len();
         let mut mine = vec![0.0; 3 * m + 3];
         if rank == owner {
-            let r = solver.shooting_region(best.patch, ambient);
+            let r = solver.shooting_region(best.patch);
             mine[..3].copy_from_slice(&r.shoot);
             for n in 0..m {
                 mine[3 + 3 * n..6 + 3 * n].copy_from_slice(r.elements.get(n).unwrap_or(&r.shoot));
@@ -531,7 +504,7 @@ fn landing<'t>(
 }
 
 /// f64 slots of a candidate in a batch's gather.
-const CANDIDATE_LEN: usize = 10;
+const CANDIDATE_LEN: usize = 9;
 
 /// A candidate as f64 slots (every field travels exactly).
 fn pack_candidate(c: &Candidate) -> [f64; CANDIDATE_LEN] {
@@ -545,7 +518,6 @@ fn pack_candidate(c: &Candidate) -> [f64; CANDIDATE_LEN] {
         c.centre.y as f64,
         c.centre.z as f64,
         c.weighted as u8 as f64,
-        c.lit,
     ]
 }
 
@@ -557,7 +529,6 @@ fn unpack_candidate(v: &[f64]) -> Option<Candidate> {
         unshot: [v[2], v[3], v[4]],
         centre: glam::Vec3::new(v[5] as f32, v[6] as f32, v[7] as f32),
         weighted: v[8] != 0.0,
-        lit: v[9],
     })
 }
 
@@ -623,7 +594,6 @@ mod tests {
             unshot: [1.0, -2.5, 1e-300],
             centre: glam::Vec3::new(0.1, -7.3, 1e6),
             weighted: true,
-            lit: 0.75,
         };
         for vote in [
             Vote {
@@ -635,7 +605,6 @@ mod tests {
                     stop: true,
                     save: false,
                 },
-                net: [-(1 << 45), 3, 0],
                 delivered: -(1 << 51) + 9,
             },
             Vote {

@@ -11,8 +11,7 @@ use std::time::{Duration, Instant};
 /// What [`gather_whole`] gathers besides radiosities and unshot radiosities.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Extra {
-    /// The elements' unshot radiosities (a checkpoint needs them, and so
-    /// does the unshot fraction under overshooting).
+    /// The elements' unshot radiosities (a checkpoint needs them).
     pub element_unshot: bool,
     /// The solution's own direct part (the image and checkpoints need it;
     /// without it the whole solution's is unknown).
@@ -21,7 +20,7 @@ pub struct Extra {
 
 /// Gathers every rank's share of `solver` to rank 0 and assembles the whole
 /// solution there (`None` on the other ranks): radiosities, unshot
-/// radiosities, shots, retention, overshooting, and what `extra` asks for.
+/// radiosities, shots, retention, and what `extra` asks for.
 /// Every rank must call it.
 pub fn gather_whole<'m>(
     comm: &dyn Collectives,
@@ -65,7 +64,6 @@ pub fn gather_whole_into<'w, 'm>(
     if let Some(e) = &ge {
         whole.assemble_element_unshot(e);
     }
-    whole.set_overshoot(solver.overshoot());
     whole.set_shots(solver.shots());
     whole.copy_retention(solver);
     match &gd {
@@ -144,11 +142,7 @@ impl<'m> Trace<'m> {
                 solver.unshot_fraction(),
             ))
         } else {
-            // With overshooting the unshot fraction sums elements' |unshot|.
-            let extra = Extra {
-                element_unshot: solver.overshoot(),
-                direct: false,
-            };
+            let extra = Extra::default();
             gather_whole_into(comm, solver, extra, &mut self.whole).map(|whole| {
                 (
                     report::surfaces(solver.mesh(), nodes, whole.display_radiosities(ambient)),

@@ -3,13 +3,10 @@
 //!
 //! 1. pick the patch i with the largest unshot power dB_i * A_i;
 //! 2. get the form factor F_ij from i to every element j (from a [`FormFactorSource`]);
-//! 3. shoot S_i = dB_i + rho_i * A (overshooting, Feda & Purgathofer 1992:
-//!    A is the ambient term, the light i can expect still to receive; 0 with
-//!    overshooting off): each element gets dB_j = rho_j * S_i * F_ij * A_i / A_j,
+//! 3. shoot S_i = dB_i: each element gets dB_j = rho_j * S_i * F_ij * A_i / A_j,
 //!    added to B_j and, area-weighted, to its patch's unshot store;
-//! 4. set dB_i = dB_i - S_i (= -rho_i * A: negative, the light shot ahead of
-//!    its arrival, taken back when it arrives); stop when the unshot power
-//!    (of |dB|) is a small fraction of the emitted power.
+//! 4. set dB_i = 0; stop when the unshot power is a small fraction of the
+//!    emitted power.
 //!
 //! Each element of the shooter shoots its own share, per channel. The solver
 //! knows nothing of GPUs or ranks: form factors arrive as sparse [`Transfer`]s.
@@ -54,8 +51,7 @@ pub struct Shot {
     pub shooter: u32,
     /// Its unshot power before the shot (of |dB|, sum over RGB), W.
     pub power: f64,
-    /// The power it shot (sum over RGB; with overshooting, more than `power`,
-    /// or negative where it takes back light shot ahead), W.
+    /// The power it shot (sum over RGB), W.
     pub shot_power: f64,
     /// Sum of F_ij over the transfers the shot was given: over all
     /// elements on one rank (1 in a closed scene), over the rank's own
@@ -95,9 +91,6 @@ pub struct Candidate {
     pub centre: glam::Vec3,
     /// Whether its elements shoot different radiosities (see [`ShotRegion::elements`]).
     pub weighted: bool,
-    /// The area share of its elements that have received light (only they
-    /// overshoot: an element hidden under an object never receives any).
-    pub lit: f64,
 }
 
 impl Candidate {
@@ -131,7 +124,7 @@ pub struct Energy {
     pub absorbed: f64,
     /// Power absorbed by the backs of one-sided surfaces.
     pub back_faces: f64,
-    /// Power still unshot (signed: overshooting can leave it negative).
+    /// Power still unshot.
     pub unshot: f64,
     /// Power shot that reached no element: it left the scene (or, in a
     /// closed scene, was lost or created by the form factors).
@@ -142,7 +135,7 @@ pub struct Energy {
 
 /// The signed unshot power per channel, over the emitted power, in
 /// [`UNSHOT_ONE`] fixed point (so ranks sum it exactly): what the ambient
-/// term and overshooting are computed from.
+/// term is computed from.
 pub type NetUnshot = [i64; 3];
 
 /// Fixed-point scale of unshot power as a fraction of the emitted power, so
@@ -170,8 +163,6 @@ pub struct Solver<'m> {
     /// Power shot, power delivered to elements, and power absorbed by back
     /// faces so far, signed, sum over RGB (see [`Solver::note_energy`]).
     energy: [f64; 3],
-    /// Whether shooters overshoot by the ambient term (see the module docs).
-    overshoot: bool,
     /// Area-weighted mean reflectance (the ambient term's rho_avg).
     mean_reflectance: [f64; 3],
     /// The mesh's area.
@@ -235,7 +226,6 @@ impl<'m> Solver<'m> {
             shots: 0,
             retention: [0.0; 2],
             energy: [0.0; 3],
-            overshoot: false,
             mean_reflectance,
             total_area: ambient_area,
             direct: vec![[0.0; 3]; mesh.elements.len()],
@@ -286,17 +276,6 @@ impl<'m> Solver<'m> {
         // the backs of one-sided surfaces, which rays do not tell apart).
         self.note_energy(field.emitted, field.delivered, 0.0);
         self.vote_mut().invalidate();
-    }
-
-    /// Turns overshooting by the ambient term on or off (off by default, here
-    /// and in the renderer: `--overshoot`).
-    pub fn set_overshoot(&mut self, on: bool) {
-        self.overshoot = on;
-    }
-
-    /// Whether shooters overshoot.
-    pub fn overshoot(&self) -> bool {
-        self.overshoot
     }
 
     /// The mesh this solver works on.
@@ -352,7 +331,7 @@ impl<'m> Solver<'m> {
     pub fn local_vote(&self) -> (u64, Option<Candidate>) {
         let patches = self.mesh.patches.len();
         let leaves = self.owners.count(self.rank, patches);
-        let key = (self.rank, self.ranks, self.overshoot, patches);
+        let key = (self.rank, self.ranks, patches);
         // Leaf k is the rank's k-th own patch, in increasing order, so the
         // first of equal powers wins (the lowest index, as
         // `Candidate::best` breaks ties).
@@ -390,26 +369,10 @@ impl<'m> Solver<'m> {
         self.vote.get_mut().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// How much patch `i`'s residual still matters (sum over RGB, W). Without
-    /// overshooting every residual is positive and this is the patch's
-    /// unshot power. With it, elements of one patch can hold residuals of
-    /// both signs whose area-weighted mean cancels, and each must still be
-    /// shot: the sum of its elements' |unshot| powers.
+    /// How much patch `i`'s residual still matters: its unshot power (sum
+    /// over RGB, W).
     fn patch_power(&self, i: usize) -> f64 {
-        if self.overshoot {
-            self.mesh.patches[i]
-                .elements
-                .clone()
-                .map(|k| {
-                    abs_power(
-                        &self.element_unshot[k as usize],
-                        self.mesh.elements[k as usize].area,
-                    )
-                })
-                .sum()
-        } else {
-            abs_power(&self.unshot[i], self.patch_area[i])
-        }
+        abs_power(&self.unshot[i], self.patch_area[i])
     }
 
     /// Whether patch `patch` still holds its emission unshot (every rank knows).
@@ -501,25 +464,17 @@ impl<'m> Solver<'m> {
     /// The candidate of patch `i`, whose power is `power`.
     fn patch_candidate(&self, i: usize, power: f64) -> Candidate {
         let p = &self.mesh.patches[i];
-        let (mut lit_area, mut lit_count) = (0.0, 0);
-        for j in p.elements.clone().filter(|&j| self.lit(j)) {
-            lit_area += self.mesh.elements[j as usize].area;
-            lit_count += 1;
-        }
-        let all_lit = lit_count == p.elements.len();
         let first = self.element_unshot[p.elements.start as usize];
         Candidate {
             patch: i as u32,
             power,
             unshot: self.unshot[i],
             centre: self.shooting_centre(i as u32),
-            // Elements shoot differently when only some are lit (only those
-            // overshoot) or when their unshot radiosities differ.
-            weighted: !(all_lit || lit_count == 0)
-                || p.elements
-                    .clone()
-                    .any(|j| self.element_unshot[j as usize] != first),
-            lit: if all_lit { 1.0 } else { lit_area / p.area },
+            // Elements shoot differently when their unshot radiosities differ.
+            weighted: p
+                .elements
+                .clone()
+                .any(|j| self.element_unshot[j as usize] != first),
         }
     }
 
@@ -552,46 +507,26 @@ impl<'m> Solver<'m> {
             .unwrap_or(p.centre)
     }
 
-    /// The overshoot of a patch of reflectance `rho` whose lit share is `lit`,
-    /// given the ambient term `ambient` (0 when overshooting is off).
-    fn overshoot_by(&self, rho: [f64; 3], lit: f64, ambient: [f64; 3]) -> [f64; 3] {
-        if !self.overshoot {
-            return [0.0; 3];
-        }
-        [0, 1, 2].map(|c| rho[c] * ambient[c] * lit)
-    }
-
     /// How `candidate` shoots, for a rank that knows only the candidate
     /// (uniform shooters; a weighted one's elements come from its owner's
-    /// [`Solver::shooting_region`]). `ambient` is [`Solver::ambient_from`]
-    /// of the whole solution's [`NetUnshot`].
-    pub fn candidate_region(&self, candidate: &Candidate, ambient: [f64; 3]) -> ShotRegion {
-        let p = &self.mesh.patches[candidate.patch as usize];
-        let rho = self.mesh.polygons[p.polygon as usize].reflectance;
-        let over = self.overshoot_by(rho, candidate.lit, ambient);
+    /// [`Solver::shooting_region`]).
+    pub fn candidate_region(&self, candidate: &Candidate) -> ShotRegion {
         ShotRegion {
             centre: candidate.centre,
             power: candidate.power,
-            shoot: [0, 1, 2].map(|c| candidate.unshot[c] + over[c]),
+            shoot: candidate.unshot,
             elements: Vec::new(),
         }
     }
 
     /// How patch `patch` shoots (see [`Solver::shooting_centre`]): each element
-    /// its own unshot radiosity, plus, with overshooting, rho times the ambient
-    /// term `ambient` if it has received light. Needs this rank to own `patch`.
-    pub fn shooting_region(&self, patch: u32, ambient: [f64; 3]) -> ShotRegion {
+    /// its own unshot radiosity. Needs this rank to own `patch`.
+    pub fn shooting_region(&self, patch: u32) -> ShotRegion {
         let p = &self.mesh.patches[patch as usize];
-        let rho = self.mesh.polygons[p.polygon as usize].reflectance;
-        let over = self.overshoot_by(rho, 1.0, ambient);
         let elements: Vec<[f64; 3]> = p
             .elements
             .clone()
-            .map(|j| {
-                let u = self.element_unshot[j as usize];
-                let o = if self.lit(j) { over } else { [0.0; 3] };
-                [0, 1, 2].map(|c| u[c] + o[c])
-            })
+            .map(|j| self.element_unshot[j as usize])
             .collect();
         let mut shoot = [0.0; 3];
         for (j, s) in p.elements.clone().zip(&elements) {
@@ -620,8 +555,7 @@ impl<'m> Solver<'m> {
         self.land(shooter, region, ff, direct_share)
     }
 
-    /// The first half of [`Solver::shoot_candidate`]: empties (or, when
-    /// overshooting, lowers) the shooter's store and returns the share of
+    /// The first half of [`Solver::shoot_candidate`]: empties the shooter's store and returns the share of
     /// the shot that is its own emission, per channel. A batch of shots
     /// takes every shooter before it lands any, so light one of them lands
     /// on another stays.
@@ -630,23 +564,11 @@ impl<'m> Solver<'m> {
         let i = shooter.patch as usize;
         let p = &mesh.patches[i];
         self.touch_patch(i);
-        if self.owns(shooter.patch) && !self.overshoot {
+        if self.owns(shooter.patch) {
             self.unshot[i] = [0.0; 3];
             for k in p.elements.clone() {
                 self.element_unshot[k as usize] = [0.0; 3];
             }
-        } else if self.owns(shooter.patch) {
-            // What each element did not shoot stays: minus its overshoot.
-            let mut rest = [0.0; 3];
-            for (n, k) in p.elements.clone().enumerate() {
-                let s = region.elements.get(n).unwrap_or(&region.shoot);
-                let u = &mut self.element_unshot[k as usize];
-                for c in 0..3 {
-                    u[c] -= s[c];
-                    rest[c] += u[c] * mesh.elements[k as usize].area / p.area;
-                }
-            }
-            self.unshot[i] = rest;
         }
         // The share of this shot that is the shooter's own emission (its
         // first shot carries all of it), per channel.
@@ -789,7 +711,7 @@ mod tests {
         let shoot = |solver: &mut Solver, patch: u32, to: u32| {
             let candidate = solver.local_candidate().expect("a shooter");
             let candidate = Candidate { patch, ..candidate };
-            let region = solver.shooting_region(patch, [0.0; 3]);
+            let region = solver.shooting_region(patch);
             let f = 0.1;
             let ff = [Transfer {
                 element: to,

@@ -13,9 +13,9 @@ const NONE: u32 = u32::MAX;
 /// and a tournament tree whose root names the best candidate.
 #[derive(Debug, Default)]
 pub(super) struct Vote {
-    /// What the tree was built for: (rank, ranks, overshoot, patches); `None`
+    /// What the tree was built for: (rank, ranks, patches); `None`
     /// until built, and after any change the marks do not follow.
-    built: Option<(usize, usize, bool, usize)>,
+    built: Option<(usize, usize, usize)>,
     /// Per leaf (own patch, in increasing order): its power.
     power: Vec<f64>,
     /// Per leaf: its power in fixed point.
@@ -53,12 +53,12 @@ impl Vote {
 
     /// The fixed-point sum and the best leaf (`None` when no power is
     /// positive), after bringing the tree up to date: `key` is what the
-    /// solver is now (rank, ranks, overshoot, patches), `leaves` the own
+    /// solver is now (rank, ranks, patches), `leaves` the own
     /// patches' count (which the key decides), `of(leaf)` a leaf's (power,
     /// fixed-point power).
     pub(super) fn refresh(
         &mut self,
-        key: (usize, usize, bool, usize),
+        key: (usize, usize, usize),
         leaves: usize,
         of: impl Fn(usize) -> (f64, u64),
     ) -> (u64, Option<(usize, f64)>) {
@@ -74,7 +74,7 @@ impl Vote {
 
     fn rebuild(
         &mut self,
-        key: (usize, usize, bool, usize),
+        key: (usize, usize, usize),
         leaves: usize,
         of: &impl Fn(usize) -> (f64, u64),
     ) {
@@ -216,7 +216,7 @@ mod tests {
             let mut power: Vec<f64> = (0..leaves).map(|_| (rng.next_u64() % 5) as f64).collect();
             let fixed_of = |w: f64| (w * 1000.0) as u64;
             let mut vote = Vote::default();
-            let key = (0, 1, false, leaves);
+            let key = (0, 1, leaves);
             for round in 0..50 {
                 // Change a few leaves (ties, zeros, negatives and NaNs too),
                 // sometimes a run of neighbours, as a shot's receivers are.

@@ -15,7 +15,6 @@ mod image;
 mod layout;
 mod lights;
 mod mpi;
-mod overshoot;
 mod projections;
 mod rasterisers;
 mod real_files;

@@ -542,8 +542,8 @@ fn weak_shooters_along_the_transport_agree_across_ranks() {
 #[test]
 fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
     // Each rank draws whole hemispheres for its turns of a batch and sends
-    // each row to its elements' owners: the same bits on any rank count,
-    // overshooting too. A batch shoots from one state, so it converges a
+    // each row to its elements' owners: the same bits on any rank count.
+    // A batch shoots from one state, so it converges a
     // little slower a shot than one shooter at a time, not much.
     let dir = tempfile::tempdir().expect("temp dir");
     let args = ["--max-shots", "60", "--batch", "4"];
@@ -581,10 +581,6 @@ fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
         .map(|x| x["rank"].as_u64())
         .collect();
     assert_eq!(takers.len(), 2, "split groups drawn by {takers:?}");
-    let over = ["--max-shots", "60", "--batch", "3", "--overshoot"];
-    let a = mpirun(1, dir.path(), "over1", &over);
-    let b = mpirun(2, dir.path(), "over2", &over);
-    same_result(&a, &b, "overshooting in batches of 3");
     let single = mpirun(1, dir.path(), "single", &["--max-shots", "60"]);
     let (u1, u4) = (
         single["unshot_fraction"].as_f64().expect("unshot"),
@@ -601,12 +597,11 @@ fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
 }
 
 #[test]
-fn overshooting_and_coarse_shots_agree_across_ranks() {
-    // The ambient term every rank overshoots by is summed in fixed point,
-    // and a weak shooter's coarse hemisphere is chosen from the gathered
-    // power: both the same whatever the rank count.
+fn coarse_shots_agree_across_ranks() {
+    // A weak shooter's coarse hemisphere is chosen from the gathered
+    // power: the same whatever the rank count.
     let dir = tempfile::tempdir().expect("temp dir");
-    let args = ["--max-shots", "400", "--overshoot"];
+    let args = ["--max-shots", "400"];
     let one = mpirun(1, dir.path(), "one", &args);
     assert!(
         one["timings"]["coarse_shots"]
@@ -615,7 +610,6 @@ fn overshooting_and_coarse_shots_agree_across_ranks() {
             > 0,
         "no coarse shot in 400"
     );
-    assert_eq!(one["settings"]["overshoot"], true);
     let two = mpirun(2, dir.path(), "two", &args);
     same_result(&one, &two, "two ranks");
     assert_eq!(

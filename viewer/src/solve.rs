@@ -196,7 +196,6 @@ fn solve(
     let mut source = GpuFormFactors::new(gpu, &mesh, opts, &single, scene.extent())
         .map_err(|e| e.to_string())?;
     let mut solver = Solver::partitioned(&mesh, 0, 1);
-    solver.set_overshoot(opts.overshoot);
     let mut shots = ShotLoop::new(&mesh, &single, opts.stop, 0.0);
     let mut pub_ = Publisher::start(shared, &mesh, &solver, opts, wake, passes)?;
     let mut control = Control {

@@ -162,9 +162,7 @@ fn pause_step_resume_restart_quit() {
 fn the_viewer_and_the_renderer_give_the_same_numbers() {
     let (gpu, scene, mut options) = cornell_at_32x128();
     options.width = 0;
-    // The ambient term and overshooting are where the two drivers once
-    // differed: both on.
-    options.overshoot = true;
+    // The ambient term is where the two drivers once differed: on.
     options.stop.threshold = 0.01;
     let rendered = radiosity::render::render(&gpu, &scene, &options, Duration::ZERO, &mut |_| {})
         .expect("render");

@@ -75,7 +75,7 @@ impl<'m> ShotLoop<'m> {
         source: &mut GpuFormFactors,
         solver: &mut Solver<'s>,
         hooks: &mut dyn LoopHooks<'s>,
-        (shot_start, unshot_fraction, ambient): (Instant, f64, [f64; 3]),
+        (shot_start, unshot_fraction): (Instant, f64),
     ) -> Result<Step, RenderError> {
         let room = self.stop.max_shots.saturating_sub(solver.shots()) as usize;
         let batch = self.batch.min(room.max(1));
@@ -89,19 +89,16 @@ impl<'m> ShotLoop<'m> {
         // one shot a step, every rank making its own elements' part of the
         // (cheap) row (the source's transport ranks are the run's), its
         // landing summed at the next vote.
-        if chosen.len() == 1 && source.by_transport(chosen[0].power) && !solver.overshoot() {
+        if chosen.len() == 1 && source.by_transport(chosen[0].power) {
             let best = chosen[0];
-            let mut region = self.region(solver, &best, ambient);
+            let mut region = self.region(solver, &best);
             self.join_group(solver, &best, &mut region);
             let shot = self.shoot(source, solver, (&best, &region), None)?;
             self.stats.shot_times.push(shot_start.elapsed());
             hooks.after_shot(solver, unshot_fraction);
             return Ok(Step::Shot(shot));
         }
-        let regions: Vec<ShotRegion> = chosen
-            .iter()
-            .map(|c| self.region(solver, c, ambient))
-            .collect();
+        let regions: Vec<ShotRegion> = chosen.iter().map(|c| self.region(solver, c)).collect();
         let kept = std::mem::take(&mut self.kept);
         let mut b = Batch::new(chosen, regions, self.comm.size(), kept);
         self.first_round(source, solver, &mut b)?;
