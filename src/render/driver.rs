@@ -4,7 +4,7 @@
 use super::hooks::{Progress, SolveHooks};
 use super::options::{fingerprint, RenderError, RenderOptions};
 use super::passes::{refined_mesh, shared_transport, wants_transport, Handoff, Refined};
-use super::shoot::{shoot_until, LoopStats};
+use super::shoot::{shoot_until, LoopStats, Until};
 use super::source::{GpuFormFactors, PhaseTimes};
 use super::trace::{gather_whole, Extra, Trace};
 use crate::checkpoint::Header;
@@ -141,7 +141,7 @@ fn start_solver<'m>(
     job: Job<'_>,
     mesh: &'m LitMesh,
     start: Start<'_>,
-) -> Result<(Solver<'m>, Trace<'m>, f64), RenderError> {
+) -> Result<(Solver<'m>, SoFar<'m>), RenderError> {
     let Job { opts, comm, .. } = job;
     let Start {
         refinement,
@@ -179,7 +179,14 @@ fn start_solver<'m>(
             );
         }
     }
-    Ok((solver, trace, so_far))
+    Ok((solver, SoFar { trace, so_far }))
+}
+
+/// Where the final solve starts from: its trace so far and the solve
+/// seconds already spent (the passes', or a checkpoint's).
+struct SoFar<'m> {
+    trace: Trace<'m>,
+    so_far: f64,
 }
 
 /// What the final solve left: its loop statistics, trace and solve time.
@@ -193,19 +200,20 @@ struct Solved<'m> {
     ambient_traffic: Traffic,
 }
 
-/// Runs the final solve with the trace, progress and checkpoint hooks;
-/// `trace` and `so_far` are where it starts (the passes', or a checkpoint's).
+/// Runs the final solve with the trace, progress and checkpoint hooks,
+/// from where `start` says.
 fn final_solve<'m>(
     job: Job<'_>,
     source: &mut GpuFormFactors,
     solver: &mut Solver<'m>,
-    (trace, so_far): (Trace<'m>, f64),
+    start: SoFar<'m>,
     header: Header,
     progress: &mut dyn FnMut(&Progress),
 ) -> Result<Solved<'m>, RenderError> {
     let Job {
         scene, opts, comm, ..
     } = job;
+    let SoFar { trace, so_far } = start;
     let mesh = solver.mesh();
     let solve_start = Instant::now()
         .checked_sub(Duration::from_secs_f64(so_far))
@@ -233,7 +241,11 @@ fn final_solve<'m>(
     let ambient = t.elapsed().as_secs_f64();
     // Its gather is not a form-factor exchange: the report's bytes leave it out.
     let ambient_traffic = comm.traffic().since(before);
-    let stats = shoot_until(mesh, opts, (0.0, true), comm, source, solver, &mut hooks)?;
+    let until = Until {
+        floor: 0.0,
+        draw_ahead: true,
+    };
+    let stats = shoot_until(opts, comm, until, source, solver, &mut hooks)?;
     let trace = hooks.trace;
     let solve = (solve_start.elapsed() - trace.spent).as_secs_f64();
     // Left out of the solve's time, so say it where it can be seen.
@@ -301,7 +313,7 @@ pub fn render_on(
         passes,
         handoff: interrupted,
     };
-    let (mut solver, trace, so_far) = start_solver(job, &mesh, start)?;
+    let (mut solver, so_far) = start_solver(job, &mesh, start)?;
     crate::report::log_memory("the solver's set-up");
     let header = Header {
         scene: scene.name.clone(),
@@ -309,34 +321,17 @@ pub fn render_on(
         counts: [mesh.patches.len(), mesh.elements.len()],
         factors,
         refinement: refinement.clone(),
-        seconds: 0.0,
-        trace: Vec::new(),
-        energy: [0.0; 3],
+        ..Header::default()
     };
     // The passes' and the set-up's exchanges are not the final solve's.
     let before = comm.traffic();
     let cpu_start = crate::parallel::process_cpu_seconds();
-    let solved = final_solve(
-        job,
-        &mut source,
-        &mut solver,
-        (trace, so_far),
-        header,
-        progress,
-    )?;
+    let solved = final_solve(job, &mut source, &mut solver, so_far, header, progress)?;
     timings.solve = solved.solve;
     // The transport is estimated before the first pass, or here.
     timings.ambient = refinement.transport_seconds + solved.ambient;
     source.release_cache();
-    // The occlusion cull's agreements and the rectangles' deal are counted
-    // apart (per rank).
-    let excluded = solved
-        .trace
-        .traffic
-        .plus(before)
-        .plus(solved.ambient_traffic)
-        .plus(source.timings.cull_traffic)
-        .plus(source.timings.rect_traffic);
+    let excluded = not_exchanges(&solved, &source, before);
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
@@ -361,6 +356,20 @@ pub fn render_on(
         report,
         interrupted,
     }))
+}
+
+/// The traffic that is not the final solve's form-factor exchanges: what
+/// came `before` it, the trace's gathers, the transport's, and the
+/// occlusion cull's agreements and the rectangles' deal (counted apart, per
+/// rank).
+fn not_exchanges(solved: &Solved, source: &GpuFormFactors, before: Traffic) -> Traffic {
+    solved
+        .trace
+        .traffic
+        .plus(before)
+        .plus(solved.ambient_traffic)
+        .plus(source.timings.cull_traffic)
+        .plus(source.timings.rect_traffic)
 }
 
 /// Says, on rank 0, when a batch is smaller than the rank count.

@@ -39,6 +39,8 @@ pub use options::{
     DEFAULT_TESSELLATION_TOLERANCE,
 };
 pub use passes::{refined_mesh, refined_mesh_shown};
-pub use shoot::{shoot_until, AfterShot, Flags, LoopHooks, LoopStats, ShotLoop, Step, Stopped};
+pub use shoot::{
+    shoot_until, AfterShot, Flags, LoopHooks, LoopStats, ShotLoop, Step, Stopped, Until,
+};
 pub use source::{GpuFormFactors, PhaseTimes};
 pub use trace::{gather_whole, Extra, Trace};

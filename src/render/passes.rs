@@ -4,7 +4,7 @@
 
 use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
-use super::shoot::{shoot_until, Flags, LoopHooks};
+use super::shoot::{shoot_until, Flags, LoopHooks, Until};
 use super::source::GpuFormFactors;
 use super::trace::{gather_whole, Extra, Trace};
 use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
@@ -401,15 +401,11 @@ fn one_pass(
         progress,
         show: (at.pass, show),
     };
-    let stats = shoot_until(
-        mesh,
-        opts,
-        (floor, false),
-        comm,
-        &mut source,
-        &mut solver,
-        &mut hooks,
-    )?;
+    let until = Until {
+        floor,
+        draw_ahead: false,
+    };
+    let stats = shoot_until(opts, comm, until, &mut source, &mut solver, &mut hooks)?;
     let seconds = started
         .elapsed()
         .saturating_sub(hooks.trace.spent)

@@ -539,18 +539,17 @@ fn unpack_candidate(v: &[f64]) -> Option<Candidate> {
 /// ahead where [`Ahead::applies`] (the final solve; a pass measures the
 /// penumbrae of the rows its source draws, so it draws each in its shot).
 pub fn shoot_until<'m>(
-    mesh: &'m LitMesh,
     opts: &RenderOptions,
-    (floor, ahead): (f64, bool),
     comm: &dyn Collectives,
+    until: Until,
     source: &mut GpuFormFactors,
     solver: &mut Solver<'m>,
     hooks: &mut dyn LoopHooks<'m>,
 ) -> Result<LoopStats, RenderError> {
-    let mut shots = ShotLoop::new(mesh, comm, opts.stop, floor)
+    let mut shots = ShotLoop::new(solver.mesh(), comm, opts.stop, until.floor)
         .batched(opts.batch)
         .dealing_rows(opts.deal_rows);
-    if ahead && Ahead::applies(opts, comm.size()) {
+    if until.draw_ahead && Ahead::applies(opts, comm.size()) {
         Ahead::run(opts, source, |ahead, source| {
             while let Step::Shot(_) = shots.step_drawing(source, solver, hooks, Some(ahead))? {}
             Ok(())
@@ -559,6 +558,17 @@ pub fn shoot_until<'m>(
         while let Step::Shot(_) = shots.step(source, solver, hooks)? {}
     }
     Ok(shots.stats)
+}
+
+/// Where [`shoot_until`] stops besides its stop rule, and how it draws.
+#[derive(Clone, Copy, Debug)]
+pub struct Until {
+    /// No shooter weaker than this shoots (W; 0: any).
+    pub floor: f64,
+    /// Whether rows of the likely next shooters may be drawn beside the
+    /// shot ([`Ahead`]: only the final solve; a refinement pass reads the
+    /// penumbrae its own source measured).
+    pub draw_ahead: bool,
 }
 
 /// The rows wanted after `shooter`'s: those of the vote's runners-up that

@@ -16,6 +16,7 @@ mod layout;
 mod lights;
 mod mpi;
 mod projections;
+mod quiet;
 mod rasterisers;
 mod real_files;
 mod reference;

@@ -189,14 +189,14 @@ impl GpuFormFactors<'_> {
         } else {
             self.fresh_row(shooter, region.centre, tier)?
         };
-        self.take_row(
-            key,
-            row,
-            region,
-            out,
-            (start, cpu, before, exchange),
-            Duration::ZERO,
-        );
+        let clock = super::RowClock {
+            start,
+            cpu,
+            before,
+            exchange,
+            aside: Duration::ZERO,
+        };
+        self.take_row(key, row, region, out, clock);
         Ok(Started::Row)
     }
 
@@ -276,14 +276,14 @@ impl GpuFormFactors<'_> {
         }
         let (row, exchange) = self.finish_split(split, &views);
         let before = self.timings.drawing();
-        self.take_row(
-            key,
-            row,
-            region,
-            out,
-            (start, cpu, before, exchange),
-            Duration::ZERO,
-        );
+        let clock = super::RowClock {
+            start,
+            cpu,
+            before,
+            exchange,
+            aside: Duration::ZERO,
+        };
+        self.take_row(key, row, region, out, clock);
         if let (Some(b), Some(c)) = (self.busy.last_mut(), self.busy_cpu.last_mut()) {
             *b += busy.as_secs_f64();
             *c += busy_cpu;
