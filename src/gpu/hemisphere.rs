@@ -161,23 +161,10 @@ impl HemisphereRasterizer {
         shapes: Arc<ProxyShapes>,
         extent: f32,
     ) -> Result<Self, GpuError> {
-        let limits = device.limits();
-        let most = limits.max_texture_dimension_2d;
-        if res.cols > most || res.rows > most {
-            return Err(GpuError::TooLarge(format!(
-                "hemisphere {res} exceeds the texture limit {most}"
-            )));
-        }
         let proxies = Proxies::sharing(shapes);
         let proxy_count = proxies.corners.len();
-        let max_instances = 2 * proxy_count.max(1) as u64;
-        let instance_bytes = max_instances * std::mem::size_of::<Instance>() as u64;
-        if instance_bytes > limits.max_buffer_size {
-            return Err(GpuError::TooLarge(format!(
-                "{} rasterisation proxies need {instance_bytes} bytes of rectangles",
-                proxy_count
-            )));
-        }
+        let [instance_bytes, coverage_bytes] =
+            device::sizes(&device.limits(), res, proxy_count, mesh.elements.len())?;
         use wgpu::BufferUsages as U;
         // Starts small and grows to the largest shot: a shot draws what it
         // sees (Sponza: about a thousand of its 1.2 M proxies), and a buffer
@@ -190,14 +177,6 @@ impl HemisphereRasterizer {
         );
         let uniform_bytes = std::mem::size_of::<ShotUniform>() as u64;
         let uniform = buffer(device, "shot", uniform_bytes, U::UNIFORM | U::COPY_DST);
-        // One u32 per element (at least one, as a binding may not be empty).
-        let coverage_bytes = 4 * mesh.elements.len().max(1) as u64;
-        if coverage_bytes > limits.max_storage_buffer_binding_size {
-            return Err(GpuError::TooLarge(format!(
-                "{} elements need {coverage_bytes} bytes of coverage counters",
-                mesh.elements.len()
-            )));
-        }
         let coverage_usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
         let coverage_buf = buffer(device, "coverage", coverage_bytes, coverage_usage);
         let readback_usage = U::MAP_READ | U::COPY_DST;

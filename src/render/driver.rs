@@ -287,22 +287,15 @@ pub fn render_on(
         load: load_time.as_secs_f64(),
         ..Default::default()
     };
-    let t = Instant::now();
     let fingerprint = fingerprint(scene, opts);
     let Refined {
         mesh,
         refinement,
         factors,
         trace: passes,
-        bookkeeping,
         interrupted,
-    } = solve_mesh(job, &fingerprint, progress)?;
-    // The passes' solves count as solve time, below; their traces' bookkeeping nowhere.
-    timings.mesh = (t.elapsed().as_secs_f64() - refinement.seconds - bookkeeping).max(0.0);
-    if comm.rank() == 0 {
-        log_mesh(scene, &mesh);
-    }
-    crate::report::log_memory("the mesh");
+        ..
+    } = mesh_phase(job, &fingerprint, &mut timings, progress)?;
     let t = Instant::now();
     let one = Single::default();
     let mut source = GpuFormFactors::for_solve(gpu, &mesh, opts, (comm, &one), scene.extent())?;
@@ -356,6 +349,25 @@ pub fn render_on(
         report,
         interrupted,
     }))
+}
+
+/// The mesh to solve ([`solve_mesh`]), its time in `timings` (the
+/// passes' solves count as solve time, their traces' bookkeeping nowhere).
+fn mesh_phase(
+    job: Job<'_>,
+    fingerprint: &str,
+    timings: &mut Timings,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Refined, RenderError> {
+    let t = Instant::now();
+    let refined = solve_mesh(job, fingerprint, progress)?;
+    let passes = refined.refinement.seconds + refined.bookkeeping;
+    timings.mesh = (t.elapsed().as_secs_f64() - passes).max(0.0);
+    if job.comm.rank() == 0 {
+        log_mesh(job.scene, &refined.mesh);
+    }
+    crate::report::log_memory("the mesh");
+    Ok(refined)
 }
 
 /// The traffic that is not the final solve's form-factor exchanges: what

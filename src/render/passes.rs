@@ -306,6 +306,31 @@ struct PassHooks<'a, 'm> {
     show: (u32, ShowPass<'a>),
 }
 
+impl<'a> PassHooks<'a, '_> {
+    /// The hooks of pass `at`, started at `started`.
+    fn new(
+        run: &PassRun<'a>,
+        at: PassAt,
+        started: Instant,
+        progress: &'a mut dyn FnMut(&Progress),
+        show: ShowPass<'a>,
+    ) -> Self {
+        Self {
+            comm: run.comm,
+            nodes: &run.scene.nodes,
+            ambient: run.opts.ambient,
+            interrupt: run.opts.interrupt.as_deref(),
+            trace: Trace::default(),
+            solve_start: started
+                .checked_sub(Duration::from_secs_f64(at.before))
+                .unwrap_or(started),
+            started,
+            progress,
+            show: (at.pass, show),
+        }
+    }
+}
+
 impl<'m> LoopHooks<'m> for PassHooks<'_, 'm> {
     fn after_shot(&mut self, s: &Solver<'m>, u: f64) {
         if self.trace.due(s.shots()) {
@@ -388,19 +413,7 @@ fn one_pass(
     let mut solver = Solver::partitioned(mesh, comm.rank(), comm.size());
     // Shots after the last one strong enough to be refined change nothing.
     let floor = refine::SHOOTER_TOL * solver.emitted_power();
-    let mut hooks = PassHooks {
-        comm,
-        nodes: &scene.nodes,
-        ambient: opts.ambient,
-        interrupt: opts.interrupt.as_deref(),
-        trace: Trace::default(),
-        solve_start: started
-            .checked_sub(Duration::from_secs_f64(at.before))
-            .unwrap_or(started),
-        started,
-        progress,
-        show: (at.pass, show),
-    };
+    let mut hooks = PassHooks::new(run, at, started, progress, show);
     let until = Until {
         floor,
         draw_ahead: false,

@@ -144,3 +144,35 @@ pub(super) fn item_bind_group(
         entries: &entries,
     })
 }
+
+/// The rectangle buffer's most bytes (two rectangles a proxy) and the
+/// coverage counters' bytes (one u32 an element, at least one, as a
+/// binding may not be empty), or why the device cannot hold them or a
+/// hemisphere of `res`.
+pub(super) fn sizes(
+    limits: &wgpu::Limits,
+    res: Resolution,
+    proxies: usize,
+    elements: usize,
+) -> Result<[u64; 2], GpuError> {
+    let most = limits.max_texture_dimension_2d;
+    if res.cols > most || res.rows > most {
+        return Err(GpuError::TooLarge(format!(
+            "hemisphere {res} exceeds the texture limit {most}"
+        )));
+    }
+    let max_instances = 2 * proxies.max(1) as u64;
+    let instance_bytes = max_instances * std::mem::size_of::<Instance>() as u64;
+    if instance_bytes > limits.max_buffer_size {
+        return Err(GpuError::TooLarge(format!(
+            "{proxies} rasterisation proxies need {instance_bytes} bytes of rectangles"
+        )));
+    }
+    let coverage_bytes = 4 * elements.max(1) as u64;
+    if coverage_bytes > limits.max_storage_buffer_binding_size {
+        return Err(GpuError::TooLarge(format!(
+            "{elements} elements need {coverage_bytes} bytes of coverage counters"
+        )));
+    }
+    Ok([instance_bytes, coverage_bytes])
+}
