@@ -642,6 +642,19 @@ struct RowClock {
     aside: Duration,
 }
 
+impl RowClock {
+    /// A row drawn with nothing else drawn meanwhile.
+    fn alone(start: Instant, cpu: parallel::CpuSpan, before: Duration, exchange: Duration) -> Self {
+        Self {
+            start,
+            cpu,
+            before,
+            exchange,
+            aside: Duration::ZERO,
+        }
+    }
+}
+
 impl FormFactorSource for GpuFormFactors<'_> {
     type Error = RenderError;
 

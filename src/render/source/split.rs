@@ -189,13 +189,7 @@ impl GpuFormFactors<'_> {
         } else {
             self.fresh_row(shooter, region.centre, tier)?
         };
-        let clock = super::RowClock {
-            start,
-            cpu,
-            before,
-            exchange,
-            aside: Duration::ZERO,
-        };
+        let clock = super::RowClock::alone(start, cpu, before, exchange);
         self.take_row(key, row, region, out, clock);
         Ok(Started::Row)
     }
@@ -276,13 +270,7 @@ impl GpuFormFactors<'_> {
         }
         let (row, exchange) = self.finish_split(split, &views);
         let before = self.timings.drawing();
-        let clock = super::RowClock {
-            start,
-            cpu,
-            before,
-            exchange,
-            aside: Duration::ZERO,
-        };
+        let clock = super::RowClock::alone(start, cpu, before, exchange);
         self.take_row(key, row, region, out, clock);
         if let (Some(b), Some(c)) = (self.busy.last_mut(), self.busy_cpu.last_mut()) {
             *b += busy.as_secs_f64();
