@@ -21,7 +21,10 @@ use std::time::{Duration, Instant};
 
 mod device;
 mod tess;
-use device::{buffer, direction_buffer, item_bind_group, item_pipeline, rect_pipeline};
+use crate::raster::{CellShot, DrawCells};
+use device::{
+    buffer, direction_buffer, item_bind_group, item_pipeline, rect_pipeline, DeviceCells,
+};
 use tess::Tessellation;
 
 /// The WGSL source of the hemisphere pipeline.
@@ -88,21 +91,10 @@ pub struct HemisphereRasterizer {
     cull_solids: bool,
     /// Rectangles of the current shot, CPU side (reused).
     instances: Vec<Instance>,
-    instance_buf: wgpu::Buffer,
-    uniform: wgpu::Buffer,
-    pipeline: wgpu::RenderPipeline,
-    group: wgpu::BindGroup,
-    target: RenderTarget,
-    /// Per-element count of the cells each element covers, occluded or not
-    /// (hybrid form factors' visibility denominator), and its readback copy.
-    coverage_buf: wgpu::Buffer,
-    coverage_read: wgpu::Buffer,
-    /// Cell directions (f64 table), shared by both projections.
-    trig: wgpu::Buffer,
-    /// The compiled shader, shared by both projections' pipelines.
-    module: wgpu::ShaderModule,
-    /// The tessellated projection, when chosen (see [`HemisphereRasterizer::use_tessellation`]).
-    tess: Option<Tessellation>,
+    /// Who draws on the device, and its objects (the tessellated
+    /// projection's too, when chosen: see
+    /// [`HemisphereRasterizer::use_tessellation`]).
+    device: DeviceCells,
     /// Whether to count coverage this shot.
     count_coverage: bool,
     /// Whether the CPU drawing packs each element's visible cells with
@@ -204,16 +196,20 @@ impl HemisphereRasterizer {
             solids: mesh.solids.clone(),
             outside: Vec::new(),
             cull_solids: true,
-            instance_buf,
-            uniform,
-            pipeline,
-            group,
-            target,
-            coverage_buf,
-            coverage_read,
-            trig,
-            module,
-            tess: None,
+            device: DeviceCells {
+                res,
+                elements: mesh.elements.len(),
+                instance_buf,
+                uniform,
+                pipeline,
+                group,
+                target,
+                coverage_buf,
+                coverage_read,
+                trig,
+                module,
+                tess: None,
+            },
             count_coverage: false,
             pack_visible: false,
             packed: false,
@@ -318,229 +314,6 @@ impl HemisphereRasterizer {
         self.res
     }
 
-    /// Writes the shot's uniform and the rectangles (or triangles) it draws.
-    fn upload(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        layout: &TileLayout,
-        own: (u32, u32),
-        lattice: bool,
-    ) -> Result<(), GpuError> {
-        let tiles = [
-            layout.tile_w.max(1),
-            layout.tile_h.max(1),
-            layout.px.max(1),
-            layout.py.max(1),
-        ];
-        let u = ShotUniform {
-            res: [self.res.rows, self.res.cols, 0, 0],
-            tiles,
-            own: [own.0, own.1, lattice as u32, self.count_coverage as u32],
-            depth: [1.0 / self.far, 0.0, 0.0, 0.0],
-            per_tile: tiles.map(|d| 1.0 / d as f32),
-        };
-        queue.write_buffer(&self.uniform, 0, bytemuck::bytes_of(&u));
-        if let Some(t) = self.tess.as_mut() {
-            if !t.vertices.is_empty() {
-                let bytes: &[u8] = bytemuck::cast_slice(&t.vertices);
-                // Grows to the largest shot, then is reused.
-                if t.vertex_buf
-                    .as_ref()
-                    .is_none_or(|b| b.size() < bytes.len() as u64)
-                {
-                    t.vertex_buf = Some(device.create_buffer(&wgpu::BufferDescriptor {
-                        label: Some("tessellated vertices"),
-                        size: (bytes.len() as u64).next_power_of_two(),
-                        usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                        mapped_at_creation: false,
-                    }));
-                }
-                if let Some(b) = &t.vertex_buf {
-                    queue.write_buffer(b, 0, bytes);
-                }
-                queue.write_buffer(&t.pieces_buf, 0, bytemuck::cast_slice(&t.pieces));
-            }
-        } else {
-            let bytes: &[u8] = bytemuck::cast_slice(&self.instances);
-            let need = bytes.len() as u64;
-            if need > self.instance_buf.size() {
-                // Rectangles cut to a rank's tiles can outnumber the proxies
-                // twice over: grow to the largest shot, then reuse.
-                let most = device.limits().max_buffer_size;
-                if need > most {
-                    return Err(GpuError::TooLarge(format!(
-                        "{} rectangles need {need} bytes, over the device's {most}",
-                        self.instances.len()
-                    )));
-                }
-                log::debug!(
-                    "rectangle buffer grows to {} rectangles ({:.0} MB)",
-                    self.instances.len(),
-                    need.next_power_of_two().min(most) as f64 / 1e6
-                );
-                self.instance_buf = buffer(
-                    device,
-                    "rectangles",
-                    need.next_power_of_two().min(most),
-                    wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                );
-            }
-            if !bytes.is_empty() {
-                queue.write_buffer(&self.instance_buf, 0, bytes);
-            }
-        }
-        Ok(())
-    }
-
-    /// Records and submits the drawing and the copies out.
-    fn submit(&self, device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::SubmissionIndex {
-        let mut enc = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("shot"),
-        });
-        if self.count_coverage {
-            enc.clear_buffer(&self.coverage_buf, 0, None);
-        }
-        {
-            let mut pass = self.target.begin_pass(
-                &mut enc,
-                wgpu::Color {
-                    r: EMPTY as f64,
-                    g: 0.0,
-                    b: 0.0,
-                    a: 0.0,
-                },
-            );
-            match &self.tess {
-                Some(t) => {
-                    if let (Some(b), false) = (&t.vertex_buf, t.vertices.is_empty()) {
-                        pass.set_pipeline(&t.pipeline);
-                        pass.set_bind_group(0, &t.group, &[]);
-                        pass.set_vertex_buffer(0, b.slice(..));
-                        pass.draw(0..t.vertices.len() as u32, 0..1);
-                    }
-                }
-                None if !self.instances.is_empty() => {
-                    pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, &self.group, &[]);
-                    pass.set_vertex_buffer(0, self.instance_buf.slice(..));
-                    // In draws of a bounded size: lavapipe keeps every
-                    // vertex of a draw, and one of Sponza's 385 000
-                    // rectangles took 0.5 GB that it kept for good. Draws
-                    // keep their order, so the item buffer is the same.
-                    let n = self.instances.len() as u32;
-                    for first in (0..n).step_by(DRAW_INSTANCES as usize) {
-                        pass.draw(0..4, first..(first + DRAW_INSTANCES).min(n));
-                    }
-                }
-                None => {}
-            }
-        }
-        self.target.copy_out(&mut enc);
-        if self.count_coverage {
-            enc.copy_buffer_to_buffer(&self.coverage_buf, 0, &self.coverage_read, 0, None);
-        }
-        queue.submit([enc.finish()])
-    }
-
-    /// Reads this rank's cells of the item buffer into `items` (a packed
-    /// lattice unpacked to its places); returns when the wait ended.
-    fn read_items(
-        &self,
-        device: &wgpu::Device,
-        submission: wgpu::SubmissionIndex,
-        layout: &TileLayout,
-        own: (u32, u32),
-        lattice: bool,
-        items: &mut Vec<u32>,
-    ) -> Result<Option<Instant>, GpuError> {
-        items.clear();
-        let mut waited = None;
-        let word = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        if lattice {
-            // Unpack this rank's cells to their places; the rest stay EMPTY.
-            items.resize(self.res.cells(), EMPTY);
-            let (cols, rows) = (self.res.cols as usize, self.res.rows as usize);
-            let (px, py, x0, y0) = (
-                layout.px as usize,
-                layout.py as usize,
-                own.0 as usize,
-                own.1 as usize,
-            );
-            self.target.read_rows(device, submission, |r, row| {
-                waited.get_or_insert_with(Instant::now);
-                let p = r * py + y0;
-                if p < rows {
-                    for (c, b) in row
-                        .chunks_exact(4)
-                        .enumerate()
-                        .take_while(|(c, _)| c * px + x0 < cols)
-                    {
-                        items[p * cols + c * px + x0] = word(b);
-                    }
-                }
-            })?;
-        } else {
-            items.reserve(self.res.cells());
-            self.target.read_rows(device, submission, |_, row| {
-                waited.get_or_insert_with(Instant::now);
-                items.extend(row.chunks_exact(4).map(word));
-            })?;
-        }
-        Ok(waited)
-    }
-
-    /// Reads the coverage counts, when counting.
-    fn read_coverage(
-        &mut self,
-        device: &wgpu::Device,
-        submission: wgpu::SubmissionIndex,
-    ) -> Result<(), GpuError> {
-        if self.count_coverage {
-            // The item buffer's wait covered this submission; this map is immediate.
-            super::map_read(device, &self.coverage_read, submission)?;
-            {
-                let view = self
-                    .coverage_read
-                    .slice(..)
-                    .get_mapped_range()
-                    .map_err(|e| GpuError::Failed(e.to_string()))?;
-                // Straight from the mapped counts to the pairs: most
-                // elements are not in view, and a block of zeros is skipped
-                // with one test (every rank reads every element's count).
-                self.coverage.clear();
-                let bytes = &view[..4 * self.elements.min(view.len() / 4)];
-                // Mapped ranges are aligned (wgpu::MAP_ALIGNMENT); copy if not.
-                let copied: Vec<u32>;
-                let counts: &[u32] = match bytemuck::try_cast_slice(bytes) {
-                    Ok(counts) => counts,
-                    Err(_) => {
-                        copied = bytes
-                            .chunks_exact(4)
-                            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                            .collect();
-                        &copied
-                    }
-                };
-                for (b, block) in counts.chunks(COVERAGE_BLOCK).enumerate() {
-                    if block.iter().fold(0, |a, &c| a | c) == 0 {
-                        continue;
-                    }
-                    let first = b * COVERAGE_BLOCK;
-                    self.coverage.extend(
-                        block
-                            .iter()
-                            .enumerate()
-                            .filter(|(_, &c)| c > 0)
-                            .map(|(k, &c)| ((first + k) as u32, u64::from(c))),
-                    );
-                }
-            }
-            self.coverage_read.unmap();
-        }
-        Ok(())
-    }
-
     /// Renders the cells of the tiles that rank `own` of `layout` owns, as seen
     /// from `shooter`, into `items` (row-major, R_phi x R_theta). Cells other
     /// ranks own are [`EMPTY`]. With `peers` (one rank drawing the whole
@@ -567,21 +340,30 @@ impl HemisphereRasterizer {
         self.packed = false;
         let (collected, lattice) = self.find_rects(shooter, layout, own, peers);
         let bounds = start.elapsed();
-        let (rasterise, readback) = if self.software.is_some() && self.tess.is_none() {
-            self.draw_on_cpu(layout, own, items);
-            (start.elapsed() - bounds, Duration::ZERO)
-        } else {
-            self.upload(device, queue, layout, own, lattice)?;
-            let submission = self.submit(device, queue);
-            let waited =
-                self.read_items(device, submission.clone(), layout, own, lattice, items)?;
-            self.read_coverage(device, submission)?;
-            let read_start = waited.unwrap_or_else(Instant::now);
-            (read_start - start - bounds, read_start.elapsed())
+        let shot = CellShot {
+            instances: &self.instances,
+            far: self.far,
+            layout,
+            own,
+            lattice,
+            coverage: self.count_coverage,
+            pack_visible: self.pack_visible,
         };
+        let tessellated = self.device.tess.is_some();
+        let drawn = match self.software.as_mut().filter(|_| !tessellated) {
+            Some(cpu) => match cpu.draw((), &shot, items, &mut self.coverage) {
+                Ok(drawn) => drawn,
+                Err(never) => match never {},
+            },
+            None => self
+                .device
+                .draw((device, queue), &shot, items, &mut self.coverage)?,
+        };
+        self.packed = drawn.packed;
+        let (rasterise, readback) = (drawn.rasterise, drawn.readback);
         Ok(RasterStats {
             bounds,
-            rects: match &self.tess {
+            rects: match &self.device.tess {
                 Some(t) => (t.vertices.len() / 3) as u32,
                 None => collected.rects as u32,
             },
@@ -611,8 +393,10 @@ impl HemisphereRasterizer {
         // The tessellated projection always draws the full image: packing
         // would move its vertices relative to the rasteriser's sub-pixel
         // grid, and rank counts would no longer agree bit for bit.
-        let lattice =
-            layout.tile_w == 1 && layout.tile_h == 1 && layout.ranks() > 1 && self.tess.is_none();
+        let lattice = layout.tile_w == 1
+            && layout.tile_h == 1
+            && layout.ranks() > 1
+            && self.device.tess.is_none();
         // Over several ranks, skip rectangles that hold none of this rank's cells.
         if layout.ranks() > 1 {
             let place = TilePlace {
@@ -648,7 +432,7 @@ impl HemisphereRasterizer {
         };
         let cull = self.cull_occluded && !waiting && agree.is_some();
         let mut collected = crate::raster::proxies::Collected::default();
-        if self.tess.is_some() {
+        if self.device.tess.is_some() {
             self.collect_triangles(shooter);
         } else {
             collected = self.proxies.collect_rects(
@@ -671,26 +455,6 @@ impl HemisphereRasterizer {
             }
         }
         (collected, lattice)
-    }
-
-    /// Draws the shot's rectangles on the CPU (`raster::software`) into
-    /// `items`, and the coverage counts when counting.
-    fn draw_on_cpu(&mut self, layout: &TileLayout, own: (u32, u32), items: &mut Vec<u32>) {
-        if let Some(soft) = self.software.as_mut() {
-            let threads = crate::parallel::cores().min(8);
-            let coverage = self.count_coverage.then_some(&mut self.coverage);
-            let visible = self.pack_visible && layout.ranks() == 1;
-            self.packed = soft.draw(
-                &self.instances,
-                self.far,
-                layout,
-                own,
-                threads,
-                items,
-                coverage,
-                visible,
-            );
-        }
     }
 }
 

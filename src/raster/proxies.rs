@@ -14,7 +14,7 @@ use std::sync::Arc;
 /// One rectangle to draw, with what the fragment test needs (see the shader's `Rect`).
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
-pub(crate) struct Instance {
+pub struct Instance {
     pub(crate) rect: [f32; 4],
     pub(crate) edges: [[f32; 3]; 4],
     pub(crate) plane: [f32; 4],

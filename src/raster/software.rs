@@ -361,28 +361,30 @@ impl Software {
         }
     }
 
-    /// Draws `instances` in order into `items` (row-major, rows x cols;
-    /// cells other ranks own stay [`EMPTY`]) as the device would, for
-    /// rank `own` of `layout`, on up to `threads` threads; with `coverage`,
+    /// Draws the shot's instances in order into `items` (row-major, rows x
+    /// cols; cells other ranks own stay [`EMPTY`]) as the device would, for
+    /// the shot's rank of its layout, on up to `threads` threads; with `coverage`,
     /// fills it with every element's count of covered cells, hidden or
     /// not, in element order; with `visible` too, where this rank draws
     /// every cell, each count packed with the element's visible cells
     /// (visible << 32 | covered, as `formfactor::unpack` reads it: what
     /// the hybrid weights summed over `items` and added to the coverage
     /// give). Returns whether it packed them.
-    // The shot's parts, each needed: see `HemisphereRasterizer::render`.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn draw(
+    pub(crate) fn draw_shot(
         &mut self,
-        instances: &[Instance],
-        far: f32,
-        layout: &TileLayout,
-        own: (u32, u32),
+        shot: &super::CellShot<'_>,
         threads: usize,
         items: &mut Vec<u32>,
         coverage: Option<&mut Vec<(u32, u64)>>,
         visible: bool,
     ) -> bool {
+        let super::CellShot {
+            instances,
+            far,
+            layout,
+            own,
+            ..
+        } = *shot;
         let (rows, cols) = (self.res.rows as usize, self.res.cols as usize);
         items.clear();
         items.resize(rows * cols, EMPTY);

@@ -42,7 +42,7 @@ impl HemisphereRasterizer {
         }
         let pipeline = item_pipeline(
             device,
-            &self.module,
+            &self.device.module,
             ("vs_tess", "fs_tess"),
             wgpu::VertexBufferLayout {
                 array_stride: std::mem::size_of::<TessVertex>() as u64,
@@ -64,9 +64,14 @@ impl HemisphereRasterizer {
         let group = item_bind_group(
             device,
             &pipeline,
-            &[&self.uniform, &self.coverage_buf, &self.trig, &pieces],
+            &[
+                &self.device.uniform,
+                &self.device.coverage_buf,
+                &self.device.trig,
+                &pieces,
+            ],
         );
-        self.tess = Some(Tessellation {
+        self.device.tess = Some(Tessellation {
             pipeline,
             group,
             pieces_buf: pieces,
@@ -81,7 +86,7 @@ impl HemisphereRasterizer {
     /// Fills the tessellation's pieces and triangles for every proxy the
     /// shooter can see, in proxy order (so depth ties break alike every run).
     pub(super) fn collect_triangles(&mut self, shooter: &ShooterFrame) {
-        let Some(t) = self.tess.as_mut() else {
+        let Some(t) = self.device.tess.as_mut() else {
             return;
         };
         t.pieces.clear();
