@@ -431,32 +431,12 @@ impl Software {
             }
         }
         let inv_far = 1.0 / far;
-        // Each rectangle's test and cells, the second half on another
-        // thread where there are many.
-        let prepare = |list: &[Instance], prepared: &mut Vec<Prepared>, spans: &mut Vec<Spans>| {
-            prepared.clear();
-            prepared.extend(list.iter().map(Prepared::new));
-            spans.clear();
-            spans.extend(list.iter().map(|inst| {
-                let [x0, x1, y0, y1] = inst.rect;
-                (
-                    Owned::span(&owned.cols, x0, x1),
-                    Owned::span(&owned.rows, y0, y1),
-                )
-            }));
-        };
-        if threads > 1 && instances.len() >= PARALLEL_PREPARE {
-            let (first, second) = instances.split_at(instances.len() / 2);
-            let (prepared, spans) = &mut self.second;
-            crate::parallel::scope(|s| {
-                s.spawn(|_| prepare(second, prepared, spans));
-                prepare(first, &mut self.prepared, &mut self.spans);
-            });
-            self.prepared.append(prepared);
-            self.spans.append(spans);
-        } else {
-            prepare(instances, &mut self.prepared, &mut self.spans);
-        }
+        prepare_all(
+            instances,
+            (owned, threads),
+            (&mut self.prepared, &mut self.spans),
+            &mut self.second,
+        );
         let shot = Shot {
             owned_cols: &owned.cols,
             prepared: &self.prepared,
@@ -561,6 +541,41 @@ fn whole(list: &mut [Counts]) -> Vec<&mut [u32]> {
 /// Every thread's counts cut at element `split`.
 fn halves(list: &mut [Counts], split: usize) -> (Vec<&mut [u32]>, Vec<&mut [u32]>) {
     list.iter_mut().map(|c| c.split_at_mut(split)).unzip()
+}
+
+/// Each rectangle's test and cells into `prepared` and `spans`, the second
+/// half on another thread (into `second`, then appended) where there are
+/// many.
+fn prepare_all(
+    instances: &[Instance],
+    (owned, threads): (&Owned, usize),
+    (prepared, spans): (&mut Vec<Prepared>, &mut Vec<Spans>),
+    second: &mut (Vec<Prepared>, Vec<Spans>),
+) {
+    let prepare = |list: &[Instance], prepared: &mut Vec<Prepared>, spans: &mut Vec<Spans>| {
+        prepared.clear();
+        prepared.extend(list.iter().map(Prepared::new));
+        spans.clear();
+        spans.extend(list.iter().map(|inst| {
+            let [x0, x1, y0, y1] = inst.rect;
+            (
+                Owned::span(&owned.cols, x0, x1),
+                Owned::span(&owned.rows, y0, y1),
+            )
+        }));
+    };
+    if threads > 1 && instances.len() >= PARALLEL_PREPARE {
+        let (first, rest) = instances.split_at(instances.len() / 2);
+        let (later, later_spans) = second;
+        crate::parallel::scope(|s| {
+            s.spawn(|_| prepare(rest, later, later_spans));
+            prepare(first, prepared, spans);
+        });
+        prepared.append(later);
+        spans.append(later_spans);
+    } else {
+        prepare(instances, prepared, spans);
+    }
 }
 
 /// Rectangles below which they are prepared on one thread.
