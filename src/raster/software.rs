@@ -404,32 +404,14 @@ impl Software {
         let threads = threads.clamp(1, owned.rows.len().max(1));
         let counting = coverage.is_some();
         if counting {
-            self.counts.resize_with(threads, Counts::default);
-            for c in &mut self.counts[..threads] {
-                c.resize(self.elements, 0);
-            }
+            zeroed(&mut self.counts, threads, self.elements);
         }
         // Visible cells are counted only where every cell is the rank's.
         let packing = counting && visible && owned.cols.len() == cols && owned.rows.len() == rows;
         if packing {
-            self.visible.resize_with(threads, Counts::default);
-            for c in &mut self.visible[..threads] {
-                c.resize(self.elements, 0);
-            }
+            zeroed(&mut self.visible, threads, self.elements);
         }
-        // Rows dealt in turn, so every thread gets cells near the pole and
-        // the horizon alike.
-        let mut bands: Vec<Band> = (0..threads).map(|_| Vec::new()).collect();
-        let mut row_cells: Vec<Option<(&mut [u32], &mut [f32])>> = items
-            .chunks_mut(cols)
-            .zip(self.depth.chunks_mut(cols))
-            .map(Some)
-            .collect();
-        for (k, &p) in owned.rows.iter().enumerate() {
-            if let Some((i, d)) = row_cells[p as usize].take() {
-                bands[k % threads].push((p, i, d));
-            }
-        }
+        let bands = deal_rows(items, &mut self.depth, &owned.rows, (cols, threads));
         let inv_far = 1.0 / far;
         prepare_all(
             instances,
@@ -450,15 +432,8 @@ impl Software {
         let run =
             |k: usize, band: &mut Band, counts: Option<&mut Counts>, seen: Option<&mut Counts>| {
                 draw_band((k, threads), band, &shot, counts);
-                // Each element's visible cells in the band's rows.
                 if let Some(seen) = seen {
-                    for (_, row, _) in band.iter() {
-                        for &id in row.iter() {
-                            if let Some(c) = seen.get_mut(id as usize) {
-                                *c += 1;
-                            }
-                        }
-                    }
+                    count_seen(band, seen);
                 }
             };
         let mut counts = self.counts.iter_mut().filter(|_| counting);
@@ -541,6 +516,48 @@ fn whole(list: &mut [Counts]) -> Vec<&mut [u32]> {
 /// Every thread's counts cut at element `split`.
 fn halves(list: &mut [Counts], split: usize) -> (Vec<&mut [u32]>, Vec<&mut [u32]>) {
     list.iter_mut().map(|c| c.split_at_mut(split)).unzip()
+}
+
+/// Each element's visible cells in the band's rows, added to `seen`.
+fn count_seen(band: &Band, seen: &mut Counts) {
+    for (_, row, _) in band.iter() {
+        for &id in row.iter() {
+            if let Some(c) = seen.get_mut(id as usize) {
+                *c += 1;
+            }
+        }
+    }
+}
+
+/// `threads` per-thread counts of `elements` elements each.
+fn zeroed(counts: &mut Vec<Counts>, threads: usize, elements: usize) {
+    counts.resize_with(threads, Counts::default);
+    for c in &mut counts[..threads] {
+        c.resize(elements, 0);
+    }
+}
+
+/// This rank's rows of `items` and `depth` (rows of `cols` cells), dealt in
+/// turn over `threads` bands, so every thread gets cells near the pole and
+/// the horizon alike.
+fn deal_rows<'r>(
+    items: &'r mut [u32],
+    depth: &'r mut [f32],
+    rows: &[u32],
+    (cols, threads): (usize, usize),
+) -> Vec<Band<'r>> {
+    let mut bands: Vec<Band> = (0..threads).map(|_| Vec::new()).collect();
+    let mut row_cells: Vec<Option<(&mut [u32], &mut [f32])>> = items
+        .chunks_mut(cols)
+        .zip(depth.chunks_mut(cols))
+        .map(Some)
+        .collect();
+    for (k, &p) in rows.iter().enumerate() {
+        if let Some((i, d)) = row_cells[p as usize].take() {
+            bands[k % threads].push((p, i, d));
+        }
+    }
+    bands
 }
 
 /// Each rectangle's test and cells into `prepared` and `spans`, the second
