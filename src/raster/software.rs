@@ -41,11 +41,7 @@ pub(crate) struct Software {
     /// The rank's cells, kept while its place in the layout stays.
     owned: Option<Owned>,
     /// Each rectangle's test and owned cells (reused from shot to shot).
-    prepared: Vec<Prepared>,
-    spans: Vec<Spans>,
-    /// The same for the second half of a shot's rectangles, prepared on
-    /// another thread (kept too).
-    second: (Vec<Prepared>, Vec<Spans>),
+    rects: Rects,
     elements: usize,
 }
 
@@ -354,9 +350,7 @@ impl Software {
             visible: Vec::new(),
             ranges: Vec::new(),
             owned: None,
-            prepared: Vec::new(),
-            second: (Vec::new(), Vec::new()),
-            spans: Vec::new(),
+            rects: Rects::default(),
             elements,
         }
     }
@@ -413,16 +407,11 @@ impl Software {
         }
         let bands = deal_rows(items, &mut self.depth, &owned.rows, (cols, threads));
         let inv_far = 1.0 / far;
-        prepare_all(
-            instances,
-            (owned, threads),
-            (&mut self.prepared, &mut self.spans),
-            &mut self.second,
-        );
+        self.rects.prepare(instances, owned, threads);
         let shot = Shot {
             owned_cols: &owned.cols,
-            prepared: &self.prepared,
-            spans: &self.spans,
+            prepared: &self.rects.prepared,
+            spans: &self.rects.spans,
             rows: &self.rows,
             cols: &self.cols,
             inv_far,
@@ -560,38 +549,47 @@ fn deal_rows<'r>(
     bands
 }
 
-/// Each rectangle's test and cells into `prepared` and `spans`, the second
-/// half on another thread (into `second`, then appended) where there are
-/// many.
-fn prepare_all(
-    instances: &[Instance],
-    (owned, threads): (&Owned, usize),
-    (prepared, spans): (&mut Vec<Prepared>, &mut Vec<Spans>),
-    second: &mut (Vec<Prepared>, Vec<Spans>),
-) {
-    let prepare = |list: &[Instance], prepared: &mut Vec<Prepared>, spans: &mut Vec<Spans>| {
-        prepared.clear();
-        prepared.extend(list.iter().map(Prepared::new));
-        spans.clear();
-        spans.extend(list.iter().map(|inst| {
-            let [x0, x1, y0, y1] = inst.rect;
-            (
-                Owned::span(&owned.cols, x0, x1),
-                Owned::span(&owned.rows, y0, y1),
-            )
-        }));
-    };
-    if threads > 1 && instances.len() >= PARALLEL_PREPARE {
-        let (first, rest) = instances.split_at(instances.len() / 2);
-        let (later, later_spans) = second;
-        crate::parallel::scope(|s| {
-            s.spawn(|_| prepare(rest, later, later_spans));
-            prepare(first, prepared, spans);
-        });
-        prepared.append(later);
-        spans.append(later_spans);
-    } else {
-        prepare(instances, prepared, spans);
+/// Each rectangle's test and owned cells, and the same for the second half
+/// of a shot's rectangles, prepared on another thread where there are many
+/// (all kept from shot to shot).
+#[derive(Default)]
+struct Rects {
+    prepared: Vec<Prepared>,
+    spans: Vec<Spans>,
+    second: (Vec<Prepared>, Vec<Spans>),
+}
+
+impl Rects {
+    /// Prepares `instances` for the cells `owned`, on up to two of `threads`.
+    fn prepare(&mut self, instances: &[Instance], owned: &Owned, threads: usize) {
+        let prepare = |list: &[Instance], prepared: &mut Vec<Prepared>, spans: &mut Vec<Spans>| {
+            prepared.clear();
+            prepared.extend(list.iter().map(Prepared::new));
+            spans.clear();
+            spans.extend(list.iter().map(|inst| {
+                let [x0, x1, y0, y1] = inst.rect;
+                (
+                    Owned::span(&owned.cols, x0, x1),
+                    Owned::span(&owned.rows, y0, y1),
+                )
+            }));
+        };
+        let Self {
+            prepared,
+            spans,
+            second: (later, later_spans),
+        } = self;
+        if threads > 1 && instances.len() >= PARALLEL_PREPARE {
+            let (first, rest) = instances.split_at(instances.len() / 2);
+            crate::parallel::scope(|s| {
+                s.spawn(|_| prepare(rest, later, later_spans));
+                prepare(first, prepared, spans);
+            });
+            prepared.append(later);
+            spans.append(later_spans);
+        } else {
+            prepare(instances, prepared, spans);
+        }
     }
 }
 
