@@ -63,12 +63,9 @@ run() { # ranks scene resolution exchange [repeat] (exchange batches-K: --batch 
   # small faces (cubes-b1: 200 244 -> 296 580 elements).
   local exchange=(--exchange "$ex")
   case "$ex" in batches-*) exchange=(--exchange hemispheres --batch "${ex#batches-}") ;; esac
-  # Oversubscribed, which rank comes free first to take a pooled row is
-  # the scheduler's choice, so the CPU seconds a rank draws would measure
-  # it, not the deal: those runs fix every row (the same bits), and the
-  # model replays each run as it dealt (docs/scaling.md "Rows taken as
-  # ranks come free").
-  case "$ex" in batches-*) if [ "$n" -gt 2 ]; then exchange+=(--deal-rows fixed); fi ;; esac
+  # Every row is dealt before any is drawn (the pool of rows was taken out
+  # on 2026-12-07: docs/mechanisms.md); the model replays older pooled
+  # runs as they dealt.
   local args=(render "$scene" --resolution "$res" "${exchange[@]}" --max-shots "$SHOTS"
     --threshold 0 --width 0 --refine-shading 0 --deal-bounds "$DEAL" --rasteriser "$RASTERISER"
     --report "$out")

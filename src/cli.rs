@@ -119,12 +119,6 @@ pub struct SolveArgs {
     /// ranks whose scene has 1024 polygons or more (measured: docs/notebook/ranks.md). The results are identical, only the time changes.
     #[arg(long, value_enum, default_value = "auto")]
     deal_bounds: crate::render::DealBounds,
-    /// How the ranks of a batched solve (`--batch`) deal a batch's rows:
-    /// pool (each rank starts on one of the dearest, then takes the rest
-    /// as it comes free) or fixed (every row dealt before any is drawn).
-    /// The results are identical, only the time changes.
-    #[arg(long, value_enum, default_value = "pool")]
-    deal_rows: crate::settings::DealRows,
     /// The memory each rank aims to stay within, GB: the form-factor row
     /// cache takes only what the scene, the mesh and the drawing leave of it
     /// (at most 1 GiB a rank; ranks of `--ranks` each count their share of
@@ -198,7 +192,6 @@ impl SolveArgs {
             occlusion_cull: !self.no_occlusion_cull,
             look_ahead: !self.no_look_ahead,
             deal_bounds: self.deal_bounds,
-            deal_rows: self.deal_rows,
             projection: self.projection,
             tessellation_tolerance: self.tessellation_tolerance,
             rasteriser: self.rasteriser,

@@ -143,9 +143,6 @@ pub struct Settings {
     /// Whether the ranks dealt the polygons' bounds (`auto`, `on`, `off`;
     /// the same bits either way).
     pub deal_bounds: crate::settings::DealBounds,
-    /// How a batched solve's ranks dealt a batch's rows (`pool`, `fixed`;
-    /// the same bits either way).
-    pub deal_rows: crate::settings::DealRows,
     /// How cells were found: `exact` or `tessellated`.
     pub projection: crate::settings::Projection,
     /// The tessellated projection's tolerance in cells (null with `exact`).

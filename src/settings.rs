@@ -121,21 +121,6 @@ pub enum DealBounds {
     Off,
 }
 
-/// How the ranks of a batched solve deal a batch's rows (`--deal-rows`;
-/// the same bits either way, only the time changes).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum DealRows {
-    /// A cached row on its cache's rank, one dear row a rank, the rest
-    /// taken by whichever rank comes free first (`parallel::Deal`).
-    #[default]
-    Pool,
-    /// Every row fixed before any is drawn (`parallel::assign_rows`). When
-    /// ranks share cores, who comes free first is the scheduler's choice,
-    /// so the calibration's oversubscribed runs deal this way.
-    Fixed,
-}
-
 /// The fewest polygons of a scene whose bounds `--deal-bounds auto` deals
 /// (on any number of ranks above one: measured on cubes-b1 and
 /// classroom-c3, docs/notebook/ranks.md "Ranks", since the pieces travel as (proxy, cell

@@ -112,8 +112,8 @@ pub struct Run {
     /// after the rows), its weight in the assignment, its CPU seconds, the
     /// rank that drew it).
     pub rows: Vec<(u64, f64, f64, usize)>,
-    /// Batched runs: whether the rows were pooled (`--deal-rows pool`;
-    /// reports before the pool dealt every row fixed).
+    /// Batched runs: whether the rows were pooled (`crate::pooled`; the
+    /// renderer dealt them so from 2026-12-04 to 2026-12-07, by default).
     pub pooled: bool,
 }
 
@@ -558,9 +558,7 @@ impl Replay {
         let mut tickets = 0.0;
         for batch in &self.batches {
             let weights: Vec<f64> = (0..ranks).flat_map(|_| batch.iter().map(|r| r.0)).collect();
-            let pool = radiosity::parallel::Deal::new(&weights, ranks, true)
-                .pool
-                .len();
+            let pool = crate::pooled::Deal::new(&weights, ranks, true).pool.len();
             if pool > 0 {
                 tickets += pool as f64 / n + 1.0;
             }
@@ -583,7 +581,7 @@ impl Replay {
             // Every rank weighs a row alike here (no row caches).
             let weights: Vec<f64> = (0..n).flat_map(|_| batch.iter().map(|r| r.0)).collect();
             let seconds: Vec<f64> = batch.iter().map(|r| r.1).collect();
-            let load = radiosity::parallel::Deal::new(&weights, n, pooled).loads(&seconds, n);
+            let load = crate::pooled::Deal::new(&weights, n, pooled).loads(&seconds, n);
             most += load.iter().copied().fold(0.0, f64::max);
             least += load.iter().copied().fold(f64::INFINITY, f64::min);
         }
@@ -660,7 +658,7 @@ impl Model {
         if n <= 1.0 {
             self.serial
         } else if let Some(r) = &self.replay {
-            r.rest(n) + r.contention(n, false) * r.loads(n as usize, true).0
+            r.rest(n) + r.contention(n, false) * r.loads(n as usize, false).0
         } else {
             let m = self.busy(n);
             self.replicated + self.divided / m * (1.0 + self.imbalance(m))
@@ -673,7 +671,7 @@ impl Model {
             return 1.0;
         }
         if let Some(r) = &self.replay {
-            let (most, least) = r.loads(n as usize, true);
+            let (most, least) = r.loads(n as usize, false);
             let c = r.contention(n, false);
             return (r.rest(n) + c * least) / (r.rest(n) + c * most);
         }
@@ -685,8 +683,8 @@ impl Model {
     /// Latencies a shot on `n` ranks: `calls` collectives of ceil(log2 N)
     /// stages each, with the paper's own schedule (`paper_schedule`) N
     /// broadcasts a hemisphere instead of a tree, N - 1 messages an
-    /// all-to-all of pairs or dealt rectangles, and 2 a pooled row's ticket
-    /// (a fetch-and-add on rank 0 and its answer).
+    /// all-to-all of pairs or dealt rectangles (the renderer deals a batch's
+    /// rows before drawing them, so no pooled row's ticket).
     pub fn stages(&self, n: f64, paper_schedule: bool) -> f64 {
         if n <= 1.0 {
             return 0.0;
@@ -697,10 +695,6 @@ impl Model {
         }
         for p in self.bytes.pairs.iter().chain(&self.bytes.rects) {
             stages += p.calls * (n - 1.0 - log2_stages(n));
-        }
-        if let Some(r) = &self.replay {
-            // The render pools the rows, as the replay deals them.
-            stages += 2.0 * r.tickets(n, true);
         }
         stages
     }
@@ -1477,8 +1471,7 @@ mod tests {
         };
         m.replay = Some(r.clone());
         for n in [2.0, 8.0, 64.0] {
-            let want =
-                4.0 * log2_stages(n) + 0.02 * (n - 1.0 - log2_stages(n)) + 2.0 * r.tickets(n, true);
+            let want = 4.0 * log2_stages(n) + 0.02 * (n - 1.0 - log2_stages(n));
             assert!((m.stages(n, false) - want).abs() < 1e-12, "{n}");
         }
     }

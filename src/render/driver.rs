@@ -693,7 +693,6 @@ pub fn build_report(
             raster_pieces: opts.raster_pieces,
             occlusion_cull: opts.occlusion_cull,
             deal_bounds: opts.deal_bounds,
-            deal_rows: opts.deal_rows,
             projection: opts.projection,
             tessellation_tolerance: (opts.projection == Projection::Tessellated)
                 .then_some(opts.tessellation_tolerance),

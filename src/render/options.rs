@@ -50,9 +50,6 @@ pub struct RenderOptions {
     /// Whether the ranks of a run deal the polygons' bounds between them
     /// (`raster::Scatter`; the same bits either way).
     pub deal_bounds: DealBounds,
-    /// How a batched solve's ranks deal a batch's rows (the same bits
-    /// either way).
-    pub deal_rows: crate::settings::DealRows,
     /// How the hemisphere is tiled and over which rank grid. Under MPI the
     /// grid comes from the rank count and only the tile size is used; in one
     /// process every rank's tiles are drawn in turn (one tile by default).
@@ -134,7 +131,6 @@ impl Default for RenderOptions {
             occlusion_cull: true,
             look_ahead: true,
             deal_bounds: DealBounds::Auto,
-            deal_rows: crate::settings::DealRows::Pool,
             projection: Projection::Exact,
             tessellation_tolerance: DEFAULT_TESSELLATION_TOLERANCE,
             rasteriser: Rasteriser::Auto,

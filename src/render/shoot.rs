@@ -8,7 +8,7 @@ use super::ahead::{Ahead, RUNNERS_UP};
 use super::options::{RenderError, RenderOptions};
 use super::source::{GpuFormFactors, GroupPart, Started};
 use crate::lit_mesh::LitMesh;
-use crate::parallel::{Collectives, Deal};
+use crate::parallel::Collectives;
 use crate::solver::{
     Candidate, FormFactorSource, Shot, ShotRegion, Solver, StopRule, Transfer, UNSHOT_ONE,
 };
@@ -190,8 +190,6 @@ pub struct ShotLoop<'m> {
     /// Shots a step (see [`ShotLoop::batched`]); 1 is progressive
     /// refinement's one shooter at a time.
     batch: usize,
-    /// Whether a batch's rows and groups are pooled ([`Deal`]).
-    pooled: bool,
     /// A batch's buffers, kept from batch to batch: fresh ones cost the
     /// kernel's zeroing of their pages every batch (a fortieth of a
     /// one-core shot in cubes-b1).
@@ -214,7 +212,6 @@ impl<'m> ShotLoop<'m> {
             last_power: None,
             ff: Vec::new(),
             batch: 1,
-            pooled: true,
             kept: BatchBuffers::default(),
             stats: LoopStats {
                 patch_power: vec![0.0; mesh.patches.len()],
@@ -225,20 +222,14 @@ impl<'m> ShotLoop<'m> {
 
     /// The loop shooting `batch` shooters a step (at least 1): the
     /// strongest `batch` patches are chosen at once, the ranks compute
-    /// their rows (each a whole hemisphere with a source of one process; a
-    /// cached row on its cache's rank, one dear row a rank, the rest taken
-    /// by whichever rank comes free first: [`crate::parallel::Deal`]), and
+    /// their rows (each a whole hemisphere with a source of one process,
+    /// dealt by [`crate::parallel::assign_rows`]: a cached row on its
+    /// cache's rank, the rest to even the ranks' costs), and
     /// every rank lands every row on its own elements, shot by shot in the
     /// batch's order. The numbers depend on `batch`, never on the rank
     /// count or on who drew what.
     pub fn batched(mut self, batch: usize) -> Self {
         self.batch = batch.max(1);
-        self
-    }
-
-    /// The loop dealing a batch's rows as `deal` says (pooled by default).
-    pub fn dealing_rows(mut self, deal: crate::settings::DealRows) -> Self {
-        self.pooled = deal == crate::settings::DealRows::Pool;
         self
     }
 
@@ -546,9 +537,7 @@ pub fn shoot_until<'m>(
     solver: &mut Solver<'m>,
     hooks: &mut dyn LoopHooks<'m>,
 ) -> Result<LoopStats, RenderError> {
-    let mut shots = ShotLoop::new(solver.mesh(), comm, opts.stop, until.floor)
-        .batched(opts.batch)
-        .dealing_rows(opts.deal_rows);
+    let mut shots = ShotLoop::new(solver.mesh(), comm, opts.stop, until.floor).batched(opts.batch);
     if until.draw_ahead && Ahead::applies(opts, comm.size()) {
         Ahead::run(opts, source, |ahead, source| {
             while let Step::Shot(_) = shots.step_drawing(source, solver, hooks, Some(ahead))? {}

@@ -553,12 +553,6 @@ fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
         same_result(&one, &r, &format!("{ranks} ranks, batches of 4"));
         assert_eq!(r["energy"], one["energy"]);
     }
-    // Rows taken from a pool as ranks come free (the default) or every row
-    // dealt before any is drawn: who draws a row never shows.
-    let fixed = [&args[..], &["--deal-rows", "fixed"]].concat();
-    let r = mpirun(2, dir.path(), "fixed2", &fixed);
-    same_result(&one, &r, "2 ranks, batches of 4, every row fixed");
-    assert_eq!(r["settings"]["deal_rows"], "fixed");
     // Split shots' groups are dealt over the ranks in a second round of
     // their batch and travel back to their rows' drawers over MPI (the
     // Cornell box's 60 shots split none; this room's do).
@@ -566,13 +560,8 @@ fn batched_shots_agree_across_ranks_and_stay_close_to_one_at_a_time() {
     let a = mpirun_scene(1, dir.path(), "split1", "family-stacked-2", &split);
     let b = mpirun_scene(2, dir.path(), "split2", "family-stacked-2", &split);
     same_result(&a, &b, "split shots in batches of 5");
-    let fixed = [&split[..], &["--deal-rows", "fixed"]].concat();
-    let c = mpirun_scene(3, dir.path(), "split3", "family-stacked-2", &fixed);
-    same_result(
-        &a,
-        &c,
-        "split shots in batches of 5, 3 ranks, every row fixed",
-    );
+    let c = mpirun_scene(3, dir.path(), "split3", "family-stacked-2", &split);
+    same_result(&a, &c, "split shots in batches of 5, 3 ranks");
     let takers: std::collections::BTreeSet<_> = b["parallel"]["rows"]
         .as_array()
         .expect("rows")

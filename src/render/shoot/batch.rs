@@ -161,10 +161,10 @@ impl<'m> ShotLoop<'m> {
         } else {
             costs
         };
-        let deal = Deal::new(&costs, ranks, self.pooled);
+        let deal = crate::parallel::assign_rows(&costs, ranks);
         let batch_start = solver.shots();
         let recorded = batch_start < MAX_ROW_RECORDS;
-        for k in deal.taken(self.comm) {
+        for k in (0..n).filter(|&k| deal[k] == rank) {
             let (patch, region) = (b.chosen[k].patch, &b.regions[k]);
             b.drew[k] = true;
             let cpu = crate::parallel::process_cpu_seconds();
@@ -238,7 +238,7 @@ impl<'m> ShotLoop<'m> {
 
     /// Every rank's split shots' group counts and which rank drew each row:
     /// a row's drawer tells its groups plus one, the others 0 (which rank
-    /// drew a pooled row is learnt here).
+    /// drew a row is learnt here).
     fn drawers(&self, b: &Batch) -> (Vec<u32>, Vec<usize>) {
         let ranks = self.comm.size();
         if ranks == 1 {
@@ -296,9 +296,10 @@ impl<'m> ShotLoop<'m> {
             .map(|&(k, _)| source.group_cost(b.chosen[k].patch, &b.regions[k]))
             .collect();
         let all_weights: Vec<f64> = (0..ranks).flat_map(|_| weights.iter().copied()).collect();
-        let deal = Deal::new(&all_weights, ranks, self.pooled);
+        let deal = crate::parallel::assign_rows(&all_weights, ranks);
         let mut parts_out = vec![Vec::new(); ranks];
-        for u in deal.taken(self.comm) {
+        let rank = self.comm.rank();
+        for u in (0..units.len()).filter(|&u| deal[u] == rank) {
             let (k, g) = units[u];
             let cpu = crate::parallel::process_cpu_seconds();
             let part = source.group_part(b.chosen[k].patch, &b.regions[k], g)?;
