@@ -54,6 +54,27 @@ pub use crate::sampling::ELEMENT_POINTS;
 /// Shadow rays per emitter per element point, along each axis.
 pub const ELEMENT_RAYS: u32 = 2;
 
+/// The most element and emitter pairs whose direct light is traced
+/// ([`DirectLight::emitter_field`]): each pair costs
+/// `ELEMENT_POINTS^2` contour integrals and `(ELEMENT_POINTS *
+/// ELEMENT_RAYS)^2` shadow rays.
+pub const MAX_TRACED_PAIRS: usize = 4_000_000;
+
+/// What the emitting polygons deliver to each element, traced: their first
+/// shot, with visibility integrated over the whole emitter (shadow rays to
+/// stratified points of it from stratified points of each element) where a
+/// hemisphere would sample it from one point of each patch and alias
+/// against regular geometry. The emitters' emission is then shot.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EmitterField {
+    /// Mean irradiance per element, W/m^2 per channel.
+    pub irradiance: Vec<[f64; 3]>,
+    /// The emitters' power, W (sum over RGB).
+    pub power: f64,
+    /// The power delivered to the elements, W (sum over RGB).
+    pub delivered: f64,
+}
+
 /// Which cells of a `grid` x `grid` stratification of an emitter's (u, v)
 /// square get a shadow ray: the `side` x `side` block from `first`.
 #[derive(Clone, Copy, Debug)]
@@ -265,6 +286,40 @@ impl<'a> DirectLight<'a> {
             }
         }
         (seen, all)
+    }
+
+    /// The scene's emitting polygons as the first shot of the solve
+    /// ([`EmitterField`]), or `None` where there are none or where
+    /// tracing them would cost more than [`MAX_TRACED_PAIRS`] element and
+    /// emitter pairs (they then shoot by hemisphere, as other patches).
+    pub fn emitter_field(scene: &Scene, mesh: &Mesh) -> Option<EmitterField> {
+        let light = DirectLight {
+            lights: Vec::new(),
+            ..DirectLight::new(scene, &mesh.occluders, ELEMENT_RAYS)
+        };
+        let pairs = light.emitters.len().saturating_mul(mesh.elements.len());
+        if light.emitters.is_empty() || pairs > MAX_TRACED_PAIRS {
+            return None;
+        }
+        let started = std::time::Instant::now();
+        let irradiance = light.element_irradiance(mesh, &vec![true; mesh.polygons.len()]);
+        let delivered = mesh
+            .elements
+            .iter()
+            .zip(&irradiance)
+            .map(|(e, d)| d.iter().sum::<f64>() * e.area)
+            .sum();
+        log::debug!(
+            "emitters traced: {} emitters to {} elements, {:.2} s",
+            light.emitters.len(),
+            mesh.elements.len(),
+            started.elapsed().as_secs_f64()
+        );
+        Some(EmitterField {
+            irradiance,
+            power: mesh.emitted_power(),
+            delivered,
+        })
     }
 
     /// Each element's mean direct irradiance over its area (jittered

@@ -6,6 +6,7 @@
 //! [`LitMesh`]; it reads as its [`Mesh`] wherever only geometry is needed.
 
 use crate::ambient::Transport;
+use crate::direct::{DirectLight, EmitterField};
 use crate::lights::{KeptField, LightField};
 use crate::mesh::{Mesh, MeshSettings};
 use crate::scene::Scene;
@@ -20,6 +21,9 @@ pub struct LitMesh {
     /// What the scene's lights and sky deliver to each element (empty
     /// without them): their one shot, which every solver starts from.
     pub light_field: LightField,
+    /// What the emitting polygons deliver to each element, traced (`None`:
+    /// they shoot by hemisphere): with the light field, the first shot.
+    pub emitter_field: Option<EmitterField>,
     /// Where each group of surfaces' diffuse light lands, for the display's
     /// ambient term (built on first use, see [`LitMesh::ambient_transport`]).
     pub ambient: OnceLock<Transport>,
@@ -56,13 +60,16 @@ impl LitMesh {
         Self::lit(Mesh::build_refined(scene, settings, factors), scene, kept)
     }
 
-    /// `mesh` (a mesh of `scene`) lit by the scene's lights and sky.
+    /// `mesh` (a mesh of `scene`) lit by the scene's lights and sky, its
+    /// emitters traced ([`DirectLight::emitter_field`]).
     pub fn lit(mesh: Mesh, scene: &Scene, kept: Option<&KeptField>) -> Self {
         let light_field =
             crate::lights::element_field_reusing(&mesh, &scene.lights, scene.sky, kept);
+        let emitter_field = DirectLight::emitter_field(scene, &mesh);
         Self {
             mesh,
             light_field,
+            emitter_field,
             ambient: OnceLock::new(),
         }
     }

@@ -2,10 +2,13 @@
 //! was tuned on: closed rooms with boxes of random sizes, boxes resting on
 //! the floor and stacked on one another (contact), a thin slab near a wall
 //! (near field), an L-shaped room, a long corridor lit at one end (far
-//! field), a room lit through a small opening, and a room of many small
-//! objects. Every one is closed (no light leaves it), so energy must
+//! field), a room lit through a small opening, a room of many small
+//! objects, and (`lattice`) a lattice of boxes, shelves under a grid of
+//! panels and thin things against walls. Every one is closed (no light leaves it), so energy must
 //! balance; none carries a subdivision of its own (the defaults mesh it).
 //! Named `family-KIND-SEED`, e.g. `family-stacked-3`.
+
+mod lattice;
 
 use super::gltf_write::box_faces;
 use super::gltf_write::{write_gltf, GltfSurface};
@@ -13,8 +16,9 @@ use crate::rng::Rng;
 use glam::{Quat, Vec3};
 
 /// The kinds of scene in the family.
-pub const KINDS: [&str; 8] = [
-    "boxes", "floor", "stacked", "slab", "l-room", "corridor", "opening", "many",
+pub const KINDS: [&str; 11] = [
+    "boxes", "floor", "stacked", "slab", "l-room", "corridor", "opening", "many", "lattice",
+    "shelves", "thin",
 ];
 
 /// The glTF text of `family-KIND-SEED`, or `None` when `name` is not one.
@@ -35,6 +39,9 @@ pub fn family_gltf(name: &str) -> Option<String> {
         "corridor" => g.corridor(),
         "opening" => g.opening(),
         "many" => g.many(),
+        "lattice" => g.lattice(),
+        "shelves" => g.shelves(),
+        "thin" => g.thin(),
         _ => return None,
     };
     Some(write_gltf(&g.surfaces, Some(camera)))

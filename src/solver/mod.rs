@@ -207,11 +207,16 @@ impl<'m> Solver<'m> {
             element_patch,
             mean_reflectance,
             ambient_area,
-        } = PerElement::of(mesh, owners, rank);
+        } = PerElement::of(mesh, owners, rank, mesh.emitter_field.is_some());
+        // Traced emitters have shot their emission (`receive_lights`).
+        let traced = mesh.emitter_field.is_some();
         let unshot: Vec<[f64; 3]> = mesh
             .patches
             .iter()
-            .map(|p| mesh.polygons[p.polygon as usize].exitance)
+            .map(|p| match traced {
+                true => [0.0; 3],
+                false => mesh.polygons[p.polygon as usize].exitance,
+            })
             .collect();
         let emitted_power = mesh.source_power();
         let mut solver = Self {
@@ -232,7 +237,7 @@ impl<'m> Solver<'m> {
             emission_unshot: mesh
                 .patches
                 .iter()
-                .map(|p| mesh.polygons[p.polygon as usize].emits())
+                .map(|p| !traced && mesh.polygons[p.polygon as usize].emits())
                 .collect(),
             direct_known: true,
             patch_area: mesh.patches.iter().map(|p| p.area).collect(),
@@ -244,21 +249,28 @@ impl<'m> Solver<'m> {
         solver
     }
 
-    /// The lights' and sky's one shot (`lights`): each element
-    /// reflects rho E of what they deliver, into its radiosity and its
-    /// patch's unshot store; the lights' part is direct light (the camera
-    /// image traces it again), the sky's is not. Every rank does it whole,
-    /// as every rank starts from the emitters' exitance.
+    /// The first shot, of the lights, the sky (`lights`) and the traced
+    /// emitters (`direct::EmitterField`): each element reflects rho E of
+    /// what they deliver, into its radiosity and its patch's unshot store;
+    /// the lights' and emitters' part is direct light (the camera image
+    /// traces it again), the sky's is not. Every rank does it whole, as
+    /// every rank starts from the emitters' exitance.
     fn receive_lights(&mut self) {
         let mesh = self.mesh;
         let field = &mesh.light_field;
-        if field.is_empty() {
+        let traced = mesh.emitter_field.as_ref();
+        if field.is_empty() && traced.is_none() {
             return;
         }
+        let zero = [0.0; 3];
         for (j, e) in mesh.elements.iter().enumerate() {
             let rho = e.reflectance;
             let share = patch_share(mesh, e);
-            let (lights, sky) = (field.direct[j], field.sky[j]);
+            let mut lights = *field.direct.get(j).unwrap_or(&zero);
+            let sky = *field.sky.get(j).unwrap_or(&zero);
+            if let Some(t) = traced {
+                (0..3).for_each(|c| lights[c] += t.irradiance[j][c]);
+            }
             // Every patch's store, but only this rank's elements (the
             // others' are never read here).
             let own = self.owners.of(e.patch) == self.rank;
@@ -274,7 +286,8 @@ impl<'m> Solver<'m> {
         }
         // Shot as one: what missed the elements left the scene (or met
         // the backs of one-sided surfaces, which rays do not tell apart).
-        self.note_energy(field.emitted, field.delivered, 0.0);
+        let (power, delivered) = traced.map_or((0.0, 0.0), |t| (t.power, t.delivered));
+        self.note_energy(field.emitted + power, field.delivered + delivered, 0.0);
         self.vote_mut().invalidate();
     }
 

@@ -69,7 +69,9 @@ impl PerElement {
     /// patches dealt to other ranks, are never touched (the arrays start
     /// as zeroed memory): two ranks of cubes-b1 each took 13-14 ms to set
     /// up, now 9.3-10.3 (the rest reads every element for the sums).
-    pub(super) fn of(mesh: &Mesh, owners: Owners, rank: usize) -> Self {
+    /// `shot`: whether the emitters' emission has shot already (traced
+    /// emitters), so it is not unshot.
+    pub(super) fn of(mesh: &Mesh, owners: Owners, rank: usize, shot: bool) -> Self {
         let n = mesh.elements.len();
         let mut exitance = vec![[0.0; 3]; n];
         let mut element_unshot = vec![[0.0; 3]; n];
@@ -83,7 +85,9 @@ impl PerElement {
             element_patch.push(e.patch);
             if owners.of(e.patch) == rank {
                 exitance[j] = polygon.exitance;
-                element_unshot[j] = polygon.exitance;
+                if !shot {
+                    element_unshot[j] = polygon.exitance;
+                }
                 receiving[j] = Receiving {
                     reflectance: e.reflectance,
                     area: e.area,
