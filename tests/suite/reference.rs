@@ -70,6 +70,38 @@ fn held_out_scenes_are_within_one_percent_mean_and_three_worst() {
     ]);
 }
 
+/// Lattices (3-D grids of boxes whose gaps are narrower than the boxes)
+/// and thin things against walls (a picture 1-2 cm off a wall, a skirting
+/// board, a shelf board, small objects on a table): made after the
+/// defaults were fixed. Before the emitters were traced over their whole
+/// area, family-lattice-1 was 2.8 % mean, 13.4 % worst (its second layer).
+#[test]
+fn lattices_and_thin_things_are_within_one_percent_mean_and_three_worst() {
+    check([
+        "family-lattice-1",
+        "family-lattice-2",
+        "family-thin-1",
+        "family-thin-2",
+    ]);
+}
+
+/// Bookcases under a grid of ceiling panels: the goal (1 % mean, 3 %
+/// worst) is not met. The bottom shelf is 3.1 % (seed 1) and 5.6 %
+/// (seed 2) too bright, from the large floor and wall patches beside it
+/// (uniform 0.25 m patches give 2.4 %); this bounds what is measured so a
+/// change for the worse fails (docs/notebook/visibility.md).
+#[test]
+fn bookcases_under_a_grid_of_panels_stay_within_their_measured_error() {
+    for scene in ["family-shelves-1", "family-shelves-2"] {
+        let s = radiosity::scene::open(scene).expect("scene");
+        let opts = RenderOptions {
+            width: 0,
+            ..RenderOptions::default()
+        };
+        check_with(scene, &s, &opts, 0.01, 0.065);
+    }
+}
+
 /// The Cornell box with a point light besides its panel
 /// (`scenes/cornell-lit.gltf`), a sun and a sky through its open front
 /// (issue 18's benchmark: lights against the strong path tracer).
@@ -175,7 +207,7 @@ fn within(scene: &str, surfaces: &[radiosity::report::Surface], mean_bound: f64,
     let (mut weighted, mut area, mut worst) = (0.0, 0.0, (0.0f64, String::new()));
     for surface in surfaces {
         // The emitters' radiosity is their emission: nothing to score.
-        if surface.node == "light" {
+        if surface.node == "light" || surface.node == "panels" {
             continue;
         }
         let (_, b_ref, se) = reference

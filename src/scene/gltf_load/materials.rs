@@ -123,18 +123,19 @@ impl Loader<'_> {
                 texture,
             });
         }
-        // Reflectance 1 (glTF's default when a material gives no factor)
-        // never converges: 0.95 instead, said once per material.
-        // A metal's diffuse part is (1 - metallic) of its base colour
-        // (glTF's BRDF); what it reflects specularly is not modelled.
+        // glTF's implicit reflectance of 1 (no factor, no texture) is
+        // rarely meant and never converges in a closed room: 0.95 instead,
+        // said once per material. A factor the file writes is the author's,
+        // 1 included. A metal's diffuse part is (1 - metallic) of its base
+        // colour (glTF's BRDF); what it reflects specularly is not modelled.
+        let written = m.index().is_some_and(|i| self.explicit_base.get(i) == Some(&true));
+        let implicit = |x: f32| !written && x >= 1.0;
         let reflectance = [base[0], base[1], base[2]]
-            .map(|x| if x >= 1.0 { CLAMPED } else { x } * (1.0 - metallic));
-        if base[..3].iter().any(|&x| x >= 1.0) {
-            let w = format!(
-                "{what}: a reflectance of 1 (baseColorFactor {:?}) never converges: clamped to {CLAMPED}",
-                &base[..3]
-            );
-            clamped.push(w);
+            .map(|x| if implicit(x) { CLAMPED } else { x } * (1.0 - metallic));
+        if base[..3].iter().any(|&x| implicit(x)) {
+            clamped.push(format!(
+                "{what}: no baseColorFactor, so glTF's default reflectance of 1, which never converges in a closed scene: clamped to {CLAMPED}"
+            ));
         }
         Ok(Material {
             reflectance,
@@ -261,4 +262,30 @@ impl MaterialTexture {
             m[1][0] * uv[0] + m[1][1] * uv[1] + m[1][2],
         )
     }
+}
+
+/// Per material of the glTF (or GLB) `bytes`, whether it writes
+/// `pbrMetallicRoughness.baseColorFactor` (the parsed document cannot
+/// tell: it gives glTF's default, 1, either way). Empty where the JSON
+/// does not parse (the full parse says why).
+pub(super) fn explicit_base_colours(bytes: &[u8]) -> Vec<bool> {
+    let json = if bytes.starts_with(b"glTF") {
+        match gltf::Glb::from_slice(bytes) {
+            Ok(glb) => glb.json.into_owned(),
+            Err(_) => return Vec::new(),
+        }
+    } else {
+        bytes.to_vec()
+    };
+    let Ok(root) = serde_json::from_slice::<serde_json::Value>(&json) else {
+        return Vec::new();
+    };
+    root["materials"]
+        .as_array()
+        .map(|ms| {
+            ms.iter()
+                .map(|m| m["pbrMetallicRoughness"].get("baseColorFactor").is_some())
+                .collect()
+        })
+        .unwrap_or_default()
 }
