@@ -229,7 +229,10 @@ fn a_closed_white_room_stops_with_a_warning_instead_of_running_to_the_cap() {
     let light = vec![rect(1, 0.99, [0.4, 0.4], [0.6, 0.6], false)];
     let (_dir, path) = write_scene(
         "white",
-        &[surface("walls", walls, 1.0, 0.0), surface("light", light, 1.0, 1.0)],
+        &[
+            surface("walls", walls, 1.0, 0.0),
+            surface("light", light, 1.0, 1.0),
+        ],
     );
     let r = solve_file(&path, &tight(1e-3));
     let report = &r.report;
@@ -240,7 +243,10 @@ fn a_closed_white_room_stops_with_a_warning_instead_of_running_to_the_cap() {
         report.shots
     );
     assert!(
-        report.warnings.iter().any(|w| w.contains("cannot converge")),
+        report
+            .warnings
+            .iter()
+            .any(|w| w.contains("cannot converge")),
         "{:?}",
         report.warnings
     );

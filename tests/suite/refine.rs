@@ -9,8 +9,13 @@ fn patches_per_polygon(mesh: &radiosity::mesh::Mesh) -> Vec<usize> {
     mesh.polygons.iter().map(|p| p.patches.len()).collect()
 }
 
+/// The Cornell box's light is traced over its whole area
+/// (`direct::EmitterField`), so it never shoots by hemisphere and needs no
+/// finer patches; the walls' shooters are dim and the blocks' shadows are
+/// not theirs: no shooter is refined. (Before the light was traced, it
+/// alone was refined, 4 x its patches.)
 #[test]
-fn the_cornell_box_refines_its_light_and_nothing_else() {
+fn the_cornell_box_refines_no_shooter() {
     let scene = radiosity::scene::open("cornell").expect("built-in");
     let mut opts = RenderOptions {
         width: 0,
@@ -41,15 +46,7 @@ fn the_cornell_box_refines_its_light_and_nothing_else() {
         [plain.mesh.patches.len(), plain.mesh.elements.len()]
     );
     assert_eq!(refined.report.counts.patches, refined.mesh.patches.len());
-    // The light (the only emitter, over the blocks) and nothing else: the
-    // walls' shooters are dim and the blocks' shadows are not theirs.
-    assert_eq!(changed.len(), 1, "refined polygons {changed:?}");
-    let light = &refined.mesh.polygons[changed[0]];
-    assert!(
-        light.exitance[0] > 0.0,
-        "refined a polygon that is not the light"
-    );
-    assert!(a[changed[0]] >= 4 * b[changed[0]]);
+    assert!(changed.is_empty(), "refined polygons {changed:?}");
     assert_eq!(plain.report.refinement.passes, 0);
 }
 

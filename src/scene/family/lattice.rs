@@ -95,7 +95,8 @@ impl Gen {
         for shelf in 0..4 {
             let y = 0.1 + shelf as f32 * 0.6;
             let lo = at + Vec3::new(board, y, 0.0);
-            let mut polygons = box_faces(lo, lo + Vec3::new(width - 2.0 * board, board, depth), true);
+            let mut polygons =
+                box_faces(lo, lo + Vec3::new(width - 2.0 * board, board, depth), true);
             let mut x = board + 0.02;
             while x < width - 0.3 {
                 let w = self.uniform(0.05, 0.25);
@@ -155,8 +156,16 @@ impl Gen {
         self.node("table", table, c, [0.0; 3]);
         let mut objects = Vec::new();
         for k in 0..5 {
-            let d = Vec3::new(self.uniform(0.05, 0.12), self.uniform(0.05, 0.2), self.uniform(0.05, 0.12));
-            let lo = Vec3::new(tx + 0.1 + 0.2 * k as f32, top + 0.03, tz + self.uniform(0.1, 0.6));
+            let d = Vec3::new(
+                self.uniform(0.05, 0.12),
+                self.uniform(0.05, 0.2),
+                self.uniform(0.05, 0.12),
+            );
+            let lo = Vec3::new(
+                tx + 0.1 + 0.2 * k as f32,
+                top + 0.03,
+                tz + self.uniform(0.1, 0.6),
+            );
             objects.extend(box_faces(lo, lo + d, true));
         }
         let c = self.colour();

@@ -128,7 +128,9 @@ impl Loader<'_> {
         // said once per material. A factor the file writes is the author's,
         // 1 included. A metal's diffuse part is (1 - metallic) of its base
         // colour (glTF's BRDF); what it reflects specularly is not modelled.
-        let written = m.index().is_some_and(|i| self.explicit_base.get(i) == Some(&true));
+        let written = m
+            .index()
+            .is_some_and(|i| self.explicit_base.get(i) == Some(&true));
         let implicit = |x: f32| !written && x >= 1.0;
         let reflectance = [base[0], base[1], base[2]]
             .map(|x| if implicit(x) { CLAMPED } else { x } * (1.0 - metallic));
