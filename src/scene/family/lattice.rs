@@ -82,7 +82,7 @@ impl Gen {
     /// and four shelf boards 2 cm thick, boxes on each.
     fn bookcase(&mut self, case: usize, at: Vec3, width: f32) {
         let (depth, height, board) = (0.35, 2.0, 0.02);
-        let sides = vec![
+        let sides = [
             box_faces(at, at + Vec3::new(board, height, depth), true),
             box_faces(
                 at + Vec3::new(width - board, 0.0, 0.0),
@@ -126,7 +126,7 @@ impl Gen {
         self.node("picture", picture, c, [0.0; 3]);
         let skirt = self.uniform(0.06, 0.12);
         let c = self.colour();
-        let boards = vec![
+        let boards = [
             box_faces(Vec3::ZERO, Vec3::new(size.x, skirt, 0.015), true),
             box_faces(
                 Vec3::new(0.0, 0.0, 0.015),
