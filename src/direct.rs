@@ -157,6 +157,9 @@ pub struct Image {
     /// Per pixel, the mean texture reflectance over its samples (1 where
     /// they meet no textured polygon).
     pub texture: Vec<[f32; 3]>,
+    /// Per pixel, the share of its samples whose camera ray left the scene
+    /// (where the sky shows).
+    pub escaped: Vec<f32>,
 }
 
 impl<'a> DirectLight<'a> {
@@ -395,7 +398,7 @@ impl<'a> DirectLight<'a> {
         let tan = (0.5 * camera.yfov).tan();
         let aspect = width as f32 / height as f32;
         let per_pixel = (ss * ss) as f64;
-        let work = |p: usize, out: &mut ([f32; 3], u32, [f32; 3])| {
+        let work = |p: usize, out: &mut ([f32; 3], u32, [f32; 3], f32)| {
             let (px, py) = ((p as u32 % width) * ss, (p as u32 / width) * ss);
             let mut rng = Rng(0xd1ec_7000_0000 ^ p as u64);
             // The pixel's samples share one (ss * strata)^2 stratification of
@@ -422,6 +425,7 @@ impl<'a> DirectLight<'a> {
                     .nearest_facing(camera.position, dir, near, far, 1e-5)
                 else {
                     texture.iter_mut().for_each(|t| *t += 1.0);
+                    out.3 += 1.0 / per_pixel as f32;
                     continue;
                 };
                 out.1 = hit.polygon + 1;
@@ -446,10 +450,10 @@ impl<'a> DirectLight<'a> {
             out.0 = pool.total().map(|s| (s / per_pixel) as f32);
             out.2 = texture.map(|t| (t / per_pixel) as f32);
         };
-        let mut pixels = vec![([0.0f32; 3], 0u32, [1.0f32; 3]); (width * height) as usize];
+        let mut pixels = vec![([0.0f32; 3], 0u32, [1.0f32; 3], 0.0f32); (width * height) as usize];
         in_parallel(&mut pixels, work);
         let mut seen = vec![false; self.normals.len()];
-        for (_, p, _) in &pixels {
+        for (_, p, _, _) in &pixels {
             if *p > 0 {
                 seen[*p as usize - 1] = true;
             }
@@ -458,6 +462,7 @@ impl<'a> DirectLight<'a> {
             direct: pixels.iter().map(|p| p.0).collect(),
             seen,
             texture: pixels.iter().map(|p| p.2).collect(),
+            escaped: pixels.iter().map(|p| p.3).collect(),
         }
     }
 }

@@ -85,7 +85,9 @@ pub struct Parts<'a> {
 
 /// Renders `mesh` with the solution `parts` from `camera`; with `shadow_rays` > 0 the direct light
 /// is traced per sample with about that many shadow rays per emitter
-/// (rounded to a square), otherwise interpolated like the rest.
+/// (rounded to a square), and the scene's sky drawn where camera rays
+/// leave the scene; otherwise the direct light is interpolated like the
+/// rest and what no polygon covers stays black.
 pub fn camera_image(
     gpu: &Gpu,
     scene: &Scene,
@@ -156,11 +158,18 @@ pub fn camera_image(
         hidden: unlit,
     };
     let mut pixels = renderer.render_masked(device, queue, shown, camera, view)?;
-    for ((p, d), t) in pixels.iter_mut().zip(&traced.direct).zip(&traced.texture) {
+    // Where a sample's ray leaves the scene the sky shows, at its radiance.
+    let sky = scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32);
+    let traced_parts = traced
+        .direct
+        .iter()
+        .zip(&traced.texture)
+        .zip(&traced.escaped);
+    for (p, ((d, t), escaped)) in pixels.iter_mut().zip(traced_parts) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution
             // underestimated can dip below 0 where the traced light is small.
-            p[c] = (p[c] * t[c] + d[c]).max(0.0);
+            p[c] = (p[c] * t[c] + d[c]).max(0.0) + escaped * sky[c];
         }
     }
     Ok(pixels)

@@ -164,3 +164,49 @@ fn a_point_light_a_sun_and_a_sky_give_the_path_traced_picture_within_two_and_a_h
         assert!(s < 0.025, "{scene}: SMAPE {:.2} %", 100.0 * s);
     }
 }
+
+/// Where camera rays leave the scene the sky shows at its radiance: an open
+/// floor under `--sky L` seen from 1 m above, looking at the horizon, shows
+/// L in every pixel above it and the lit floor below.
+#[test]
+fn the_sky_is_drawn_where_camera_rays_leave_the_scene() {
+    use crate::common::{rect, surface, write_scene};
+    let floor = vec![rect(1, 0.0, [-50.0, -50.0], [50.0, 50.0], true)];
+    let (_dir, path) = write_scene("open", &[surface("floor", floor, 0.5, 0.0)]);
+    let mut s = radiosity::scene::open(path.to_str().expect("utf-8")).expect("scene");
+    let sky = 0.7;
+    s.sky = Some([sky; 3]);
+    s.camera = Some(radiosity::scene::Camera {
+        // Positions are stored relative to the scene's origin.
+        position: glam::Vec3::new(0.0, 1.0, 0.0) - glam::DVec3::from(s.origin).as_vec3(),
+        rotation: glam::Quat::IDENTITY,
+        yfov: 1.0,
+        aspect: Some(1.0),
+        znear: 0.01,
+    });
+    let mut opts = RenderOptions {
+        width: 32,
+        height: Some(32),
+        ..RenderOptions::default()
+    };
+    opts.stop.max_shots = 50;
+    let r = render(gpu(), &s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+    let (w, h, pixels) = r.image.expect("an image");
+    let row = |y: u32| &pixels[(y * w) as usize..((y + 1) * w) as usize];
+    for p in row(0).iter().chain(row(h / 2 - 2)) {
+        for c in p {
+            assert!(
+                (f64::from(*c) / sky - 1.0).abs() < 1e-4,
+                "above the horizon: {p:?}"
+            );
+        }
+    }
+    // The floor reflects rho E / pi = 0.5 L of the sky it sees (a little
+    // less near the camera's feet: nothing blocks it here, so all of it).
+    for p in row(h - 1) {
+        assert!(
+            (f64::from(p[0]) / (0.5 * sky) - 1.0).abs() < 0.05,
+            "the floor: {p:?}"
+        );
+    }
+}
