@@ -213,9 +213,12 @@ impl<'m> Solver<'m> {
         let unshot: Vec<[f64; 3]> = mesh
             .patches
             .iter()
-            .map(|p| match traced {
-                true => [0.0; 3],
-                false => mesh.polygons[p.polygon as usize].exitance,
+            .map(|p| {
+                if traced {
+                    [0.0; 3]
+                } else {
+                    mesh.polygons[p.polygon as usize].exitance
+                }
             })
             .collect();
         let emitted_power = mesh.source_power();
