@@ -237,6 +237,10 @@ pub struct RenderArgs {
     /// edges); 0 interpolates the direct light from the solution like the rest.
     #[arg(long, default_value_t = crate::render::image::DEFAULT_SHADOW_RAYS, value_parser = clap::value_parser!(u32).range(0..=4096))]
     pub shadow_rays: u32,
+    /// Keep black the pixels where camera rays leave the scene (by default
+    /// they show the sky, `--sky`, at its radiance).
+    #[arg(long)]
+    pub no_background: bool,
     /// The glTF camera to render from, by name (the camera's, else its
     /// node's); default: the file's first perspective camera.
     #[arg(long)]

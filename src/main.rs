@@ -296,6 +296,7 @@ fn render_options(
     opts.height = args.height;
     opts.shading = args.shading;
     opts.shadow_rays = args.shadow_rays;
+    opts.background = !args.no_background;
     opts.ambient = if args.no_ambient {
         radiosity::settings::AmbientTerm::Off
     } else {

@@ -157,6 +157,8 @@ pub struct Settings {
     /// Shadow rays per emitter per image sample of the traced direct light
     /// (0: the direct light interpolated from the solution).
     pub shadow_rays: u32,
+    /// Whether the sky is drawn where camera rays leave the scene.
+    pub background: bool,
     /// Whether the ambient term (the unshot light's estimate) is in the
     /// image and in the reported radiosities.
     pub ambient: bool,

@@ -708,6 +708,7 @@ pub fn build_report(
             image_size,
             shading: opts.shading,
             shadow_rays: opts.shadow_rays,
+            background: opts.background,
             ambient: opts.ambient.is_on(),
             ambient_term: opts.ambient,
             coarse: opts

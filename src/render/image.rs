@@ -58,15 +58,11 @@ pub fn solution_image(
         direct: solver.direct(),
         unlit: Some(solver.unlit()),
     };
-    camera_image(
-        gpu,
-        scene,
-        solver.mesh(),
-        &parts,
-        camera,
-        view,
-        opts.shadow_rays,
-    )
+    let rays = ImageRays {
+        shadow_rays: opts.shadow_rays,
+        background: opts.background,
+    };
+    camera_image(gpu, scene, solver.mesh(), &parts, camera, view, rays)
 }
 
 /// A solution as the image needs it: per element its radiance, and what
@@ -83,11 +79,21 @@ pub struct Parts<'a> {
     pub unlit: Option<Vec<bool>>,
 }
 
-/// Renders `mesh` with the solution `parts` from `camera`; with `shadow_rays` > 0 the direct light
-/// is traced per sample with about that many shadow rays per emitter
-/// (rounded to a square), and the scene's sky drawn where camera rays
-/// leave the scene; otherwise the direct light is interpolated like the
-/// rest and what no polygon covers stays black.
+/// What the camera image traces per sample.
+#[derive(Clone, Copy, Debug)]
+pub struct ImageRays {
+    /// About this many shadow rays per emitter (rounded to a square); 0:
+    /// the direct light is interpolated like the rest and nothing is traced.
+    pub shadow_rays: u32,
+    /// Whether the scene's sky shows where camera rays leave the scene.
+    pub background: bool,
+}
+
+/// Renders `mesh` with the solution `parts` from `camera`; with
+/// `rays.shadow_rays` > 0 the direct light is traced per sample, and the
+/// scene's sky drawn where camera rays leave the scene (unless
+/// `rays.background` is off); otherwise the direct light is interpolated
+/// like the rest and what no polygon covers stays black.
 pub fn camera_image(
     gpu: &Gpu,
     scene: &Scene,
@@ -95,8 +101,9 @@ pub fn camera_image(
     parts: &Parts,
     camera: &Camera,
     view: &ViewSettings,
-    shadow_rays: u32,
+    rays: ImageRays,
 ) -> Result<Vec<[f32; 3]>, GpuError> {
+    let shadow_rays = rays.shadow_rays;
     let (device, queue) = (&gpu.device, &gpu.queue);
     let mut renderer = ViewRenderer::new(device);
     let unlit = parts.unlit.as_deref();
@@ -159,7 +166,11 @@ pub fn camera_image(
     };
     let mut pixels = renderer.render_masked(device, queue, shown, camera, view)?;
     // Where a sample's ray leaves the scene the sky shows, at its radiance.
-    let sky = scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32);
+    let sky = if rays.background {
+        scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32)
+    } else {
+        [0.0; 3]
+    };
     let traced_parts = traced
         .direct
         .iter()

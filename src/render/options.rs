@@ -69,6 +69,9 @@ pub struct RenderOptions {
     /// Shadow rays per emitter per image sample for the image's traced
     /// direct light (0: the direct light interpolated from the solution).
     pub shadow_rays: u32,
+    /// Draw the scene's sky where camera rays leave the scene (with traced
+    /// direct light); `false` keeps those pixels black (`--no-background`).
+    pub background: bool,
     /// Add the ambient term to the image and the reported radiosities.
     pub ambient: crate::settings::AmbientTerm,
     /// Keep form-factor rows of patches that have shot, so a patch that
@@ -141,6 +144,7 @@ impl Default for RenderOptions {
             height: None,
             shading: Shading::Smooth,
             shadow_rays: DEFAULT_SHADOW_RAYS,
+            background: true,
             ambient: crate::settings::AmbientTerm::default(),
             cache_rows: true,
             memory_budget: DEFAULT_MEMORY_BUDGET,

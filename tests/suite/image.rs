@@ -201,12 +201,19 @@ fn the_sky_is_drawn_where_camera_rays_leave_the_scene() {
             );
         }
     }
-    // The floor reflects rho E / pi = 0.5 L of the sky it sees (a little
-    // less near the camera's feet: nothing blocks it here, so all of it).
+    // The floor reflects rho E / pi = 0.5 L of the sky it sees (an open
+    // floor: nothing blocks its sky, so all of it).
     for p in row(h - 1) {
         assert!(
             (f64::from(p[0]) / (0.5 * sky) - 1.0).abs() < 0.05,
             "the floor: {p:?}"
         );
     }
+    // `--no-background` keeps it black; the floor is the same.
+    opts.background = false;
+    let r = render(gpu(), &s, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+    let (_, _, black) = r.image.expect("an image");
+    assert!(black[..w as usize].iter().all(|p| *p == [0.0; 3]));
+    let last = ((h - 1) * w) as usize;
+    assert_eq!(black[last..], pixels[last..]);
 }
