@@ -225,3 +225,26 @@ fn a_solve_drawn_on_the_cpu_is_the_devices_and_tiles_alike() {
         Rasteriser::Device
     );
 }
+
+/// Asking for the device's drawing on an adapter that is itself a CPU
+/// rasteriser (lavapipe, as in CI) says so loudly, in the log and the
+/// report; `auto` (which draws on the CPU there) says nothing of it.
+#[test]
+fn the_device_asked_for_on_a_cpu_adapter_is_a_warning_in_the_report() {
+    let scene = radiosity::scene::open("cornell").expect("scene");
+    let warned = |rasteriser: Rasteriser| {
+        let mut opts = RenderOptions {
+            width: 0,
+            rasteriser,
+            ..RenderOptions::default()
+        };
+        opts.stop.max_shots = 10;
+        let r = render(gpu(), &scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+        r.report
+            .warnings
+            .iter()
+            .any(|w| w.contains("the adapter is a CPU rasteriser"))
+    };
+    assert_eq!(warned(Rasteriser::Device), gpu().is_cpu());
+    assert!(!warned(Rasteriser::Auto));
+}
