@@ -127,38 +127,7 @@ pub fn camera_image(
         near,
         far,
     );
-    let mut rest: Vec<[f32; 3]> = match parts.direct {
-        Some(direct) => radiance
-            .iter()
-            .zip(direct)
-            .map(|(r, d)| [0, 1, 2].map(|c| r[c] - (d[c] / std::f64::consts::PI) as f32))
-            .collect(),
-        None => {
-            let element_direct = light.element_irradiance(mesh, &traced.seen);
-            mesh.elements
-                .iter()
-                .zip(radiance)
-                .zip(&element_direct)
-                .map(|((e, r), d)| {
-                    let rho = e.reflectance;
-                    [0, 1, 2].map(|c| r[c] - (rho[c] * d[c] / std::f64::consts::PI) as f32)
-                })
-                .collect()
-        }
-    };
-    // Textured elements interpolate their irradiance (the rest over their
-    // reflectance); each pixel multiplies it by its texture.
-    for (r, e) in rest.iter_mut().zip(&mesh.elements) {
-        if mesh.polygons[e.polygon as usize].textured {
-            for (x, rho) in r.iter_mut().zip(e.reflectance) {
-                *x = if rho > 1e-6 {
-                    (f64::from(*x) / rho) as f32
-                } else {
-                    0.0
-                };
-            }
-        }
-    }
+    let rest = indirect_part(mesh, parts, &light, &traced.seen);
     let shown = Shown {
         mesh,
         radiance: &rest,
@@ -184,4 +153,45 @@ pub fn camera_image(
         }
     }
     Ok(pixels)
+}
+
+/// What the image interpolates of `parts`: each element's radiance less its
+/// direct part (the solution's own, else `light`'s traced mean over the
+/// elements of the polygons `seen`), over its reflectance on textured
+/// polygons (each pixel multiplies its texture back).
+fn indirect_part(mesh: &Mesh, parts: &Parts, light: &DirectLight, seen: &[bool]) -> Vec<[f32; 3]> {
+    let radiance = parts.radiance;
+    let mut rest: Vec<[f32; 3]> = match parts.direct {
+        Some(direct) => radiance
+            .iter()
+            .zip(direct)
+            .map(|(r, d)| [0, 1, 2].map(|c| r[c] - (d[c] / std::f64::consts::PI) as f32))
+            .collect(),
+        None => {
+            let element_direct = light.element_irradiance(mesh, seen);
+            mesh.elements
+                .iter()
+                .zip(radiance)
+                .zip(&element_direct)
+                .map(|((e, r), d)| {
+                    let rho = e.reflectance;
+                    [0, 1, 2].map(|c| r[c] - (rho[c] * d[c] / std::f64::consts::PI) as f32)
+                })
+                .collect()
+        }
+    };
+    // Textured elements interpolate their irradiance (the rest over their
+    // reflectance); each pixel multiplies it by its texture.
+    for (r, e) in rest.iter_mut().zip(&mesh.elements) {
+        if mesh.polygons[e.polygon as usize].textured {
+            for (x, rho) in r.iter_mut().zip(e.reflectance) {
+                *x = if rho > 1e-6 {
+                    (f64::from(*x) / rho) as f32
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
+    rest
 }
