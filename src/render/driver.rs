@@ -287,7 +287,7 @@ pub fn render_on(
         load: load_time.as_secs_f64(),
         ..Default::default()
     };
-    let fingerprint = fingerprint(scene, opts);
+    let fingerprint = fingerprint(scene, opts, opts.rasteriser_for(gpu.is_cpu()));
     let Refined {
         mesh,
         refinement,

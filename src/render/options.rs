@@ -274,8 +274,11 @@ pub enum RenderError {
 /// materials and subdivision, and every setting that changes the numbers
 /// (not the rank count, tiles or exchange, which do not). Spelled out field
 /// by field (never through `Debug`, whose output Rust does not promise to
-/// keep), in the text checkpoints have always hashed.
-pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
+/// keep), in the text checkpoints have always hashed. `rasteriser` is where
+/// the run draws (`RenderOptions::rasteriser_for`): a driver may fuse a
+/// multiply-add the CPU drawing does not, so a resume drawn elsewhere could
+/// differ in a cell in ten thousand.
+pub fn fingerprint(scene: &Scene, opts: &RenderOptions, rasteriser: Rasteriser) -> String {
     let mut geometry = Vec::new();
     for p in &scene.polygons {
         let floats = p.vertices.iter().flat_map(|v| v.to_array());
@@ -315,6 +318,12 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions) -> String {
     };
     let settings = match opts.batch {
         b if b > 1 => format!("{settings} batch {b}"),
+        _ => settings,
+    };
+    // The device's drawing only, so checkpoints drawn on the CPU (every one
+    // before the rasteriser was held here) still resume.
+    let settings = match rasteriser {
+        Rasteriser::Device => format!("{settings} rasteriser device"),
         _ => settings,
     };
     crate::checkpoint::fingerprint(&[
@@ -398,6 +407,13 @@ mod tests {
         for m in [FormFactorMethod::Hybrid, FormFactorMethod::Hemisphere] {
             assert_eq!(m.name(), format!("{m:?}"));
         }
+        // Drawn by the device, a checkpoint says so; drawn on the CPU, its
+        // text is the one before the rasteriser was held.
+        let scene = Scene::default();
+        let opts = RenderOptions::default();
+        let cpu = fingerprint(&scene, &opts, Rasteriser::Cpu);
+        assert_ne!(fingerprint(&scene, &opts, Rasteriser::Device), cpu);
+        assert_eq!(fingerprint(&scene, &opts, Rasteriser::Auto), cpu);
         for p in [Projection::Exact, Projection::Tessellated] {
             assert_eq!(p.name(), format!("{p:?}"));
         }
