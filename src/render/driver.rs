@@ -282,7 +282,7 @@ pub fn render_on(
         opts,
         comm,
     };
-    warn_of_settings(job);
+    super::checks::check_settings(gpu, opts, comm)?;
     let mut timings = Timings {
         load: load_time.as_secs_f64(),
         ..Default::default()
@@ -385,42 +385,6 @@ fn not_exchanges(solved: &Solved, source: &GpuFormFactors, before: Traffic) -> T
 }
 
 /// Says, on rank 0, when a batch is smaller than the rank count.
-/// What a run's settings should be told of before it starts (rank 0).
-fn warn_of_settings(job: Job<'_>) {
-    let Job {
-        opts, comm, gpu, ..
-    } = job;
-    if comm.rank() != 0 {
-        return;
-    }
-    if let Some(w) = device_on_a_cpu(gpu, opts) {
-        log::warn!("{w}");
-    }
-    if opts.batch > 1 && comm.size() > opts.batch {
-        // Not an error: the split shots' groups, the transport's rays and
-        // the landing still go to every rank (docs/scaling.md).
-        log::warn!(
-            "--batch {} on {} ranks: a batch's rows keep at most {} ranks drawing; a batch of at least the rank count uses them all (the numbers depend on --batch, not on the ranks)",
-            opts.batch,
-            comm.size(),
-            opts.batch
-        );
-    }
-}
-
-/// The warning for a run that asked for the device's drawing
-/// (`--rasteriser device`) on an adapter that is itself a CPU rasteriser:
-/// its "device" figures are a CPU's (wgpu falls back to lavapipe where no
-/// Vulkan driver for the GPU is installed).
-fn device_on_a_cpu(gpu: &Gpu, opts: &RenderOptions) -> Option<String> {
-    (opts.rasteriser == crate::settings::Rasteriser::Device && gpu.is_cpu()).then(|| {
-        format!(
-            "--rasteriser device asked for a GPU, but the adapter is a CPU rasteriser: {} (no Vulkan driver for a GPU?): its device drawing runs on the CPU",
-            gpu.describe()
-        )
-    })
-}
-
 /// A camera image: width, height and linear radiance pixels, top row first.
 type Image = (u32, u32, Vec<[f32; 3]>);
 
@@ -665,7 +629,9 @@ fn finish(
     };
     let mut report = build_report(scene, mesh, opts, solver, gpu, run);
     report.convergence = solved.trace.finish(&report, solved.solve);
-    report.warnings.extend(device_on_a_cpu(gpu, opts));
+    report
+        .warnings
+        .extend(super::checks::device_on_a_cpu(gpu, opts));
     if solved.stats.lossless {
         let w = format!(
             "stopped after {shots} shots: the scene keeps {:.1} % of its light unshot, so it cannot converge (a closed scene whose surfaces reflect all light: check reflectances of 1)",

@@ -17,6 +17,7 @@
 
 pub mod ahead;
 pub mod cache;
+mod checks;
 pub mod driver;
 pub mod exchange;
 pub mod hooks;
