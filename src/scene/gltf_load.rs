@@ -38,14 +38,9 @@ pub fn load_slice(bytes: &[u8], name: &str) -> Result<Scene, SceneError> {
 /// index before checking it, and panics on a file where it is out of range
 /// (found by `radiosity-lab fuzz`): check every primitive's accessor indices first.
 fn check_primitive_indices(bytes: &[u8], name: &str) -> Result<(), SceneError> {
-    let json = if bytes.starts_with(b"glTF") {
-        match gltf::Glb::from_slice(bytes) {
-            Ok(glb) => glb.json,
-            // Not a readable GLB: the full parse below says why.
-            Err(_) => return Ok(()),
-        }
-    } else {
-        std::borrow::Cow::Borrowed(bytes)
+    // Not a readable GLB: the full parse below says why.
+    let Some(json) = json_chunk(bytes) else {
+        return Ok(());
     };
     let Ok(root) = gltf::json::Root::from_slice(&json) else {
         return Ok(());
@@ -73,6 +68,15 @@ fn check_primitive_indices(bytes: &[u8], name: &str) -> Result<(), SceneError> {
         }
     }
     Ok(())
+}
+
+/// The JSON of glTF (or GLB) `bytes`; `None` for a GLB that does not read.
+fn json_chunk(bytes: &[u8]) -> Option<std::borrow::Cow<'_, [u8]>> {
+    if bytes.starts_with(b"glTF") {
+        gltf::Glb::from_slice(bytes).ok().map(|glb| glb.json)
+    } else {
+        Some(std::borrow::Cow::Borrowed(bytes))
+    }
 }
 
 fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene, SceneError> {

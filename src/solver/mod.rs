@@ -200,6 +200,8 @@ impl<'m> Solver<'m> {
     /// The share of rank `rank` of `ranks` (it holds every patch but updates only its own).
     pub fn partitioned(mesh: &'m LitMesh, rank: usize, ranks: usize) -> Self {
         let owners = Owners::new(mesh.patches.len(), ranks);
+        // Traced emitters have shot their emission (`receive_lights`).
+        let traced = mesh.emitter_field.is_some();
         let PerElement {
             exitance: radiosity,
             element_unshot,
@@ -207,9 +209,7 @@ impl<'m> Solver<'m> {
             element_patch,
             mean_reflectance,
             ambient_area,
-        } = PerElement::of(mesh, owners, rank, mesh.emitter_field.is_some());
-        // Traced emitters have shot their emission (`receive_lights`).
-        let traced = mesh.emitter_field.is_some();
+        } = PerElement::of(mesh, owners, rank, traced);
         let unshot: Vec<[f64; 3]> = mesh
             .patches
             .iter()

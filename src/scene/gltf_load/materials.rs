@@ -271,13 +271,8 @@ impl MaterialTexture {
 /// tell: it gives glTF's default, 1, either way). Empty where the JSON
 /// does not parse (the full parse says why).
 pub(super) fn explicit_base_colours(bytes: &[u8]) -> Vec<bool> {
-    let json = if bytes.starts_with(b"glTF") {
-        match gltf::Glb::from_slice(bytes) {
-            Ok(glb) => glb.json.into_owned(),
-            Err(_) => return Vec::new(),
-        }
-    } else {
-        bytes.to_vec()
+    let Some(json) = super::json_chunk(bytes) else {
+        return Vec::new();
     };
     let Ok(root) = serde_json::from_slice::<serde_json::Value>(&json) else {
         return Vec::new();
