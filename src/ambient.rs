@@ -27,9 +27,10 @@
 //! Deterministic: every group's rays come from a generator seeded by its
 //! index, whatever the thread count.
 
+use crate::locate::{nearest_other, patch_at};
 use crate::mesh::Mesh;
 use crate::rng::Rng;
-use crate::sampling::{in_parallel, point_in, unit};
+use crate::sampling::{cosine_direction, in_parallel, point_in, unit};
 use glam::Vec3;
 
 /// Up to this many patches each patch is a group; bigger meshes group
@@ -652,93 +653,6 @@ fn landings_of(
     out
 }
 
-/// The patch of polygon `polygon` that holds its point `x`: on a quad, the
-/// cell of its patch grid at `x`'s bilinear coordinates; on a triangle, the
-/// patch whose centre is nearest.
-fn patch_at(mesh: &Mesh, polygon: u32, x: Vec3) -> u32 {
-    let poly = &mesh.polygons[polygon as usize];
-    let patches = poly.patches.clone();
-    if patches.len() == 1 {
-        return patches.start;
-    }
-    let [pu, pv] = poly.patch_grid;
-    let first = &mesh.patches[patches.start as usize];
-    if first.corners[3] != first.corners[2] && (pu * pv) as usize == patches.len() {
-        let at = |i: u32, j: u32| &mesh.patches[(patches.start + j * pu + i) as usize];
-        let quad = [
-            at(0, 0).corners[0],
-            at(pu - 1, 0).corners[1],
-            at(pu - 1, pv - 1).corners[2],
-            at(0, pv - 1).corners[3],
-        ];
-        let (u, v) = inverse_bilinear(&quad, x);
-        let i = ((u * pu as f32) as u32).min(pu - 1);
-        let j = ((v * pv as f32) as u32).min(pv - 1);
-        return patches.start + j * pu + i;
-    }
-    patches
-        .min_by(|&a, &b| {
-            let da = mesh.patches[a as usize].centre.distance_squared(x);
-            let db = mesh.patches[b as usize].centre.distance_squared(x);
-            da.total_cmp(&db)
-        })
-        .unwrap_or(0)
-}
-
-/// The bilinear coordinates (u, v), clamped to the unit square, of the
-/// point `x` of the planar quad `c` ([`crate::mesh::bilinear`]'s corners),
-/// by Newton's method on the least-squares residual.
-fn inverse_bilinear(c: &[Vec3; 4], x: Vec3) -> (f32, f32) {
-    let (mut u, mut v) = (0.5f32, 0.5f32);
-    for _ in 0..6 {
-        let r = x - crate::mesh::bilinear(c, u, v);
-        let du = (c[1] - c[0]) * (1.0 - v) + (c[2] - c[3]) * v;
-        let dv = (c[3] - c[0]) * (1.0 - u) + (c[2] - c[1]) * u;
-        let (a, b, d) = (du.dot(du), du.dot(dv), dv.dot(dv));
-        let det = a * d - b * b;
-        if det.abs() <= f32::EPSILON * a * d {
-            break;
-        }
-        let (ru, rv) = (du.dot(r), dv.dot(r));
-        let (su, sv) = ((d * ru - b * rv) / det, (a * rv - b * ru) / det);
-        u = (u + su).clamp(0.0, 1.0);
-        v = (v + sv).clamp(0.0, 1.0);
-        // Converged (a parallelogram, bilinear only in name, takes one
-        // step): the remaining steps would move it by rounding alone.
-        if su.abs().max(sv.abs()) < 1e-6 {
-            break;
-        }
-    }
-    (u, v)
-}
-
-/// The nearest hit along the ray, skipping polygon `own` (a quad that is
-/// not quite planar, as the measured Cornell box's left wall, meets a ray
-/// leaving one of its triangles in its other one, a hair away).
-fn nearest_other(mesh: &Mesh, origin: Vec3, dir: Vec3, own: u32) -> Option<crate::raytrace::Hit> {
-    let mut t_min = 0.0;
-    for _ in 0..4 {
-        let hit = mesh
-            .occluders
-            .nearest_facing(origin, dir, t_min, f32::INFINITY, 1e-5)?;
-        if hit.polygon != own {
-            return Some(hit);
-        }
-        t_min = hit.t * (1.0 + 1e-5) + mesh.ray_offset;
-    }
-    None
-}
-
-/// A cosine-distributed direction about `normal` (unit) from two uniform
-/// numbers; `tangent` is any unit vector across the normal.
-fn cosine_direction(normal: Vec3, tangent: Vec3, u1: f32, u2: f32) -> Vec3 {
-    let bitangent = normal.cross(tangent);
-    let r = u1.sqrt();
-    let phi = std::f32::consts::TAU * u2;
-    let z = (1.0 - u1).max(0.0).sqrt();
-    (tangent * (r * phi.cos()) + bitangent * (r * phi.sin()) + normal * z).normalize()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -953,43 +867,6 @@ mod tests {
         assert_eq!(got.len(), 2);
         assert_eq!(got[1], row, "every bit travels");
         assert_eq!(GroupRays::unpack_all(&words[..words.len() - 1]), None);
-    }
-
-    #[test]
-    fn a_point_of_a_quad_finds_its_patch() {
-        // A skewed planar quad of 3 x 2 patches.
-        let mut poly = Polygon::square(Vec3::ZERO, 1.0, Vec3::X, Vec3::Y, [0.5; 3], [0.0; 3]);
-        poly.vertices[2] += Vec3::new(0.6, 0.3, 0.0);
-        poly.subdivision = Some(Subdivision {
-            patches: [3, 2],
-            elements: [2, 2],
-        });
-        let scene = Scene {
-            nodes: vec!["q".into()],
-            polygons: vec![poly],
-            ..Default::default()
-        };
-        let mesh = Mesh::build(&scene, &MeshSettings::default());
-        assert_eq!(mesh.patches.len(), 6);
-        for (k, p) in mesh.patches.iter().enumerate() {
-            assert_eq!(patch_at(&mesh, 0, p.centre), k as u32);
-            for e in &mesh.elements[p.elements.start as usize..p.elements.end as usize] {
-                assert_eq!(patch_at(&mesh, 0, e.centre), k as u32);
-            }
-        }
-        let c = [
-            scene.polygons[0].vertices[0],
-            scene.polygons[0].vertices[1],
-            scene.polygons[0].vertices[2],
-            scene.polygons[0].vertices[3],
-        ];
-        for (u, v) in [(0.1, 0.9), (0.5, 0.5), (0.93, 0.07), (0.3, 0.6)] {
-            let (a, b) = inverse_bilinear(&c, crate::mesh::bilinear(&c, u, v));
-            assert!(
-                (a - u).abs() < 1e-5 && (b - v).abs() < 1e-5,
-                "({u}, {v}) -> ({a}, {b})"
-            );
-        }
     }
 
     #[test]

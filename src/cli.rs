@@ -241,6 +241,12 @@ pub struct RenderArgs {
     /// they show the sky, `--sky`, at its radiance).
     #[arg(long)]
     pub no_background: bool,
+    /// Final gather rays per pixel for the image's indirect light: rays from
+    /// each image sample bring back the solution's radiance where they land
+    /// (smooth indirect light with exact visibility); 0 interpolates the
+    /// indirect light from the solution. Needs --shadow-rays > 0.
+    #[arg(long, default_value_t = crate::gather::DEFAULT_GATHER_RAYS, value_parser = clap::value_parser!(u32).range(0..=65536))]
+    pub gather: u32,
     /// The glTF camera to render from, by name (the camera's, else its
     /// node's); default: the file's first perspective camera.
     #[arg(long)]

@@ -13,10 +13,11 @@
 //! updates: the solver's numbers are untouched.
 
 use crate::formfactor::point_to_polygon;
+use crate::gather::{Gather, GatherPixel};
 use crate::mesh::Mesh;
 use crate::raytrace::Bvh;
 use crate::rng::Rng;
-use crate::sampling::{in_parallel, point_in, unit, RayStart};
+use crate::sampling::{in_parallel, point_in, unit, RayStart, Strata};
 use crate::scene::{Camera, Scene};
 use glam::{DVec3, Vec3};
 
@@ -82,26 +83,6 @@ pub struct EmitterField {
     pub delivered: f64,
 }
 
-/// Which cells of a `grid` x `grid` stratification of an emitter's (u, v)
-/// square get a shadow ray: the `side` x `side` block from `first`.
-#[derive(Clone, Copy, Debug)]
-struct Strata {
-    grid: u32,
-    first: [u32; 2],
-    side: u32,
-}
-
-impl Strata {
-    /// Every cell of a `side` x `side` grid.
-    fn whole(side: u32) -> Self {
-        Strata {
-            grid: side,
-            first: [0, 0],
-            side,
-        }
-    }
-}
-
 /// What a set of points (an image pixel's samples, an element's points)
 /// gathers of the direct light, weighted per point. Each emitter's visible
 /// share is one ratio over all the points' shadow rays (their
@@ -163,6 +144,43 @@ pub struct Image {
     /// Per pixel, the share of its samples whose camera ray left the scene
     /// (where the sky shows).
     pub escaped: Vec<f32>,
+    /// Per pixel, with a final gather ([`Gather`]), what its samples
+    /// gathered (else empty).
+    pub gathered: Vec<GatherPixel>,
+}
+
+impl Image {
+    /// The image of `pixels` over a scene of `polygons`, with what they
+    /// gathered if `gathered`.
+    fn of(pixels: &[PixelSums], polygons: usize, gathered: bool) -> Self {
+        let mut seen = vec![false; polygons];
+        for p in pixels {
+            if p.polygon > 0 {
+                seen[p.polygon as usize - 1] = true;
+            }
+        }
+        Image {
+            direct: pixels.iter().map(|p| p.direct).collect(),
+            seen,
+            texture: pixels.iter().map(|p| p.texture).collect(),
+            escaped: pixels.iter().map(|p| p.escaped).collect(),
+            gathered: match gathered {
+                true => pixels.iter().map(|p| p.gathered).collect(),
+                false => Vec::new(),
+            },
+        }
+    }
+}
+
+/// One pixel of [`DirectLight::image`] as its samples build it.
+#[derive(Clone, Copy)]
+struct PixelSums {
+    direct: [f32; 3],
+    /// 1 + the last polygon a sample saw (0: none).
+    polygon: u32,
+    texture: [f32; 3],
+    escaped: f32,
+    gathered: GatherPixel,
 }
 
 impl<'a> DirectLight<'a> {
@@ -393,15 +411,23 @@ impl<'a> DirectLight<'a> {
     /// polygons some sample saw; and per pixel the mean over its samples
     /// of the texture's reflectance where they meet a textured polygon, 1
     /// elsewhere (what the interpolated irradiance of textured elements is
-    /// multiplied by: see `render::image`).
-    pub fn image(&self, camera: &Camera, size: [u32; 2], ss: u32, near: f32, far: f32) -> Image {
+    /// multiplied by: see `render::image`); with `gather`, each pixel's
+    /// emission and indirect light gathered from the solution.
+    pub fn image(
+        &self,
+        camera: &Camera,
+        size: [u32; 2],
+        ss: u32,
+        depth: [f32; 2],
+        gather: Option<&Gather>,
+    ) -> Image {
         let [width, height] = size;
         let ss = ss.max(1);
         let (w, h) = ((width * ss) as f32, (height * ss) as f32);
         let tan = (0.5 * camera.yfov).tan();
         let aspect = width as f32 / height as f32;
         let per_pixel = (ss * ss) as f64;
-        let work = |p: usize, out: &mut ([f32; 3], u32, [f32; 3], f32)| {
+        let work = |p: usize, out: &mut PixelSums| {
             let (px, py) = ((p as u32 % width) * ss, (p as u32 / width) * ss);
             let mut rng = Rng(0xd1ec_7000_0000 ^ p as u64);
             // The pixel's samples share one (ss * strata)^2 stratification of
@@ -415,23 +441,23 @@ impl<'a> DirectLight<'a> {
             let mut texture = [0.0f64; 3];
             for k in 0..ss * ss {
                 let (sx, sy) = ((px + k % ss) as f32 + 0.5, (py + k / ss) as f32 + 0.5);
-                let dir = Vec3::new(
-                    (2.0 * sx / w - 1.0) * tan * aspect,
-                    (1.0 - 2.0 * sy / h) * tan,
-                    -1.0,
-                );
-                let dir = camera.rotation * dir;
+                let dir = camera.rotation
+                    * Vec3::new(
+                        (2.0 * sx / w - 1.0) * tan * aspect,
+                        (1.0 - 2.0 * sy / h) * tan,
+                        -1.0,
+                    );
                 // Coinciding faces: the one facing the camera shows (as in
                 // the rasterised view), and a back face is black.
-                let Some(hit) = self
-                    .bvh
-                    .nearest_facing(camera.position, dir, near, far, 1e-5)
+                let Some(hit) =
+                    self.bvh
+                        .nearest_facing(camera.position, dir, depth[0], depth[1], 1e-5)
                 else {
                     texture.iter_mut().for_each(|t| *t += 1.0);
-                    out.3 += 1.0 / per_pixel as f32;
+                    out.escaped += 1.0 / per_pixel as f32;
                     continue;
                 };
-                out.1 = hit.polygon + 1;
+                out.polygon = hit.polygon + 1;
                 let x = camera.position + dir * hit.t;
                 let textured = self.textures[hit.polygon as usize].map(|m| m.reflectance(x));
                 for (t, r) in texture.iter_mut().zip(textured.unwrap_or([1.0; 3])) {
@@ -449,24 +475,24 @@ impl<'a> DirectLight<'a> {
                 let rho = textured.unwrap_or(self.reflectance[hit.polygon as usize]);
                 let weight = rho.map(|r| f64::from(r) / std::f64::consts::PI);
                 self.gather(&mut pool, x, hit.polygon, weight, &mut rng, strata);
+                if let Some(g) = gather {
+                    let sample = g.sample(x, hit.polygon, rho, &mut rng, [ss, block]);
+                    out.gathered.add(&sample, 1.0 / per_pixel);
+                }
             }
-            out.0 = pool.total().map(|s| (s / per_pixel) as f32);
-            out.2 = texture.map(|t| (t / per_pixel) as f32);
+            out.direct = pool.total().map(|s| (s / per_pixel) as f32);
+            out.texture = texture.map(|t| (t / per_pixel) as f32);
         };
-        let mut pixels = vec![([0.0f32; 3], 0u32, [1.0f32; 3], 0.0f32); (width * height) as usize];
+        let blank = PixelSums {
+            direct: [0.0; 3],
+            polygon: 0,
+            texture: [1.0; 3],
+            escaped: 0.0,
+            gathered: GatherPixel::default(),
+        };
+        let mut pixels = vec![blank; (width * height) as usize];
         in_parallel(&mut pixels, work);
-        let mut seen = vec![false; self.normals.len()];
-        for (_, p, _, _) in &pixels {
-            if *p > 0 {
-                seen[*p as usize - 1] = true;
-            }
-        }
-        Image {
-            direct: pixels.iter().map(|p| p.0).collect(),
-            seen,
-            texture: pixels.iter().map(|p| p.2).collect(),
-            escaped: pixels.iter().map(|p| p.3).collect(),
-        }
+        Image::of(&pixels, self.normals.len(), gather.is_some())
     }
 }
 
@@ -535,7 +561,7 @@ mod tests {
             znear: 0.01,
         };
         let (size, ss) = (16u32, 4u32);
-        let image = d.image(&camera, [size, size], ss, 0.01, 10.0);
+        let image = d.image(&camera, [size, size], ss, [0.01, 10.0], None);
         // The same samples' light from 24 x 24 rays each, per side of x = 0.
         let fine = DirectLight::new(&s, &bvh, 24);
         let mut rng = Rng(7);

@@ -297,6 +297,7 @@ fn render_options(
     opts.shading = args.shading;
     opts.shadow_rays = args.shadow_rays;
     opts.background = !args.no_background;
+    opts.gather = args.gather;
     opts.ambient = if args.no_ambient {
         radiosity::settings::AmbientTerm::Off
     } else {

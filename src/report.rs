@@ -159,6 +159,8 @@ pub struct Settings {
     pub shadow_rays: u32,
     /// Whether the sky is drawn where camera rays leave the scene.
     pub background: bool,
+    /// Final gather rays per pixel of the image's indirect light (0: interpolated).
+    pub gather: u32,
     /// Whether the ambient term (the unshot light's estimate) is in the
     /// image and in the reported radiosities.
     pub ambient: bool,

@@ -47,6 +47,40 @@ pub fn point_in(c: &[Vec3], u: f32, v: f32) -> (Vec3, f32) {
     }
 }
 
+/// Which cells of a `grid` x `grid` stratification of a unit square (an
+/// emitter's (u, v), the hemisphere's directions) a point's rays take: the
+/// `side` x `side` block from `first`.
+#[derive(Clone, Copy, Debug)]
+pub struct Strata {
+    /// Cells along each axis of the whole stratification.
+    pub grid: u32,
+    /// The block's first cell.
+    pub first: [u32; 2],
+    /// The block's cells along each axis.
+    pub side: u32,
+}
+
+impl Strata {
+    /// Every cell of a `side` x `side` grid.
+    pub fn whole(side: u32) -> Self {
+        Strata {
+            grid: side,
+            first: [0, 0],
+            side,
+        }
+    }
+}
+
+/// A cosine-distributed direction about `normal` (unit) from two uniform
+/// numbers; `tangent` is any unit vector across the normal.
+pub fn cosine_direction(normal: Vec3, tangent: Vec3, u1: f32, u2: f32) -> Vec3 {
+    let bitangent = normal.cross(tangent);
+    let r = u1.sqrt();
+    let phi = std::f32::consts::TAU * u2;
+    let z = (1.0 - u1).max(0.0).sqrt();
+    (tangent * (r * phi.cos()) + bitangent * (r * phi.sin()) + normal * z).normalize()
+}
+
 /// A uniform number in [0, 1).
 pub fn unit(rng: &mut Rng) -> f32 {
     (rng.next_u64() >> 40) as f32 / (1u64 << 24) as f32

@@ -698,6 +698,7 @@ pub fn build_report(
             shading: opts.shading,
             shadow_rays: opts.shadow_rays,
             background: opts.background,
+            gather: opts.gather,
             ambient: opts.ambient.is_on(),
             ambient_term: opts.ambient,
             coarse: opts

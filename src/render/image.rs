@@ -7,6 +7,7 @@
 //! still average to the solution's value.
 
 use crate::direct::DirectLight;
+use crate::gather::Gather;
 use crate::gpu::{view_depth_range, Gpu, GpuError, Shading, Shown, ViewRenderer, ViewSettings};
 use crate::mesh::Mesh;
 use crate::render::options::RenderOptions;
@@ -61,6 +62,7 @@ pub fn solution_image(
     let rays = ImageRays {
         shadow_rays: opts.shadow_rays,
         background: opts.background,
+        gather: opts.gather,
     };
     camera_image(gpu, scene, solver.mesh(), &parts, camera, view, rays)
 }
@@ -87,6 +89,10 @@ pub struct ImageRays {
     pub shadow_rays: u32,
     /// Whether the scene's sky shows where camera rays leave the scene.
     pub background: bool,
+    /// Final gather rays per pixel (rounded to a square per sample) for
+    /// the indirect light ([`crate::gather`]); 0 interpolates it from the
+    /// solution. Only with `shadow_rays` > 0.
+    pub gather: u32,
 }
 
 /// Renders `mesh` with the solution `parts` from `camera`; with
@@ -120,13 +126,20 @@ pub fn camera_image(
     // The mesh's hierarchy holds the same polygons (built once per mesh).
     let light = DirectLight::new(scene, &mesh.occluders, strata);
     let (near, far) = view_depth_range(mesh, camera);
-    let traced = light.image(
-        camera,
-        [view.width, view.height],
-        view.supersample,
-        near,
-        far,
-    );
+    // Where a sample's ray leaves the scene the sky shows, at its radiance.
+    let sky = if rays.background {
+        scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32)
+    } else {
+        [0.0; 3]
+    };
+    let size = [view.width, view.height];
+    let ss = view.supersample.max(1);
+    let gather = (rays.gather > 0).then(|| {
+        let side = (f64::from(rays.gather) / f64::from(ss * ss)).sqrt().ceil() as u32;
+        let rays_sky = scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32);
+        Gather::new(mesh, radiance, rays_sky, side)
+    });
+    let traced = light.image(camera, size, ss, [near, far], gather.as_ref());
     let rest = indirect_part(mesh, parts, &light, &traced.seen);
     let shown = Shown {
         mesh,
@@ -134,22 +147,18 @@ pub fn camera_image(
         hidden: unlit,
     };
     let mut pixels = renderer.render_masked(device, queue, shown, camera, view)?;
-    // Where a sample's ray leaves the scene the sky shows, at its radiance.
-    let sky = if rays.background {
-        scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32)
-    } else {
-        [0.0; 3]
-    };
-    let traced_parts = traced
-        .direct
-        .iter()
-        .zip(&traced.texture)
-        .zip(&traced.escaped);
-    for (p, ((d, t), escaped)) in pixels.iter_mut().zip(traced_parts) {
+    for (p, t) in pixels.iter_mut().zip(&traced.texture) {
+        (0..3).for_each(|c| p[c] *= t[c]);
+    }
+    if gather.is_some() {
+        crate::gather::blend(&mut pixels, &traced.gathered, size[0] as usize);
+    }
+    let traced_parts = traced.direct.iter().zip(&traced.escaped);
+    for (p, (d, escaped)) in pixels.iter_mut().zip(traced_parts) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution
             // underestimated can dip below 0 where the traced light is small.
-            p[c] = (p[c] * t[c] + d[c]).max(0.0) + escaped * sky[c];
+            p[c] = (p[c] + d[c]).max(0.0) + escaped * sky[c];
         }
     }
     Ok(pixels)

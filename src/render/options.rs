@@ -72,6 +72,9 @@ pub struct RenderOptions {
     /// Draw the scene's sky where camera rays leave the scene (with traced
     /// direct light); `false` keeps those pixels black (`--no-background`).
     pub background: bool,
+    /// Final gather rays per pixel for the image's indirect light (0: the
+    /// indirect light interpolated from the solution); with traced direct light.
+    pub gather: u32,
     /// Add the ambient term to the image and the reported radiosities.
     pub ambient: crate::settings::AmbientTerm,
     /// Keep form-factor rows of patches that have shot, so a patch that
@@ -145,6 +148,7 @@ impl Default for RenderOptions {
             shading: Shading::Smooth,
             shadow_rays: DEFAULT_SHADOW_RAYS,
             background: true,
+            gather: crate::gather::DEFAULT_GATHER_RAYS,
             ambient: crate::settings::AmbientTerm::default(),
             cache_rows: true,
             memory_budget: DEFAULT_MEMORY_BUDGET,
