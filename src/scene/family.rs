@@ -3,11 +3,14 @@
 //! the floor and stacked on one another (contact), a thin slab near a wall
 //! (near field), an L-shaped room, a long corridor lit at one end (far
 //! field), a room lit through a small opening, a room of many small
-//! objects, and (`lattice`) a lattice of boxes, shelves under a grid of
-//! panels and thin things against walls. Every one is closed (no light leaves it), so energy must
-//! balance; none carries a subdivision of its own (the defaults mesh it).
+//! objects, (`lattice`) a lattice of boxes, shelves under a grid of
+//! panels and thin things against walls, and (`furnished`) furnished rooms
+//! lit by a sun and a sky through a window. All but the furnished rooms are
+//! closed (no light leaves them), so energy must balance; none carries a
+//! subdivision of its own (the defaults mesh it).
 //! Named `family-KIND-SEED`, e.g. `family-stacked-3`.
 
+mod furnished;
 mod lattice;
 
 use super::gltf_write::box_faces;
@@ -16,10 +19,29 @@ use crate::rng::Rng;
 use glam::{Quat, Vec3};
 
 /// The kinds of scene in the family.
-pub const KINDS: [&str; 11] = [
-    "boxes", "floor", "stacked", "slab", "l-room", "corridor", "opening", "many", "lattice",
-    "shelves", "thin",
+pub const KINDS: [&str; 12] = [
+    "boxes",
+    "floor",
+    "stacked",
+    "slab",
+    "l-room",
+    "corridor",
+    "opening",
+    "many",
+    "lattice",
+    "shelves",
+    "thin",
+    "furnished",
 ];
+
+/// The sun and sky `family-KIND-SEED` is lit by beside its own emitters
+/// (`furnished` rooms: through their window), if any.
+pub fn family_lights(name: &str) -> Option<(super::Light, [f64; 3])> {
+    name.strip_prefix("family-furnished-")?
+        .parse::<u64>()
+        .ok()
+        .map(|_| furnished::lights())
+}
 
 /// The glTF text of `family-KIND-SEED`, or `None` when `name` is not one.
 pub fn family_gltf(name: &str) -> Option<String> {
@@ -42,6 +64,7 @@ pub fn family_gltf(name: &str) -> Option<String> {
         "lattice" => g.lattice(),
         "shelves" => g.shelves(),
         "thin" => g.thin(),
+        "furnished" => g.furnished(),
         _ => return None,
     };
     Some(write_gltf(&g.surfaces, Some(camera)))

@@ -353,7 +353,13 @@ pub fn open_as_authored(name_or_path: &str) -> Result<Scene, SceneError> {
         return load(path);
     }
     if let Some(doc) = builtin_gltf(name_or_path) {
-        return load_slice(doc.as_bytes(), name_or_path);
+        let mut scene = load_slice(doc.as_bytes(), name_or_path)?;
+        // A generated room lit through a window carries its sun and sky.
+        if let Some((sun, sky)) = family::family_lights(name_or_path) {
+            scene.lights.push(sun);
+            scene.sky = Some(sky);
+        }
+        return Ok(scene);
     }
     let looks_like_file = path.extension().is_some() || name_or_path.contains('/');
     if looks_like_file {

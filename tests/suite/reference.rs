@@ -102,6 +102,24 @@ fn bookcases_under_a_grid_of_panels_stay_within_their_measured_error() {
     }
 }
 
+/// Furnished rooms lit by a sun and a sky through a window (no lamp):
+/// seed 2 meets the goal (0.14 % mean, 2.64 % worst, 2026-12-07); seed 1's
+/// picture, 1-2 cm off its wall, is 9.5 % too dark (its mean 0.48 %): the
+/// near field of a strong secondary shooter (`--near-field-ratio 0.1` or
+/// `--form-factor hemisphere`: 5.5 %). This bounds what is measured so a
+/// change for the worse fails (docs/notebook/gather.md).
+#[test]
+fn furnished_rooms_lit_through_a_window_stay_within_their_measured_error() {
+    for (scene, worst) in [("family-furnished-1", 0.10), ("family-furnished-2", 0.03)] {
+        let s = radiosity::scene::open(scene).expect("scene");
+        let opts = RenderOptions {
+            width: 0,
+            ..RenderOptions::default()
+        };
+        check_with(scene, &s, &opts, 0.01, worst);
+    }
+}
+
 /// The Cornell box with a point light besides its panel
 /// (`scenes/cornell-lit.gltf`), a sun and a sky through its open front
 /// (issue 18's benchmark: lights against the strong path tracer).

@@ -117,6 +117,12 @@ impl Gen {
         let size = Vec3::new(self.uniform(4.0, 6.0), 2.8, self.uniform(4.0, 6.0));
         let light = self.uniform(0.8, 1.4);
         let camera = self.room(size, light);
+        self.furnish(size);
+        camera
+    }
+
+    /// A room's thin things (see [`Gen::thin`]), each a node.
+    pub(super) fn furnish(&mut self, size: Vec3) {
         // Along the -z wall (the camera looks at it from +z).
         let off = self.uniform(0.01, 0.02);
         let (w, h) = (self.uniform(0.6, 1.2), self.uniform(0.4, 0.8));
@@ -170,6 +176,5 @@ impl Gen {
         }
         let c = self.colour();
         self.node("objects", objects, c, [0.0; 3]);
-        camera
     }
 }
