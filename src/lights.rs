@@ -26,10 +26,31 @@ use glam::Vec3;
 
 pub use crate::sampling::ELEMENT_POINTS;
 
-/// Sky directions per element point along each axis: each element's
-/// points share one `(ELEMENT_POINTS * SKY_RAYS)^2` stratification of the
-/// cosine-weighted hemisphere (64 directions an element).
+/// The fewest sky directions per element point along each axis: each
+/// element's points share one `(ELEMENT_POINTS * side)^2` stratification
+/// of the cosine-weighted hemisphere (64 directions an element).
 pub const SKY_RAYS: u32 = 2;
+
+/// The most: 8 x 8 x 16 = 1024 directions an element. Through a window,
+/// 64 directions put about three rays through it, and the walls' sky
+/// light was splotched by +-60 % from element to element.
+pub const MAX_SKY_RAYS: u32 = 8;
+
+/// Sky directions per element, times the scene's polygons: an element
+/// takes `SKY_BUDGET / polygons` directions (within 64 and 1024), so a
+/// 290-polygon furnished room takes 1024 and Sponza's 288 718 polygons
+/// stay at 64 (docs/notebook/gather.md).
+pub const SKY_BUDGET: u64 = 1 << 25;
+
+/// Sky directions per point along each axis for `mesh`'s elements: from
+/// the scene's polygon count, which refinement leaves alone (a refined
+/// mesh's field reuses the unrefined one's, bit for bit).
+fn sky_rays(mesh: &Mesh) -> u32 {
+    let per_element = SKY_BUDGET / (mesh.polygons.len() as u64).max(1);
+    let points = u64::from(ELEMENT_POINTS * ELEMENT_POINTS);
+    let side = ((per_element / points) as f64).sqrt() as u32;
+    side.clamp(SKY_RAYS, MAX_SKY_RAYS)
+}
 
 /// What the lights and the sky deliver to each element of a mesh.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -209,12 +230,13 @@ pub fn element_field_reusing(
     }
     // Per element: the lights' irradiance, the sky's, and the part of the
     // first from directional lights (sum over RGB).
+    let sky_rays = sky_rays(mesh);
     let work = |j: usize, out: &mut ([f64; 3], [f64; 3], f64)| {
         if let Some((k, f)) = kept.and_then(|f| Some((f.find(mesh, j)?, &f.field))) {
             *out = (f.direct[k], f.sky[k], f.directional[k]);
             return;
         }
-        *out = element_light(mesh, lights, sky, j);
+        *out = element_light(mesh, lights, sky.map(|s| (s, sky_rays)), j);
     };
     let started = std::time::Instant::now();
     let mut values = vec![([0.0; 3], [0.0; 3], 0.0); mesh.elements.len()];
@@ -246,12 +268,13 @@ pub fn element_field_reusing(
 }
 
 /// Element `j`'s mean irradiance from the lights, from the sky (lit by
-/// `sky`), and the lights' part that is directional (sum over RGB), over
-/// jittered points on it, each with shadow rays.
+/// `sky.0`), and the lights' part that is directional (sum over RGB), over
+/// jittered points on it, each with shadow rays (`sky.1` x `sky.1` sky
+/// directions a point).
 fn element_light(
     mesh: &Mesh,
     lights: &[Light],
-    sky: Option<[f64; 3]>,
+    sky: Option<([f64; 3], u32)>,
     j: usize,
 ) -> ([f64; 3], [f64; 3], f64) {
     let (eps, bvh) = (mesh.ray_offset, &mesh.occluders);
@@ -266,16 +289,18 @@ fn element_light(
     // the mesh, so that another mesh's field can be reused.
     let local = j as u64 - u64::from(mesh.polygons[e.polygon as usize].elements.start);
     let mut rng = Rng(0x119b_7000_0000 ^ (u64::from(e.polygon) << 32) ^ local);
-    let (side, rays) = (ELEMENT_POINTS, SKY_RAYS);
-    let (mut direct, mut parallel, mut open, mut weight) = ([0.0; 3], 0.0, 0.0, 0.0);
+    let side = ELEMENT_POINTS;
+    let (mut direct, mut parallel, mut weight) = ([0.0; 3], 0.0, 0.0);
     // The leaves that stopped each light's recent rays, and the sky's:
     // an element's points are mostly shadowed by the same few occluders.
     let mut hints = vec![[None; RECENT_HINTS]; lights.len()];
     let mut sky_hints = [None; RECENT_HINTS];
+    let mut points = Vec::with_capacity((side * side) as usize);
     for q in 0..side * side {
         let u = ((q % side) as f32 + unit(&mut rng)) / side as f32;
         let v = ((q / side) as f32 + unit(&mut rng)) / side as f32;
         let (x, jac) = point_in(corners, u, v);
+        points.push((x, jac));
         let jac = f64::from(jac);
         for (light, hint) in lights.iter().zip(&mut hints) {
             let d = irradiance(light, bvh, x, n, e.polygon, eps, hint);
@@ -286,30 +311,62 @@ fn element_light(
                 parallel += d.iter().sum::<f64>() * jac;
             }
         }
-        if sky.is_some() {
+        weight += jac;
+    }
+    if weight <= 0.0 {
+        return ([0.0; 3], [0.0; 3], 0.0);
+    }
+    let Some((radiance, rays)) = sky else {
+        return (direct.map(|d| d / weight), [0.0; 3], parallel / weight);
+    };
+    let at = SkyPoints {
+        points: &points,
+        normal: n,
+        polygon: e.polygon,
+        eps,
+    };
+    let open = at.share(bvh, rays, &mut rng, &mut sky_hints);
+    (
+        direct.map(|d| d / weight),
+        radiance.map(|l| std::f64::consts::PI * l * open),
+        parallel / weight,
+    )
+}
+
+/// An element's points (and their area weights) as its sky rays leave them.
+struct SkyPoints<'a> {
+    points: &'a [(Vec3, f32)],
+    normal: Vec3,
+    polygon: u32,
+    eps: f32,
+}
+
+impl SkyPoints<'_> {
+    /// The points' weighted sky share, with `rays` x `rays` directions a
+    /// point, all of them one stratification of the hemisphere.
+    fn share(&self, bvh: &Bvh, rays: u32, rng: &mut Rng, hints: &mut Hints) -> f64 {
+        let side = ELEMENT_POINTS;
+        let (mut open, mut weight) = (0.0, 0.0);
+        for (q, &(x, jac)) in (0..).zip(self.points) {
             let cells = Cells {
                 grid: side * rays,
                 first: [q % side * rays, q / side * rays],
                 side: rays,
             };
             let from = RayStart {
-                origin: x + n * eps,
-                normal: n,
-                polygon: e.polygon,
+                origin: x + self.normal * self.eps,
+                normal: self.normal,
+                polygon: self.polygon,
             };
-            open += sky_share(bvh, from, cells, &mut rng, &mut sky_hints) * jac;
+            open += sky_share(bvh, from, cells, rng, hints) * f64::from(jac);
+            weight += f64::from(jac);
         }
-        weight += jac;
+        if weight > 0.0 {
+            open / weight
+        } else {
+            0.0
+        }
     }
-    if weight <= 0.0 {
-        return ([0.0; 3], [0.0; 3], 0.0);
-    }
-    let share = open / weight;
-    (
-        direct.map(|d| d / weight),
-        sky.map_or([0.0; 3], |l| l.map(|l| std::f64::consts::PI * l * share)),
-        parallel / weight,
-    )
 }
 
 #[cfg(test)]
