@@ -657,27 +657,18 @@ fn landings_of(
 mod tests {
     use super::*;
     use crate::mesh::MeshSettings;
-    use crate::scene::{Polygon, Scene, Subdivision};
+    use crate::scene::{Scene, Subdivision};
 
     /// A closed unit cube of six inward-facing squares (reflectance `rho`),
     /// each of `patches` x `patches` patches.
     fn cube(rho: f32, patches: u32) -> Mesh {
-        let s = |c: Vec3, u: Vec3, v: Vec3| {
-            let mut p = Polygon::square(c, 0.5, u, v, [rho; 3], [0.0; 3]);
+        let mut polygons = crate::scene::inward_unit_cube(rho);
+        for p in &mut polygons {
             p.subdivision = Some(Subdivision {
                 patches: [patches; 2],
                 elements: [1; 2],
             });
-            p
-        };
-        let polygons = vec![
-            s(Vec3::new(0.5, 0.5, 0.0), Vec3::X, Vec3::Y),
-            s(Vec3::new(0.5, 0.5, 1.0), Vec3::Y, Vec3::X),
-            s(Vec3::new(0.5, 0.0, 0.5), Vec3::Z, Vec3::X),
-            s(Vec3::new(0.5, 1.0, 0.5), Vec3::X, Vec3::Z),
-            s(Vec3::new(0.0, 0.5, 0.5), Vec3::Y, Vec3::Z),
-            s(Vec3::new(1.0, 0.5, 0.5), Vec3::Z, Vec3::Y),
-        ];
+        }
         let scene = Scene {
             nodes: vec!["box".into(); 1],
             polygons,

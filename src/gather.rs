@@ -265,15 +265,7 @@ mod tests {
     /// brings back the element's radiance there, less its emission.
     #[test]
     fn rays_in_a_closed_box_bring_back_the_elements_radiance_less_emission() {
-        let s = |c: Vec3, u: Vec3, v: Vec3| Polygon::square(c, 0.5, u, v, [0.5; 3], [0.0; 3]);
-        let mut polygons = vec![
-            s(Vec3::new(0.5, 0.5, 0.0), Vec3::X, Vec3::Y),
-            s(Vec3::new(0.5, 0.5, 1.0), Vec3::Y, Vec3::X),
-            s(Vec3::new(0.5, 0.0, 0.5), Vec3::Z, Vec3::X),
-            s(Vec3::new(0.5, 1.0, 0.5), Vec3::X, Vec3::Z),
-            s(Vec3::new(0.0, 0.5, 0.5), Vec3::Y, Vec3::Z),
-            s(Vec3::new(1.0, 0.5, 0.5), Vec3::Z, Vec3::Y),
-        ];
+        let mut polygons = crate::scene::inward_unit_cube(0.5);
         polygons[3].emission = [2.0; 3];
         let mesh = mesh_of(polygons);
         // Each element shows 0.25 reflected, the ceiling its emission too.

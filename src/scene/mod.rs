@@ -109,6 +109,21 @@ impl Polygon {
     }
 }
 
+/// A closed unit cube from the origin as six inward-facing squares of
+/// reflectance `rho` (for tests).
+#[cfg(test)]
+pub(crate) fn inward_unit_cube(rho: f32) -> Vec<Polygon> {
+    let s = |c: Vec3, u: Vec3, v: Vec3| Polygon::square(c, 0.5, u, v, [rho; 3], [0.0; 3]);
+    vec![
+        s(Vec3::new(0.5, 0.5, 0.0), Vec3::X, Vec3::Y),
+        s(Vec3::new(0.5, 0.5, 1.0), Vec3::Y, Vec3::X),
+        s(Vec3::new(0.5, 0.0, 0.5), Vec3::Z, Vec3::X),
+        s(Vec3::new(0.5, 1.0, 0.5), Vec3::X, Vec3::Z),
+        s(Vec3::new(0.0, 0.5, 0.5), Vec3::Y, Vec3::Z),
+        s(Vec3::new(1.0, 0.5, 0.5), Vec3::Z, Vec3::Y),
+    ]
+}
+
 /// A fixed subdivision: patches per polygon and elements per patch, along the
 /// polygon's first and second edge directions (triangles use the first count).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
