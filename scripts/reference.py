@@ -150,8 +150,17 @@ def main():
         else:
             # Mitsuba's spot falls off differently from glTF's.
             sys.exit(f"reference.py: a {light['kind']} light has no Mitsuba counterpart here")
+    if doc.get("sky") and doc.get("sky_map"):
+        # Mitsuba takes one environment emitter.
+        sys.exit("reference.py: --sky with --sky-map has no Mitsuba counterpart here")
     if doc.get("sky"):
         d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": doc["sky"]}}
+    if doc.get("sky_map"):
+        # The renderer's --sky-map convention is Mitsuba's envmap, turned
+        # about +Y as its to_world rotation is.
+        m = doc["sky_map"]
+        d["sky"] = {"type": "envmap", "filename": m["path"], "scale": m["strength"],
+                    "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], m["rotation_degrees"])}
     if args.image:
         return render_image(mi, dr, d, doc["camera"], args)
     scene = mi.load_dict(d)

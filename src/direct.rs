@@ -48,6 +48,8 @@ pub struct DirectLight<'a> {
     strata: u32,
     /// Offset of ray ends off their surfaces, m.
     eps: f32,
+    /// What camera rays that leave the scene see.
+    sky: crate::scene::Background<'a>,
 }
 
 pub use crate::sampling::ELEMENT_POINTS;
@@ -141,9 +143,9 @@ pub struct Image {
     /// Per pixel, the mean texture reflectance over its samples (1 where
     /// they meet no textured polygon).
     pub texture: Vec<[f32; 3]>,
-    /// Per pixel, the share of its samples whose camera ray left the scene
-    /// (where the sky shows).
-    pub escaped: Vec<f32>,
+    /// Per pixel, the sky's radiance along its samples' camera rays that
+    /// left the scene, over all its samples (what the sky adds there).
+    pub sky: Vec<[f32; 3]>,
     /// Per pixel, with a final gather ([`Gather`]), what its samples
     /// gathered (else empty).
     pub gathered: Vec<GatherPixel>,
@@ -163,7 +165,7 @@ impl Image {
             direct: pixels.iter().map(|p| p.direct).collect(),
             seen,
             texture: pixels.iter().map(|p| p.texture).collect(),
-            escaped: pixels.iter().map(|p| p.escaped).collect(),
+            sky: pixels.iter().map(|p| p.sky).collect(),
             gathered: match gathered {
                 true => pixels.iter().map(|p| p.gathered).collect(),
                 false => Vec::new(),
@@ -179,7 +181,7 @@ struct PixelSums {
     /// 1 + the last polygon a sample saw (0: none).
     polygon: u32,
     texture: [f32; 3],
-    escaped: f32,
+    sky: [f32; 3],
     gathered: GatherPixel,
 }
 
@@ -211,6 +213,7 @@ impl<'a> DirectLight<'a> {
             textures: scene.polygons.iter().map(|p| p.texture.as_ref()).collect(),
             strata: strata.max(1),
             eps: 1e-5 * scene.extent().max(1e-6),
+            sky: scene.background(),
         }
     }
 
@@ -454,7 +457,8 @@ impl<'a> DirectLight<'a> {
                         .nearest_facing(camera.position, dir, depth[0], depth[1], 1e-5)
                 else {
                     texture.iter_mut().for_each(|t| *t += 1.0);
-                    out.escaped += 1.0 / per_pixel as f32;
+                    let sky = self.sky.radiance(dir.normalize());
+                    (0..3).for_each(|c| out.sky[c] += sky[c] / per_pixel as f32);
                     continue;
                 };
                 out.polygon = hit.polygon + 1;
@@ -487,7 +491,7 @@ impl<'a> DirectLight<'a> {
             direct: [0.0; 3],
             polygon: 0,
             texture: [1.0; 3],
-            escaped: 0.0,
+            sky: [0.0; 3],
             gathered: GatherPixel::default(),
         };
         let mut pixels = vec![blank; (width * height) as usize];

@@ -85,9 +85,14 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
         .iter()
         .map(crate::report::LightSummary::of)
         .collect();
+    // The map as Mitsuba's envmap takes it: file, turn about +Y, scale.
+    let sky_map = scene.sky_map.as_ref().map(|m| {
+        let path = std::fs::canonicalize(&m.path).unwrap_or_else(|_| m.path.clone().into());
+        serde_json::json!({ "path": path, "rotation_degrees": m.rotation, "strength": m.strength })
+    });
     output::write_json(
         path,
-        &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky }),
+        &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky, "sky_map": sky_map }),
     )?;
     Ok(())
 }

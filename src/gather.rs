@@ -19,6 +19,7 @@ use crate::locate::{element_at, nearest_other};
 use crate::mesh::Mesh;
 use crate::rng::Rng;
 use crate::sampling::{cosine_direction, unit, Strata};
+use crate::scene::Background;
 use glam::Vec3;
 
 /// Gather rays per pixel by default (rounded to a square per image
@@ -34,17 +35,17 @@ pub struct Gather<'a> {
     reflected: Vec<[f32; 3]>,
     /// Per polygon, its emitted radiance.
     emitted: Vec<[f32; 3]>,
-    /// Radiance where a ray leaves the scene.
-    sky: [f32; 3],
+    /// What a ray that leaves the scene sees.
+    sky: Background<'a>,
     /// Gather rays per image sample: `side` x `side`.
     side: u32,
 }
 
 impl<'a> Gather<'a> {
     /// A gather over `mesh` whose elements show `radiance` (display
-    /// radiance, emission included) under a sky of radiance `sky`, with
+    /// radiance, emission included) under the sky `sky`, with
     /// `side` x `side` rays per image sample.
-    pub fn new(mesh: &'a Mesh, radiance: &[[f32; 3]], sky: [f32; 3], side: u32) -> Self {
+    pub fn new(mesh: &'a Mesh, radiance: &[[f32; 3]], sky: Background<'a>, side: u32) -> Self {
         let emitted: Vec<[f32; 3]> = mesh
             .polygons
             .iter()
@@ -119,7 +120,7 @@ impl<'a> Gather<'a> {
             let u2 = ((strata.first[1] + k / strata.side) as f32 + unit(rng)) / g;
             let dir = cosine_direction(poly.normal, poly.tangent, u1, u2);
             let radiance = match nearest_other(mesh, origin, dir, polygon) {
-                None => self.sky,
+                None => self.sky.radiance(dir.normalize()),
                 // One-sided surfaces are black behind.
                 Some(hit) if mesh.polygons[hit.polygon as usize].normal.dot(dir) >= 0.0 => continue,
                 Some(hit) => {
@@ -274,7 +275,15 @@ mod tests {
             .iter()
             .map(|e| [0.25 + if e.polygon == 3 { 2.0 } else { 0.0 }; 3])
             .collect();
-        let g = Gather::new(&mesh, &radiance, [9.0; 3], 4);
+        let g = Gather::new(
+            &mesh,
+            &radiance,
+            Background {
+                uniform: [9.0; 3],
+                map: None,
+            },
+            4,
+        );
         let sum = g.incoming(Vec3::new(0.3, 0.0, 0.6), 2, &mut Rng(7), Strata::whole(4));
         for c in sum {
             assert!((c / 16.0 - 0.25).abs() < 1e-6, "{sum:?}");
@@ -288,7 +297,15 @@ mod tests {
         let floor = Polygon::square(Vec3::ZERO, 1.0, Vec3::Z, Vec3::X, [0.5; 3], [0.0; 3]);
         let mesh = mesh_of(vec![floor]);
         let radiance = vec![[1.0; 3]; mesh.elements.len()];
-        let g = Gather::new(&mesh, &radiance, [3.0, 2.0, 1.0], 2);
+        let g = Gather::new(
+            &mesh,
+            &radiance,
+            Background {
+                uniform: [3.0, 2.0, 1.0],
+                map: None,
+            },
+            2,
+        );
         let sum = g.incoming(Vec3::ZERO, 0, &mut Rng(1), Strata::whole(2));
         assert_eq!(sum, [12.0, 8.0, 4.0]);
     }

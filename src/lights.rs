@@ -21,7 +21,7 @@ use crate::mesh::Mesh;
 use crate::raytrace::{Bvh, Hints, RECENT_HINTS};
 use crate::rng::Rng;
 use crate::sampling::{in_parallel, point_in, unit, RayStart};
-use crate::scene::{Light, LightKind};
+use crate::scene::{Background, Light, LightKind, SkyMap};
 use glam::Vec3;
 
 pub use crate::sampling::ELEMENT_POINTS;
@@ -204,11 +204,11 @@ fn frame(n: Vec3) -> (Vec3, Vec3) {
     (t, n.cross(t))
 }
 
-/// What `lights` and the sky of radiance `sky` deliver to every element of
+/// What `lights` and the sky `sky` deliver to every element of
 /// `mesh` (its [`Mesh::occluders`] give visibility): the mean over
 /// [`ELEMENT_POINTS`]^2 jittered points of each element. Empty when there
 /// are no lights and no sky.
-pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Option<[f64; 3]>) -> LightField {
+pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Background) -> LightField {
     element_field_reusing(mesh, lights, sky, None)
 }
 
@@ -221,10 +221,10 @@ pub fn element_field(mesh: &Mesh, lights: &[Light], sky: Option<[f64; 3]>) -> Li
 pub fn element_field_reusing(
     mesh: &Mesh,
     lights: &[Light],
-    sky: Option<[f64; 3]>,
+    sky: Background,
     kept: Option<&KeptField>,
 ) -> LightField {
-    let sky = sky.filter(|s| s.iter().any(|&l| l > 0.0));
+    let sky = (!sky.is_dark()).then_some(sky);
     if lights.is_empty() && sky.is_none() {
         return LightField::default();
     }
@@ -301,14 +301,14 @@ fn pool_sky_by_patch(
     }
 }
 
-/// Element `j`'s mean irradiance from the lights, from the sky (lit by
-/// `sky.0`), and the lights' part that is directional (sum over RGB), over
-/// jittered points on it, each with shadow rays (`sky.1` x `sky.1` sky
-/// directions a point).
+/// Element `j`'s mean irradiance from the lights, from the sky `sky.0`,
+/// and the lights' part that is directional (sum over RGB), over jittered
+/// points on it, each with shadow rays (`sky.1` x `sky.1` sky directions a
+/// point for the sky's floor, as many again for a map's rest).
 fn element_light(
     mesh: &Mesh,
     lights: &[Light],
-    sky: Option<([f64; 3], u32)>,
+    sky: Option<(Background, u32)>,
     j: usize,
 ) -> ([f64; 3], [f64; 3], f64) {
     let (eps, bvh) = (mesh.ray_offset, &mesh.occluders);
@@ -350,7 +350,7 @@ fn element_light(
     if weight <= 0.0 {
         return ([0.0; 3], [0.0; 3], 0.0);
     }
-    let Some((radiance, rays)) = sky else {
+    let Some((background, rays)) = sky else {
         return (direct.map(|d| d / weight), [0.0; 3], parallel / weight);
     };
     let at = SkyPoints {
@@ -359,12 +359,20 @@ fn element_light(
         polygon: e.polygon,
         eps,
     };
-    let open = at.share(bvh, rays, &mut rng, &mut sky_hints);
-    (
-        direct.map(|d| d / weight),
-        radiance.map(|l| std::f64::consts::PI * l * open),
-        parallel / weight,
-    )
+    // The floor lights as a uniform sky: pi L times the open share of the
+    // cosine-weighted hemisphere (exact over an open floor); a map's rest
+    // by directions drawn from its brightness.
+    let floor = background.floor();
+    let mut sky = [0.0; 3];
+    if floor.iter().any(|&l| l > 0.0) {
+        let open = at.share(bvh, rays, &mut rng, &mut sky_hints);
+        sky = floor.map(|l| std::f64::consts::PI * l * open);
+    }
+    if let Some(map) = background.map.filter(|m| m.has_rest()) {
+        let rest = at.map_irradiance(bvh, map, rays, &mut rng, &mut sky_hints);
+        (0..3).for_each(|c| sky[c] += rest[c]);
+    }
+    (direct.map(|d| d / weight), sky, parallel / weight)
 }
 
 /// An element's points (and their area weights) as its sky rays leave them.
@@ -399,6 +407,47 @@ impl SkyPoints<'_> {
             open / weight
         } else {
             0.0
+        }
+    }
+
+    /// The points' weighted irradiance from the rest of `map` (above its
+    /// floor), with `rays` x `rays` directions a point drawn in proportion
+    /// to its brightness, all of them one stratification of the map.
+    fn map_irradiance(
+        &self,
+        bvh: &Bvh,
+        map: &SkyMap,
+        rays: u32,
+        rng: &mut Rng,
+        hints: &mut Hints,
+    ) -> [f64; 3] {
+        let side = ELEMENT_POINTS;
+        let grid = f64::from(side * rays);
+        let (mut sum, mut weight) = ([0.0; 3], 0.0);
+        for (q, &(x, jac)) in (0..).zip(self.points) {
+            let origin = x + self.normal * self.eps;
+            let mut e = [0.0; 3];
+            for i in 0..rays * rays {
+                let u1 = (f64::from(q % side * rays + i % rays) + rng.unit()) / grid;
+                let u2 = (f64::from(q / side * rays + i / rays) + rng.unit()) / grid;
+                let Some((d, w)) = map.sample(u1, u2) else {
+                    continue;
+                };
+                let cos = f64::from(d.dot(self.normal));
+                let skip = [self.polygon, self.polygon];
+                if cos <= 0.0 || bvh.occluded_recent(origin, d, 0.0, f32::INFINITY, skip, hints) {
+                    continue;
+                }
+                (0..3).for_each(|c| e[c] += w[c] * cos);
+            }
+            let jac = f64::from(jac);
+            (0..3).for_each(|c| sum[c] += e[c] / f64::from(rays * rays) * jac);
+            weight += jac;
+        }
+        if weight > 0.0 {
+            sum.map(|s| s / weight)
+        } else {
+            [0.0; 3]
         }
     }
 }

@@ -64,7 +64,7 @@ impl LitMesh {
     /// emitters traced ([`DirectLight::emitter_field`]).
     pub fn lit(mesh: Mesh, scene: &Scene, kept: Option<&KeptField>) -> Self {
         let light_field =
-            crate::lights::element_field_reusing(&mesh, &scene.lights, scene.sky, kept);
+            crate::lights::element_field_reusing(&mesh, &scene.lights, scene.background(), kept);
         let emitter_field = DirectLight::emitter_field(scene, &mesh);
         Self {
             mesh,

@@ -183,7 +183,7 @@ fn write_scene(
     }
     if let Some(path) = nodes {
         let mut scene = scene::open(name)?;
-        lights.apply(&mut scene);
+        lights.apply(&mut scene)?;
         radiosity::export::write_nodes(&scene, path)?;
         eprintln!("wrote {}", path.display());
     }
@@ -398,7 +398,7 @@ fn open_everywhere(
             if let Some(name) = &args.camera {
                 s.use_camera(name)?;
             }
-            args.lights.apply(&mut s);
+            args.lights.apply(&mut s)?;
             s.check_lit()?;
             Ok(s)
         })

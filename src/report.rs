@@ -33,6 +33,9 @@ pub struct Report {
     pub lights: Vec<LightSummary>,
     /// The uniform sky's radiance (`--sky`), W sr^-1 m^-2 per channel.
     pub sky: Option<[f64; 3]>,
+    /// The environment map (`--sky-map`): its file, size, turn and strength.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sky_map: Option<String>,
     /// Wall-clock seconds per phase (rank 0's; every rank's are in `parallel`).
     pub timings: Timings,
     /// Ranks, their grid and tiles, the exchange, per-rank phases and traffic, load balance.

@@ -713,6 +713,7 @@ pub fn build_report(
             .map(crate::report::LightSummary::of)
             .collect(),
         sky: scene.sky,
+        sky_map: scene.sky_map.as_ref().map(|m| m.describe()),
         refinement: Refinement::default(),
         bake: None,
         counts: Counts {

@@ -126,18 +126,11 @@ pub fn camera_image(
     // The mesh's hierarchy holds the same polygons (built once per mesh).
     let light = DirectLight::new(scene, &mesh.occluders, strata);
     let (near, far) = view_depth_range(mesh, camera);
-    // Where a sample's ray leaves the scene the sky shows, at its radiance.
-    let sky = if rays.background {
-        scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32)
-    } else {
-        [0.0; 3]
-    };
     let size = [view.width, view.height];
     let ss = view.supersample.max(1);
     let gather = (rays.gather > 0).then(|| {
         let side = (f64::from(rays.gather) / f64::from(ss * ss)).sqrt().ceil() as u32;
-        let rays_sky = scene.sky.unwrap_or([0.0; 3]).map(|l| l as f32);
-        Gather::new(mesh, radiance, rays_sky, side)
+        Gather::new(mesh, radiance, scene.background(), side)
     });
     let traced = light.image(camera, size, ss, [near, far], gather.as_ref());
     let rest = indirect_part(mesh, parts, &light, &traced.seen);
@@ -153,12 +146,14 @@ pub fn camera_image(
     if gather.is_some() {
         crate::gather::blend(&mut pixels, &traced.gathered, size[0] as usize);
     }
-    let traced_parts = traced.direct.iter().zip(&traced.escaped);
-    for (p, (d, escaped)) in pixels.iter_mut().zip(traced_parts) {
+    // Where a sample's ray leaves the scene the sky shows, at its radiance.
+    let shown_sky = if rays.background { 1.0 } else { 0.0 };
+    let traced_parts = traced.direct.iter().zip(&traced.sky);
+    for (p, (d, sky)) in pixels.iter_mut().zip(traced_parts) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution
             // underestimated can dip below 0 where the traced light is small.
-            p[c] = (p[c] + d[c]).max(0.0) + escaped * sky[c];
+            p[c] = (p[c] + d[c]).max(0.0) + shown_sky * sky[c];
         }
     }
     Ok(pixels)

@@ -300,6 +300,9 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions, rasteriser: Rasteriser) 
     if let Some(sky) = scene.sky {
         geometry.extend_from_slice(format!("sky {sky:?};").as_bytes());
     }
+    if let Some(map) = &scene.sky_map {
+        geometry.extend_from_slice(format!("{};", map.describe()).as_bytes());
+    }
     let settings = format!(
         "{} {} {} {} {} {} {} {} {}",
         opts.resolution,

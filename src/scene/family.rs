@@ -34,6 +34,9 @@ pub const KINDS: [&str; 12] = [
     "furnished",
 ];
 
+/// The name of the sun a generated room carries (a sky map replaces it).
+pub const CARRIED_SUN: &str = "window sun";
+
 /// The sun and sky `family-KIND-SEED` is lit by beside its own emitters
 /// (`furnished` rooms: through their window), if any.
 pub fn family_lights(name: &str) -> Option<(super::Light, [f64; 3])> {

@@ -141,7 +141,7 @@ impl Light {
 
 /// The command-line flags that light a scene (the renderer's and the
 /// viewer's): `--sun`, `--sky` and `--photometric`.
-#[derive(Clone, Debug, Default, clap::Args)]
+#[derive(Clone, Debug, clap::Args)]
 pub struct LightArgs {
     /// A sun: X,Y,Z,E (the direction toward it, Y up, and its irradiance in
     /// W/m^2 on a surface facing it; X,Y,Z,R,G,B for a colour). Shoots once,
@@ -152,6 +152,24 @@ pub struct LightArgs {
     /// seen along every direction that leaves the scene.
     #[arg(long, value_parser = parse_sky)]
     pub sky: Option<[f64; 3]>,
+    /// An environment map: an equirectangular image (.hdr or .exr) of
+    /// linear radiance, W sr^-1 m^-2, +Y up, oriented as Mitsuba's envmap
+    /// (the middle of the image toward +Z). It replaces the sun and sky a
+    /// generated room carries; added to --sky.
+    #[arg(long, value_name = "FILE")]
+    pub sky_map: Option<std::path::PathBuf>,
+    /// Turns the sky map about +Y by DEGREES (right-handed: 90 takes the
+    /// middle of the image from +Z to +X; 90 matches Blender's world).
+    #[arg(
+        long,
+        value_name = "DEGREES",
+        default_value_t = 0.0,
+        allow_hyphen_values = true
+    )]
+    pub sky_rotation: f64,
+    /// Multiplies the sky map's radiance.
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    pub sky_strength: f64,
     /// Read the file's light units as photometric: point and spot
     /// intensities as candela, directional ones as lux, emission as nits
     /// (683 lm/W). --sun and --sky stay radiometric.
@@ -159,11 +177,37 @@ pub struct LightArgs {
     pub photometric: bool,
 }
 
+impl Default for LightArgs {
+    /// No lights, as the flags' defaults are (a map's strength 1).
+    fn default() -> Self {
+        LightArgs {
+            sun: None,
+            sky: None,
+            sky_map: None,
+            sky_rotation: 0.0,
+            sky_strength: 1.0,
+            photometric: false,
+        }
+    }
+}
+
 impl LightArgs {
-    /// Lights `scene` as the flags say (after loading it).
-    pub fn apply(&self, scene: &mut super::Scene) {
+    /// Lights `scene` as the flags say (after loading it); reads the sky
+    /// map.
+    pub fn apply(&self, scene: &mut super::Scene) -> Result<(), super::SkyMapError> {
         if self.photometric {
             scene.read_photometric();
+        }
+        if let Some(path) = &self.sky_map {
+            let map = super::SkyMap::load(path, self.sky_rotation, self.sky_strength)?;
+            // A map is the whole environment, its sun included.
+            scene
+                .lights
+                .retain(|l| l.name != super::family::CARRIED_SUN);
+            if super::family::family_lights(&scene.name).is_some() {
+                scene.sky = None;
+            }
+            scene.sky_map = Some(std::sync::Arc::new(map));
         }
         if let Some(sun) = &self.sun {
             scene.lights.push(sun.clone());
@@ -171,6 +215,7 @@ impl LightArgs {
         if self.sky.is_some() {
             scene.sky = self.sky;
         }
+        Ok(())
     }
 }
 

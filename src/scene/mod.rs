@@ -10,6 +10,7 @@ pub mod family;
 mod gltf_load;
 mod gltf_write;
 pub mod light;
+pub mod sky;
 pub mod texture;
 pub mod tolerate;
 
@@ -17,6 +18,7 @@ pub use builtin::{builtin_gltf, builtin_names};
 pub use gltf_load::{load, load_slice, polygon_normal};
 pub use gltf_write::{axis_rect, glb_from, to_glb, write_gltf, GltfSurface};
 pub use light::{parse_sky, parse_sun, Light, LightKind, LUMENS_PER_WATT};
+pub use sky::{Background, SkyMap, SkyMapError};
 pub use texture::{TexMap, Texture};
 
 use glam::{Quat, Vec3};
@@ -178,9 +180,20 @@ pub struct Scene {
     /// A uniform sky's radiance (W sr^-1 m^-2 per channel) seen by every
     /// direction that leaves the scene (`--sky`).
     pub sky: Option<[f64; 3]>,
+    /// An environment map seen along every direction that leaves the scene
+    /// (`--sky-map`), added to the uniform sky.
+    pub sky_map: Option<std::sync::Arc<SkyMap>>,
 }
 
 impl Scene {
+    /// What a ray that leaves the scene sees: the uniform sky and the map.
+    pub fn background(&self) -> Background<'_> {
+        Background {
+            uniform: self.sky.unwrap_or([0.0; 3]),
+            map: self.sky_map.as_deref(),
+        }
+    }
+
     /// Axis-aligned bounds (min, max) of all vertices.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         self.polygons
@@ -204,7 +217,7 @@ impl Scene {
             .lights
             .iter()
             .any(|l| l.intensity.iter().any(|&i| i > 0.0));
-        let sky = self.sky.is_some_and(|s| s.iter().any(|&l| l > 0.0));
+        let sky = !self.background().is_dark();
         if lights || sky || self.polygons.iter().any(Polygon::is_emitter) {
             Ok(())
         } else {
@@ -269,6 +282,9 @@ impl Scene {
 /// Why a scene could not be loaded. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
+    /// The sky map (`--sky-map`) could not be used.
+    #[error(transparent)]
+    SkyMap(#[from] SkyMapError),
     /// The file could not be read.
     #[error("cannot read scene '{path}': {source}")]
     Read {

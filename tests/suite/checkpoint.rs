@@ -14,7 +14,8 @@ fn cornell(opts: &RenderOptions, stop_at: Option<u64>) -> Rendered {
     solve_scene(&scene, opts, stop_at)
 }
 
-/// The Cornell box with a point light, a sun and a sky besides its panel.
+/// The Cornell box with a point light, a sun, a sky and a sky map besides
+/// its panel.
 fn lit_cornell() -> radiosity::scene::Scene {
     use radiosity::scene::{Light, LightKind};
     let mut scene = radiosity::scene::open("cornell").expect("built-in scene");
@@ -30,7 +31,17 @@ fn lit_cornell() -> radiosity::scene::Scene {
         .lights
         .push(Light::sun(glam::Vec3::new(0.2, 0.4, 1.0), [2.0; 3]));
     scene.sky = Some([0.1, 0.12, 0.2]);
+    scene.sky_map = Some(Arc::new(sky_map(0.0)));
     scene
+}
+
+/// An 8 x 4 sky map brighter toward the zenith and on one side, turned
+/// `turn` degrees.
+fn sky_map(turn: f64) -> radiosity::scene::SkyMap {
+    let texels = (0..32u32)
+        .map(|k| [0.05 * (4 - k / 8) as f32 + if k % 8 < 2 { 0.3 } else { 0.0 }; 3])
+        .collect();
+    radiosity::scene::SkyMap::from_texels("test", [8, 4], texels, [turn, 1.0]).expect("a map")
 }
 
 fn solve_scene(
@@ -195,7 +206,7 @@ fn a_checkpoint_from_other_settings_is_refused() {
 }
 
 #[test]
-fn a_solve_with_lights_sun_and_sky_resumes_to_the_same_bits_and_other_lights_are_refused() {
+fn a_solve_with_lights_sun_sky_and_a_map_resumes_to_the_same_bits_and_other_lights_are_refused() {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join("lit.ckpt");
     let scene = lit_cornell();
@@ -225,13 +236,17 @@ fn a_solve_with_lights_sun_and_sky_resumes_to_the_same_bits_and_other_lights_are
     same_solution(&solve_scene(&scene, &opts, None), &straight);
     let mut brighter = scene.clone();
     brighter.sky = Some([0.2, 0.12, 0.2]);
-    let err = render(gpu(), &brighter, &opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    let mut turned = scene.clone();
+    turned.sky_map = Some(Arc::new(sky_map(90.0)));
+    for other in [brighter, turned] {
+        let err = render(gpu(), &other, &opts, Duration::ZERO, &mut |_| {})
+            .err()
+            .expect("refused");
+        assert!(
+            err.to_string().contains("other geometry or settings"),
+            "{err}"
+        );
+    }
 }
 
 /// A signal during the refinement pass stops the pass at once (it used to

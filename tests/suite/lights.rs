@@ -16,7 +16,7 @@ const RHO: f64 = 0.5;
 
 /// Surfaces plus `lights` (glTF light objects, each with the node
 /// transform fields to put it at), loaded through the public loader.
-fn scene_with(
+pub(crate) fn scene_with(
     surfaces: &[scene::GltfSurface],
     lights: &[(serde_json::Value, serde_json::Value)],
 ) -> Scene {
@@ -40,12 +40,12 @@ fn scene_with(
     scene::load_slice(&serde_json::to_vec(&doc).expect("JSON"), "lights").expect("loads")
 }
 
-fn solve(scene: &Scene) -> Rendered {
+pub(crate) fn solve(scene: &Scene) -> Rendered {
     render(gpu(), scene, &tight(1e-6), Duration::ZERO, &mut |_| {}).expect("render")
 }
 
 /// A floor rectangle facing +y at y = 0.
-fn floor(name: &str, lo: [f32; 2], hi: [f32; 2]) -> scene::GltfSurface {
+pub(crate) fn floor(name: &str, lo: [f32; 2], hi: [f32; 2]) -> scene::GltfSurface {
     surface(
         name,
         vec![rect(1, 0.0, [lo[1], lo[0]], [hi[1], hi[0]], true)],
@@ -59,12 +59,12 @@ fn solid_angle(a: f64, b: f64, h: f64) -> f64 {
     4.0 * (a * b / ((a * a + h * h) * (b * b + h * h)).sqrt()).asin()
 }
 
-fn irradiance(r: &Rendered, node: &str) -> f64 {
+pub(crate) fn irradiance(r: &Rendered, node: &str) -> f64 {
     let s = crate::common::node(r, node);
     s.radiosity[0] / RHO
 }
 
-fn check(what: &str, got: f64, want: f64, tolerance: f64) {
+pub(crate) fn check(what: &str, got: f64, want: f64, tolerance: f64) {
     eprintln!(
         "{what}: {got:.5} (closed form {want:.5}, {:+.3} %)",
         100.0 * (got / want - 1.0)
@@ -197,7 +197,7 @@ fn photometric_units_read_candela_as_683_lumens_per_watt() {
         photometric: true,
         ..Default::default()
     };
-    args.apply(&mut scene);
+    args.apply(&mut scene).expect("lit");
     assert!((scene.lights[0].intensity[0] - 1.0).abs() < 1e-12);
 }
 

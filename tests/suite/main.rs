@@ -22,5 +22,6 @@ mod real_files;
 mod reference;
 mod refine;
 mod shaders;
+mod sky_maps;
 mod textures;
 mod traps;

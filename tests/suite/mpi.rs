@@ -791,3 +791,31 @@ fn a_cluttered_scene_gives_the_same_bits_culled_on_one_rank_and_on_five() {
     same_result(&one, &lattice, "lattice");
     assert_eq!(lattice["timings"]["occluded_per_shot"].as_f64(), Some(0.0));
 }
+
+#[test]
+fn a_sky_map_gives_the_same_bits_on_every_rank_count() {
+    // The map's rays are drawn per element from its own seed, as the
+    // uniform sky's are: every rank computes the same field.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let map = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/docs/references/maps/window-sun.exr"
+    );
+    let args = [
+        "--sky-map",
+        map,
+        "--sky-rotation",
+        "10",
+        "--max-shots",
+        "60",
+    ];
+    let scene = "family-furnished-1";
+    let one = mpirun_scene(1, dir.path(), "one", scene, &args);
+    assert!(one["sky_map"]
+        .as_str()
+        .is_some_and(|m| m.contains("window-sun.exr")));
+    let two = mpirun_scene(2, dir.path(), "two", scene, &args);
+    same_result(&one, &two, "2 ranks under a sky map");
+    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+    assert!(image("one") == image("two"), "the images differ");
+}

@@ -162,7 +162,7 @@ fn check<const N: usize>(scenes: [&str; N]) {
 }
 
 /// [`check`] of one scene `s` against the reference named `scene`.
-fn check_scene(scene: &str, s: &radiosity::scene::Scene) {
+pub(crate) fn check_scene(scene: &str, s: &radiosity::scene::Scene) {
     let opts = RenderOptions {
         width: 0,
         ..RenderOptions::default()

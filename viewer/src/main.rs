@@ -20,7 +20,7 @@ fn run(args: Args) -> Result<()> {
     if let Some(name) = &args.camera {
         scene.use_camera(name)?;
     }
-    args.lights.apply(&mut scene);
+    args.lights.apply(&mut scene)?;
     scene.check_lit()?;
     let (w, h) = args
         .size

@@ -18,7 +18,8 @@ pub const SKY: f64 = 1.0;
 /// The sun and the sky a furnished room is lit by.
 pub fn lights() -> (Light, [f64; 3]) {
     let [x, y, z, e] = SUN;
-    let sun = crate::scene::parse_sun(&format!("{x},{y},{z},{e}")).expect("a valid sun");
+    let mut sun = crate::scene::parse_sun(&format!("{x},{y},{z},{e}")).expect("a valid sun");
+    sun.name = super::CARRIED_SUN.into();
     (sun, [SKY; 3])
 }
 
