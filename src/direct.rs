@@ -115,7 +115,8 @@ impl Pool {
             lights: [0.0; 3],
             unoccluded: vec![[0.0; 3]; emitters],
             rays: vec![[0.0; 2]; emitters],
-            hints: vec![[None; crate::raytrace::RECENT_HINTS]; lights + emitters],
+            // One more for a sky map's sun, last.
+            hints: vec![[None; crate::raytrace::RECENT_HINTS]; lights + emitters + 1],
         }
     }
 
@@ -248,6 +249,16 @@ impl<'a> DirectLight<'a> {
         let n = self.normals[polygon as usize];
         let origin = x + n * self.eps;
         let (light_hints, emitter_hints) = pool.hints.split_at_mut(self.lights.len());
+        let (map_hint, emitter_hints) = emitter_hints.split_last_mut().expect("the map's hint");
+        if let Some(map) = self.sky.map.filter(|m| m.has_sun()) {
+            let from = RayStart {
+                origin,
+                normal: n,
+                polygon,
+            };
+            let e = map_sun(map, self.bvh, from, rng, strata, map_hint);
+            (0..3).for_each(|c| pool.lights[c] += weight[c] * e[c]);
+        }
         for (light, hint) in self.lights.iter().zip(light_hints) {
             let d = crate::lights::irradiance(light, self.bvh, x, n, polygon, self.eps, hint);
             for c in 0..3 {
@@ -324,8 +335,10 @@ impl<'a> DirectLight<'a> {
     /// tracing them would cost more than [`MAX_TRACED_PAIRS`] element and
     /// emitter pairs (they then shoot by hemisphere, as other patches).
     pub fn emitter_field(scene: &Scene, mesh: &Mesh) -> Option<EmitterField> {
+        // The emitters alone: the lights and a map's sun are `lights`'.
         let light = DirectLight {
             lights: Vec::new(),
+            sky: crate::scene::Background::default(),
             ..DirectLight::new(scene, &mesh.occluders, ELEMENT_RAYS)
         };
         let pairs = light.emitters.len().saturating_mul(mesh.elements.len());
@@ -498,6 +511,37 @@ impl<'a> DirectLight<'a> {
         in_parallel(&mut pixels, work);
         Image::of(&pixels, self.normals.len(), gather.is_some())
     }
+}
+
+/// The irradiance from `map`'s sun at `from`: one direction drawn from the
+/// sun's brightness in each cell `strata` says of a stratification of the
+/// unit square, kept where its shadow ray leaves the scene.
+fn map_sun(
+    map: &crate::scene::SkyMap,
+    bvh: &Bvh,
+    from: RayStart,
+    rng: &mut Rng,
+    strata: Strata,
+    hints: &mut crate::raytrace::Hints,
+) -> [f64; 3] {
+    let g = f64::from(strata.grid);
+    let mut sum = [0.0; 3];
+    let skip = [from.polygon, from.polygon];
+    for i in 0..strata.side * strata.side {
+        let u1 = (f64::from(strata.first[0] + i % strata.side) + rng.unit()) / g;
+        let u2 = (f64::from(strata.first[1] + i / strata.side) + rng.unit()) / g;
+        let Some(m) = map.sample_sun(u1, u2) else {
+            continue;
+        };
+        let cos = f64::from(m.direction.dot(from.normal));
+        if cos > 0.0
+            && !bvh.occluded_recent(from.origin, m.direction, 0.0, f32::INFINITY, skip, hints)
+        {
+            (0..3).for_each(|c| sum[c] += m.sun[c] * cos);
+        }
+    }
+    let n = f64::from((strata.side * strata.side).max(1));
+    sum.map(|s| s / n)
 }
 
 #[cfg(test)]

@@ -120,7 +120,8 @@ impl<'a> Gather<'a> {
             let u2 = ((strata.first[1] + k / strata.side) as f32 + unit(rng)) / g;
             let dir = cosine_direction(poly.normal, poly.tangent, u1, u2);
             let radiance = match nearest_other(mesh, origin, dir, polygon) {
-                None => self.sky.radiance(dir.normalize()),
+                // A map's sun is traced as direct light.
+                None => self.sky.radiance_without_sun(dir.normalize()),
                 // One-sided surfaces are black behind.
                 Some(hit) if mesh.polygons[hit.polygon as usize].normal.dot(dir) >= 0.0 => continue,
                 Some(hit) => {

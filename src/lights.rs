@@ -368,11 +368,17 @@ fn element_light(
         let open = at.share(bvh, rays, &mut rng, &mut sky_hints);
         sky = floor.map(|l| std::f64::consts::PI * l * open);
     }
+    let mut direct = direct.map(|d| d / weight);
+    let mut parallel = parallel / weight;
     if let Some(map) = background.map.filter(|m| m.has_rest()) {
-        let rest = at.map_irradiance(bvh, map, rays, &mut rng, &mut sky_hints);
+        // A map's sun is direct light (the image traces it again); like a
+        // directional light's, its power is what it delivers.
+        let [rest, sun] = at.map_irradiance(bvh, map, rays, &mut rng, &mut sky_hints);
         (0..3).for_each(|c| sky[c] += rest[c]);
+        (0..3).for_each(|c| direct[c] += sun[c]);
+        parallel += sun.iter().sum::<f64>();
     }
-    (direct.map(|d| d / weight), sky, parallel / weight)
+    (direct, sky, parallel)
 }
 
 /// An element's points (and their area weights) as its sky rays leave them.
@@ -412,7 +418,8 @@ impl SkyPoints<'_> {
 
     /// The points' weighted irradiance from the rest of `map` (above its
     /// floor), with `rays` x `rays` directions a point drawn in proportion
-    /// to its brightness, all of them one stratification of the map.
+    /// to its brightness, all of them one stratification of the map: what
+    /// is not the map's sun, and the sun's.
     fn map_irradiance(
         &self,
         bvh: &Bvh,
@@ -420,34 +427,37 @@ impl SkyPoints<'_> {
         rays: u32,
         rng: &mut Rng,
         hints: &mut Hints,
-    ) -> [f64; 3] {
+    ) -> [[f64; 3]; 2] {
         let side = ELEMENT_POINTS;
         let grid = f64::from(side * rays);
-        let (mut sum, mut weight) = ([0.0; 3], 0.0);
+        let (mut sum, mut weight) = ([[0.0; 3]; 2], 0.0);
         for (q, &(x, jac)) in (0..).zip(self.points) {
             let origin = x + self.normal * self.eps;
-            let mut e = [0.0; 3];
+            let mut e = [[0.0; 3]; 2];
             for i in 0..rays * rays {
                 let u1 = (f64::from(q % side * rays + i % rays) + rng.unit()) / grid;
                 let u2 = (f64::from(q / side * rays + i / rays) + rng.unit()) / grid;
-                let Some((d, w)) = map.sample(u1, u2) else {
+                let Some(m) = map.sample(u1, u2) else {
                     continue;
                 };
+                let (d, skip) = (m.direction, [self.polygon, self.polygon]);
                 let cos = f64::from(d.dot(self.normal));
-                let skip = [self.polygon, self.polygon];
                 if cos <= 0.0 || bvh.occluded_recent(origin, d, 0.0, f32::INFINITY, skip, hints) {
                     continue;
                 }
-                (0..3).for_each(|c| e[c] += w[c] * cos);
+                (0..3).for_each(|c| e[0][c] += m.sky[c] * cos);
+                (0..3).for_each(|c| e[1][c] += m.sun[c] * cos);
             }
-            let jac = f64::from(jac);
-            (0..3).for_each(|c| sum[c] += e[c] / f64::from(rays * rays) * jac);
-            weight += jac;
+            let share = f64::from(jac) / f64::from(rays * rays);
+            for (s, e) in sum.iter_mut().zip(e) {
+                (0..3).for_each(|c| s[c] += e[c] * share);
+            }
+            weight += f64::from(jac);
         }
         if weight > 0.0 {
-            sum.map(|s| s / weight)
+            sum.map(|s| s.map(|x| x / weight))
         } else {
-            [0.0; 3]
+            [[0.0; 3]; 2]
         }
     }
 }

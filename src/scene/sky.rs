@@ -14,7 +14,10 @@
 //! texel), which lights like a uniform sky and is estimated as one, and the
 //! rest, which is sampled in proportion to its brightness times each
 //! texel's solid angle, so a small bright sun costs no more rays than a dull
-//! sky and a uniform map is exactly the uniform sky.
+//! sky and a uniform map is exactly the uniform sky. Of the rest, what is
+//! above [`SUN_CAP`] times the map's mean radiance (per channel) is its sun:
+//! direct light, which the camera image traces again per sample, as it does
+//! a `--sun`.
 
 use glam::Vec3;
 use std::f64::consts::PI;
@@ -41,6 +44,82 @@ pub enum SkyMapError {
     },
 }
 
+/// Radiance above this many times the map's mean (over the sphere, per
+/// channel) is the map's sun, traced per image sample: a clear sky's sun is
+/// thousands of times its mean, an overcast sky's brightest texels a few
+/// times (docs/notebook/sky-maps.md).
+pub const SUN_CAP: f64 = 8.0;
+
+/// A distribution over a map's texels in proportion to a weight times
+/// each texel's solid angle: cumulative shares of the rows, and of each
+/// row's texels.
+#[derive(Clone, Default)]
+struct Table {
+    /// Per row, the cumulative share up to and including it (the last 1).
+    rows: Vec<f64>,
+    /// Per texel, the cumulative share of its row.
+    columns: Vec<f64>,
+    /// The weight's integral over the sphere.
+    total: f64,
+}
+
+impl Table {
+    /// The table of `weight` (per texel, top row first) over a map of `size`.
+    fn build(size: [u32; 2], weight: impl Fn(usize) -> f64) -> Self {
+        let [w, h] = size.map(|s| s as usize);
+        let (mut columns, mut rows) = (vec![0.0; w * h], vec![0.0; h]);
+        let mut total = 0.0;
+        for y in 0..h {
+            let solid = row_solid_angle(y, size);
+            let mut acc = 0.0;
+            for x in 0..w {
+                acc += weight(x + y * w) * solid;
+                columns[x + y * w] = acc;
+            }
+            if acc > 0.0 {
+                columns[y * w..(y + 1) * w]
+                    .iter_mut()
+                    .for_each(|c| *c /= acc);
+            }
+            total += acc;
+            rows[y] = total;
+        }
+        if total > 0.0 {
+            rows.iter_mut().for_each(|r| *r /= total);
+        }
+        Table {
+            rows,
+            columns,
+            total,
+        }
+    }
+
+    /// The texel (u2 picks the row, u1 the texel in it; a stratified
+    /// square stays stratified) and where in it (x, y from 0 to 1).
+    fn pick(&self, size: [u32; 2], u1: f64, u2: f64) -> Option<(usize, f64, f64)> {
+        if self.total <= 0.0 {
+            return None;
+        }
+        let w = size[0] as usize;
+        let (y, fy) = pick(&self.rows, u2);
+        let (x, fx) = pick(&self.columns[y * w..(y + 1) * w], u1);
+        Some((x + y * w, fx, fy))
+    }
+}
+
+/// A direction drawn from a map, in world axes, and per channel its
+/// radiance over the density it was drawn with, split into the part that
+/// is not the sun and the sun's.
+#[derive(Clone, Copy, Debug)]
+pub struct MapSample {
+    /// The unit direction.
+    pub direction: Vec3,
+    /// The radiance above the floor that is not the sun's, over the density.
+    pub sky: [f64; 3],
+    /// The sun's radiance over the density.
+    pub sun: [f64; 3],
+}
+
 /// A loaded environment map, turned and scaled as the flags say, with what
 /// sampling it in proportion to its brightness needs.
 #[derive(Clone)]
@@ -57,13 +136,12 @@ pub struct SkyMap {
     texels: Vec<[f32; 3]>,
     /// Per channel, the darkest texel's radiance: lights like a uniform sky.
     floor: [f64; 3],
-    /// Per row, the cumulative share of the rest's power up to and including
-    /// it (the last is 1).
-    rows: Vec<f64>,
-    /// Per texel, the cumulative share of its row's power.
-    columns: Vec<f64>,
-    /// Integral over the sphere of the rest's brightness (W sr^-1 m^-2 sr).
-    total: f64,
+    /// Per channel, the radiance above which a texel's light is the sun's.
+    cap: [f64; 3],
+    /// The rest's brightness (above the floor), for the solution's rays.
+    rest: Table,
+    /// The sun's brightness, for the image's rays.
+    sun: Table,
     /// The turn as cos and sin.
     turn: [f32; 2],
     /// A hash of the texels, for the checkpoint's fingerprint.
@@ -160,9 +238,9 @@ impl SkyMap {
             strength,
             texels,
             floor,
-            rows: Vec::new(),
-            columns: Vec::new(),
-            total: 0.0,
+            cap: [f64::INFINITY; 3],
+            rest: Table::default(),
+            sun: Table::default(),
             turn: [theta.cos(), theta.sin()],
             digest,
         };
@@ -170,42 +248,30 @@ impl SkyMap {
         Ok(map)
     }
 
-    /// The cumulative tables of the rest (the map less its floor), each
-    /// texel weighted by its brightness times its solid angle.
+    /// The sun's cap and the sampling tables of the rest and the sun.
     fn build_sampling(&mut self) {
-        let [w, h] = self.size.map(|s| s as usize);
-        self.columns = vec![0.0; w * h];
-        self.rows = vec![0.0; h];
-        let mut total = 0.0;
-        for y in 0..h {
-            let solid = row_solid_angle(y, self.size);
-            let mut acc = 0.0;
-            for x in 0..w {
-                acc += self.rest(x + y * w) * solid;
-                self.columns[x + y * w] = acc;
-            }
-            if acc > 0.0 {
-                self.columns[y * w..(y + 1) * w]
-                    .iter_mut()
-                    .for_each(|c| *c /= acc);
-            }
-            total += acc;
-            self.rows[y] = total;
+        // The mean radiance over the sphere, per channel.
+        let mut mean = [0.0; 3];
+        let w = self.size[0] as usize;
+        for (k, t) in self.texels.iter().enumerate() {
+            let solid = row_solid_angle(k / w, self.size) / (4.0 * PI);
+            (0..3).for_each(|c| mean[c] += f64::from(t[c]) * solid);
         }
-        if total > 0.0 {
-            self.rows.iter_mut().for_each(|r| *r /= total);
-        }
-        self.total = total;
+        self.cap = [0, 1, 2].map(|c| (SUN_CAP * mean[c]).max(self.floor[c]));
+        self.rest = Table::build(self.size, |k| brightness(self.above_floor(k)));
+        self.sun = Table::build(self.size, |k| brightness(self.sun_of(k)));
     }
 
-    /// Texel `k`'s brightness above the floor.
-    fn rest(&self, k: usize) -> f64 {
+    /// Texel `k`'s radiance above the floor.
+    fn above_floor(&self, k: usize) -> [f64; 3] {
         let t = self.texels[k];
-        brightness(
-            [0, 1, 2]
-                .map(|c| f64::from(t[c]) - self.floor[c])
-                .map(|x| x.max(0.0)),
-        )
+        [0, 1, 2].map(|c| (f64::from(t[c]) - self.floor[c]).max(0.0))
+    }
+
+    /// Texel `k`'s radiance above the cap: the sun's.
+    fn sun_of(&self, k: usize) -> [f64; 3] {
+        let t = self.texels[k];
+        [0, 1, 2].map(|c| (f64::from(t[c]) - self.cap[c]).max(0.0))
     }
 
     /// Per channel, the radiance every direction has at least (the darkest
@@ -216,13 +282,25 @@ impl SkyMap {
 
     /// Whether anything is left above the floor (else the map is uniform).
     pub fn has_rest(&self) -> bool {
-        self.total > 0.0
+        self.rest.total > 0.0
+    }
+
+    /// Whether some of it is above the cap: a sun the image traces.
+    pub fn has_sun(&self) -> bool {
+        self.sun.total > 0.0
     }
 
     /// The radiance along the unit direction `d` (world axes): the texel
     /// it falls in.
     pub fn radiance(&self, d: Vec3) -> [f32; 3] {
         self.texels[self.texel_of(d)]
+    }
+
+    /// [`SkyMap::radiance`] less the sun's part (what the image does not
+    /// trace as direct light).
+    pub fn radiance_without_sun(&self, d: Vec3) -> [f32; 3] {
+        let t = self.texels[self.texel_of(d)];
+        [0, 1, 2].map(|c| (f64::from(t[c]).min(self.cap[c])) as f32)
     }
 
     /// The texel the world direction `d` falls in.
@@ -241,25 +319,47 @@ impl SkyMap {
     }
 
     /// A direction drawn from (u1, u2) in the unit square in proportion to
-    /// the rest's brightness (u2 picks the row, u1 the texel in it; a
-    /// stratified square stays stratified), and the rest's radiance over
-    /// its density there (per channel): the mean over many of
-    /// `weight * cos * visible` estimates the rest's irradiance. `None`
-    /// when the map has no rest.
-    pub fn sample(&self, u1: f64, u2: f64) -> Option<(Vec3, [f64; 3])> {
-        if self.total <= 0.0 {
+    /// the rest's brightness (above the floor), with the rest's radiance
+    /// over its density there: the mean over many of `(sky + sun) * cos *
+    /// visible` estimates the rest's irradiance. `None` when the map has no
+    /// rest.
+    pub fn sample(&self, u1: f64, u2: f64) -> Option<MapSample> {
+        let (k, fx, fy) = self.rest.pick(self.size, u1, u2)?;
+        let rest = self.above_floor(k);
+        let b = brightness(rest);
+        if b <= 0.0 {
             return None;
         }
+        let sun = self.sun_of(k);
+        let scale = self.rest.total / b;
+        Some(MapSample {
+            direction: self.direction_in(k, fx, fy),
+            sky: [0, 1, 2].map(|c| (rest[c] - sun[c]) * scale),
+            sun: sun.map(|s| s * scale),
+        })
+    }
+
+    /// A direction drawn in proportion to the sun's brightness (its `sky`
+    /// is 0): the image's rays. `None` when the map has no sun.
+    pub fn sample_sun(&self, u1: f64, u2: f64) -> Option<MapSample> {
+        let (k, fx, fy) = self.sun.pick(self.size, u1, u2)?;
+        let sun = self.sun_of(k);
+        let b = brightness(sun);
+        if b <= 0.0 {
+            return None;
+        }
+        Some(MapSample {
+            direction: self.direction_in(k, fx, fy),
+            sky: [0.0; 3],
+            sun: sun.map(|s| s * self.sun.total / b),
+        })
+    }
+
+    /// The world direction at (fx, fy) within texel `k`, uniform in solid
+    /// angle (phi linear, cos theta linear).
+    fn direction_in(&self, k: usize, fx: f64, fy: f64) -> Vec3 {
         let [w, h] = self.size.map(|s| s as usize);
-        let (y, fy) = pick(&self.rows, u2);
-        let row = &self.columns[y * w..(y + 1) * w];
-        let (x, fx) = pick(row, u1);
-        let k = x + y * w;
-        let rest = self.rest(k);
-        if rest <= 0.0 {
-            return None;
-        }
-        // Uniform in solid angle within the texel: phi linear, cos theta linear.
+        let (x, y) = (k % w, k / w);
         let phi = (x as f64 + fx) / w as f64 * std::f64::consts::TAU;
         let (c0, c1) = (
             (y as f64 / h as f64 * PI).cos(),
@@ -273,12 +373,7 @@ impl SkyMap {
             (-phi.cos() * sin_t) as f32,
         );
         let [c, s] = self.turn;
-        let d = Vec3::new(c * m.x + s * m.z, m.y, -s * m.x + c * m.z);
-        let t = self.texels[k];
-        // radiance / density = rest_c / (brightness / total).
-        let weight =
-            [0, 1, 2].map(|ch| (f64::from(t[ch]) - self.floor[ch]).max(0.0) * self.total / rest);
-        Some((d, weight))
+        Vec3::new(c * m.x + s * m.z, m.y, -s * m.x + c * m.z)
     }
 
     /// One line for the report, the log and the checkpoint's fingerprint.
@@ -333,6 +428,12 @@ impl Background<'_> {
     pub fn floor(&self) -> [f64; 3] {
         let m = self.map.map_or([0.0; 3], SkyMap::floor);
         [0, 1, 2].map(|c| self.uniform[c] + m[c])
+    }
+
+    /// [`Background::radiance`] less a map's sun (which the image traces).
+    pub fn radiance_without_sun(&self, d: Vec3) -> [f32; 3] {
+        let m = self.map.map_or([0.0; 3], |m| m.radiance_without_sun(d));
+        [0, 1, 2].map(|c| self.uniform[c] as f32 + m[c])
     }
 
     /// Whether it is black in every direction.
@@ -392,9 +493,9 @@ mod tests {
                 ((k % n) as f64 + 0.5) / n as f64,
                 ((k / n) as f64 + 0.5) / n as f64,
             );
-            let (d, w) = m.sample(u1, u2).expect("a sample");
-            assert!((d.length() - 1.0).abs() < 1e-5);
-            sum += w[0];
+            let m = m.sample(u1, u2).expect("a sample");
+            assert!((m.direction.length() - 1.0).abs() < 1e-5);
+            sum += m.sky[0] + m.sun[0];
         }
         let mut want = 0.0;
         for y in 0..8 {

@@ -274,3 +274,35 @@ fn a_furnished_room_under_a_map_is_within_one_percent_mean_of_mitsubas_envmap() 
     );
     crate::reference::check_scene("family-furnished-1-window-map", &s);
 }
+
+#[test]
+fn the_picture_traces_a_maps_sun_as_it_does_the_sun() {
+    // The box's shadow in the picture is as sharp as the pixels: the map's
+    // sun is traced per sample, not interpolated per element.
+    let toward = Vec3::new(1.0, 1.2, 0.4);
+    let picture = |scene: &mut Scene| {
+        scene.camera = Some(radiosity::scene::Camera {
+            position: Vec3::new(-2.5, 2.5, 3.5) - glam::DVec3::from(scene.origin).as_vec3(),
+            rotation: glam::Quat::from_rotation_y(-0.6) * glam::Quat::from_rotation_x(-0.55),
+            yfov: 0.9,
+            aspect: Some(1.0),
+            znear: 0.01,
+        });
+        let opts = RenderOptions {
+            width: 64,
+            height: Some(64),
+            gather: 0,
+            ..RenderOptions::default()
+        };
+        let r = render(gpu(), scene, &opts, Duration::ZERO, &mut |_| {}).expect("render");
+        r.image.expect("an image").2
+    };
+    let mut mapped = box_on_quarters();
+    mapped.sky_map = Some(Arc::new(spot(toward, 40.0, 0.0)));
+    let mut sunlit = box_on_quarters();
+    sunlit.lights.push(Light::sun(toward, [40.0; 3]));
+    let (m, s) = (picture(&mut mapped), picture(&mut sunlit));
+    let error = radiosity::compare::smape(&m, &s, 64, 64);
+    eprintln!("map's sun against the sun: {:.2} % SMAPE", 100.0 * error);
+    assert!(error < 0.02, "{:.2} %", 100.0 * error);
+}
