@@ -174,7 +174,7 @@ fn run_of(path: &std::path::Path) -> Result<Run> {
 /// Named curves of (x, y) points.
 pub(crate) type Series = Vec<(String, Vec<(f64, f64)>)>;
 
-fn draw_chart<DB: plotters::prelude::DrawingBackend>(
+pub(crate) fn draw_chart<DB: plotters::prelude::DrawingBackend>(
     root: plotters::prelude::DrawingArea<DB, plotters::coord::Shift>,
     title: &str,
     axes: (&str, &str),

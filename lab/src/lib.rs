@@ -28,6 +28,7 @@ pub mod accuracy;
 pub mod bench;
 pub mod charted;
 pub mod fuzz;
+pub mod image_time;
 pub mod pooled;
 pub mod receivers;
 pub mod regimes;

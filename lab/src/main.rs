@@ -39,6 +39,9 @@ enum Command {
         #[command(flatten)]
         solve: SolveArgs,
     },
+    /// Chart image error against wall time, this renderer beside the path
+    /// tracer, from scripts/image-time.sh's rows (docs/bench/image-time).
+    ImageTime(radiosity_lab::image_time::ImageTimeArgs),
     /// Robustness run: broken glTF/GLB files made from the Cornell box, each
     /// loaded and rendered small, and random `render` flag lists parsed; exits
     /// non-zero on any panic, hang or non-finite report (docs/tests.md "Reliability").
@@ -71,6 +74,7 @@ fn main() -> Result<()> {
     .init();
     match Cli::parse().command {
         Command::Bench(args) => bench::run(args),
+        Command::ImageTime(args) => radiosity_lab::image_time::run(&args),
         Command::BenchReport(args) => bench::report(args),
         Command::Scaling(args) => scaling_report::run(args),
         Command::Accuracy { args, .. } if !args.reports.is_empty() => charted::from_args(&args),
