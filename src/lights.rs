@@ -21,10 +21,14 @@ use crate::mesh::Mesh;
 use crate::raytrace::{Bvh, Hints, RECENT_HINTS};
 use crate::rng::Rng;
 use crate::sampling::{in_parallel, point_in, unit, RayStart};
-use crate::scene::{Background, Light, LightKind, SkyMap};
+use crate::scene::sky::MapSample;
+use crate::scene::{Background, Light, LightKind};
 use glam::Vec3;
 
 pub use crate::sampling::ELEMENT_POINTS;
+
+/// Points an element: [`ELEMENT_POINTS`] squared.
+const POINTS: usize = (ELEMENT_POINTS * ELEMENT_POINTS) as usize;
 
 /// The fewest sky directions per element point along each axis: each
 /// element's points share one `(ELEMENT_POINTS * side)^2` stratification
@@ -353,8 +357,13 @@ fn element_light(
     let Some((background, rays)) = sky else {
         return (direct.map(|d| d / weight), [0.0; 3], parallel / weight);
     };
+    let mut blocks: [u32; POINTS] = std::array::from_fn(|k| k as u32);
+    for k in (1..blocks.len()).rev() {
+        blocks.swap(k, rng.below(k + 1));
+    }
     let at = SkyPoints {
         points: &points,
+        blocks,
         normal: n,
         polygon: e.polygon,
         eps,
@@ -373,7 +382,27 @@ fn element_light(
     if let Some(map) = background.map.filter(|m| m.has_rest()) {
         // A map's sun is direct light (the image traces it again); like a
         // directional light's, its power is what it delivers.
-        let [rest, sun] = at.map_irradiance(bvh, map, rays, &mut rng, &mut sky_hints);
+        // The sky part and the sun apart, the sun with a quarter of the
+        // directions (its visibility is nearly all or nothing).
+        let rest = at.map_irradiance(
+            bvh,
+            |u1, u2| map.sample(u1, u2),
+            rays,
+            &mut rng,
+            &mut sky_hints,
+        );
+        let sun_rays = (rays / 2).max(1);
+        let sun = match map.has_sun() {
+            true => at.map_irradiance(
+                bvh,
+                |u1, u2| map.sample_sun(u1, u2),
+                sun_rays,
+                &mut rng,
+                &mut sky_hints,
+            ),
+            false => [[0.0; 3]; 2],
+        };
+        let (rest, sun) = (rest[0], sun[1]);
         (0..3).for_each(|c| sky[c] += rest[c]);
         (0..3).for_each(|c| direct[c] += sun[c]);
         parallel += sun.iter().sum::<f64>();
@@ -384,6 +413,11 @@ fn element_light(
 /// An element's points (and their area weights) as its sky rays leave them.
 struct SkyPoints<'a> {
     points: &'a [(Vec3, f32)],
+    /// Per point, which block of the directions' stratification it takes:
+    /// shuffled per element, so that no part of the element always looks
+    /// the same way (a fixed pairing biases an element that sees the sky
+    /// through an opening from some of its points only).
+    blocks: [u32; POINTS],
     normal: Vec3,
     polygon: u32,
     eps: f32,
@@ -395,10 +429,10 @@ impl SkyPoints<'_> {
     fn share(&self, bvh: &Bvh, rays: u32, rng: &mut Rng, hints: &mut Hints) -> f64 {
         let side = ELEMENT_POINTS;
         let (mut open, mut weight) = (0.0, 0.0);
-        for (q, &(x, jac)) in (0..).zip(self.points) {
+        for (&b, &(x, jac)) in self.blocks.iter().zip(self.points) {
             let cells = Cells {
                 grid: side * rays,
-                first: [q % side * rays, q / side * rays],
+                first: [b % side * rays, b / side * rays],
                 side: rays,
             };
             let from = RayStart {
@@ -416,14 +450,14 @@ impl SkyPoints<'_> {
         }
     }
 
-    /// The points' weighted irradiance from the rest of `map` (above its
-    /// floor), with `rays` x `rays` directions a point drawn in proportion
-    /// to its brightness, all of them one stratification of the map: what
-    /// is not the map's sun, and the sun's.
+    /// The points' weighted irradiance from a map's directions `draw`
+    /// gives, `rays` x `rays` a point, all of them one stratification of
+    /// the unit square `draw` maps: the part that is not the map's sun,
+    /// and the sun's.
     fn map_irradiance(
         &self,
         bvh: &Bvh,
-        map: &SkyMap,
+        draw: impl Fn(f64, f64) -> Option<MapSample>,
         rays: u32,
         rng: &mut Rng,
         hints: &mut Hints,
@@ -431,13 +465,13 @@ impl SkyPoints<'_> {
         let side = ELEMENT_POINTS;
         let grid = f64::from(side * rays);
         let (mut sum, mut weight) = ([[0.0; 3]; 2], 0.0);
-        for (q, &(x, jac)) in (0..).zip(self.points) {
+        for (&b, &(x, jac)) in self.blocks.iter().zip(self.points) {
             let origin = x + self.normal * self.eps;
             let mut e = [[0.0; 3]; 2];
             for i in 0..rays * rays {
-                let u1 = (f64::from(q % side * rays + i % rays) + rng.unit()) / grid;
-                let u2 = (f64::from(q / side * rays + i / rays) + rng.unit()) / grid;
-                let Some(m) = map.sample(u1, u2) else {
+                let u1 = (f64::from(b % side * rays + i % rays) + rng.unit()) / grid;
+                let u2 = (f64::from(b / side * rays + i / rays) + rng.unit()) / grid;
+                let Some(m) = draw(u1, u2) else {
                     continue;
                 };
                 let (d, skip) = (m.direction, [self.polygon, self.polygon]);

@@ -138,9 +138,9 @@ pub struct SkyMap {
     floor: [f64; 3],
     /// Per channel, the radiance above which a texel's light is the sun's.
     cap: [f64; 3],
-    /// The rest's brightness (above the floor), for the solution's rays.
+    /// The brightness above the floor less the sun's.
     rest: Table,
-    /// The sun's brightness, for the image's rays.
+    /// The sun's brightness.
     sun: Table,
     /// The turn as cos and sin.
     turn: [f32; 2],
@@ -258,14 +258,14 @@ impl SkyMap {
             (0..3).for_each(|c| mean[c] += f64::from(t[c]) * solid);
         }
         self.cap = [0, 1, 2].map(|c| (SUN_CAP * mean[c]).max(self.floor[c]));
-        self.rest = Table::build(self.size, |k| brightness(self.above_floor(k)));
+        self.rest = Table::build(self.size, |k| brightness(self.sky_of(k)));
         self.sun = Table::build(self.size, |k| brightness(self.sun_of(k)));
     }
 
-    /// Texel `k`'s radiance above the floor.
-    fn above_floor(&self, k: usize) -> [f64; 3] {
+    /// Texel `k`'s radiance above the floor up to the cap: not the sun's.
+    fn sky_of(&self, k: usize) -> [f64; 3] {
         let t = self.texels[k];
-        [0, 1, 2].map(|c| (f64::from(t[c]) - self.floor[c]).max(0.0))
+        [0, 1, 2].map(|c| (f64::from(t[c]).min(self.cap[c]) - self.floor[c]).max(0.0))
     }
 
     /// Texel `k`'s radiance above the cap: the sun's.
@@ -282,7 +282,7 @@ impl SkyMap {
 
     /// Whether anything is left above the floor (else the map is uniform).
     pub fn has_rest(&self) -> bool {
-        self.rest.total > 0.0
+        self.rest.total > 0.0 || self.sun.total > 0.0
     }
 
     /// Whether some of it is above the cap: a sun the image traces.
@@ -319,28 +319,27 @@ impl SkyMap {
     }
 
     /// A direction drawn from (u1, u2) in the unit square in proportion to
-    /// the rest's brightness (above the floor), with the rest's radiance
-    /// over its density there: the mean over many of `(sky + sun) * cos *
-    /// visible` estimates the rest's irradiance. `None` when the map has no
-    /// rest.
+    /// the brightness above the floor less the sun's, with that radiance
+    /// over its density there (its `sun` is 0): the mean over many of
+    /// `sky * cos * visible` estimates that part's irradiance. Drawn apart
+    /// from the sun, so a bright sun leaves the sky its rays. `None` when
+    /// the map has nothing there.
     pub fn sample(&self, u1: f64, u2: f64) -> Option<MapSample> {
         let (k, fx, fy) = self.rest.pick(self.size, u1, u2)?;
-        let rest = self.above_floor(k);
-        let b = brightness(rest);
+        let sky = self.sky_of(k);
+        let b = brightness(sky);
         if b <= 0.0 {
             return None;
         }
-        let sun = self.sun_of(k);
-        let scale = self.rest.total / b;
         Some(MapSample {
             direction: self.direction_in(k, fx, fy),
-            sky: [0, 1, 2].map(|c| (rest[c] - sun[c]) * scale),
-            sun: sun.map(|s| s * scale),
+            sky: sky.map(|s| s * self.rest.total / b),
+            sun: [0.0; 3],
         })
     }
 
     /// A direction drawn in proportion to the sun's brightness (its `sky`
-    /// is 0): the image's rays. `None` when the map has no sun.
+    /// is 0). `None` when the map has no sun.
     pub fn sample_sun(&self, u1: f64, u2: f64) -> Option<MapSample> {
         let (k, fx, fy) = self.sun.pick(self.size, u1, u2)?;
         let sun = self.sun_of(k);
@@ -495,7 +494,7 @@ mod tests {
             );
             let m = m.sample(u1, u2).expect("a sample");
             assert!((m.direction.length() - 1.0).abs() < 1e-5);
-            sum += m.sky[0] + m.sun[0];
+            sum += m.sky[0];
         }
         let mut want = 0.0;
         for y in 0..8 {
