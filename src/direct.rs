@@ -186,6 +186,14 @@ struct PixelSums {
     gathered: GatherPixel,
 }
 
+impl PixelSums {
+    /// Adds one of `per_pixel` samples whose camera ray left the scene and
+    /// saw the sky's `radiance`.
+    fn add_sky(&mut self, radiance: [f32; 3], per_pixel: f64) {
+        (0..3).for_each(|c| self.sky[c] += radiance[c] / per_pixel as f32);
+    }
+}
+
 impl<'a> DirectLight<'a> {
     /// Gathers `scene`'s emitters; `bvh` holds the scene's polygons (the
     /// mesh's [`Mesh::occluders`], built once); `strata` squared shadow rays
@@ -470,8 +478,7 @@ impl<'a> DirectLight<'a> {
                         .nearest_facing(camera.position, dir, depth[0], depth[1], 1e-5)
                 else {
                     texture.iter_mut().for_each(|t| *t += 1.0);
-                    let sky = self.sky.radiance(dir.normalize());
-                    (0..3).for_each(|c| out.sky[c] += sky[c] / per_pixel as f32);
+                    out.add_sky(self.sky.radiance(dir.normalize()), per_pixel);
                     continue;
                 };
                 out.polygon = hit.polygon + 1;

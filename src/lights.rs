@@ -368,45 +368,11 @@ fn element_light(
         polygon: e.polygon,
         eps,
     };
-    // The floor lights as a uniform sky: pi L times the open share of the
-    // cosine-weighted hemisphere (exact over an open floor); a map's rest
-    // by directions drawn from its brightness.
-    let floor = background.floor();
-    let mut sky = [0.0; 3];
-    if floor.iter().any(|&l| l > 0.0) {
-        let open = at.share(bvh, rays, &mut rng, &mut sky_hints);
-        sky = floor.map(|l| std::f64::consts::PI * l * open);
-    }
-    let mut direct = direct.map(|d| d / weight);
-    let mut parallel = parallel / weight;
-    if let Some(map) = background.map.filter(|m| m.has_rest()) {
-        // A map's sun is direct light (the image traces it again); like a
-        // directional light's, its power is what it delivers.
-        // The sky part and the sun apart, the sun with a quarter of the
-        // directions (its visibility is nearly all or nothing).
-        let rest = at.map_irradiance(
-            bvh,
-            |u1, u2| map.sample(u1, u2),
-            rays,
-            &mut rng,
-            &mut sky_hints,
-        );
-        let sun_rays = (rays / 2).max(1);
-        let sun = match map.has_sun() {
-            true => at.map_irradiance(
-                bvh,
-                |u1, u2| map.sample_sun(u1, u2),
-                sun_rays,
-                &mut rng,
-                &mut sky_hints,
-            ),
-            false => [[0.0; 3]; 2],
-        };
-        let (rest, sun) = (rest[0], sun[1]);
-        (0..3).for_each(|c| sky[c] += rest[c]);
-        (0..3).for_each(|c| direct[c] += sun[c]);
-        parallel += sun.iter().sum::<f64>();
-    }
+    let (sky, sun) = at.light(bvh, background, rays, &mut rng, &mut sky_hints);
+    // A map's sun is direct light (the image traces it again); like a
+    // directional light's, its power is what it delivers.
+    let direct = [0, 1, 2].map(|c| direct[c] / weight + sun[c]);
+    let parallel = parallel / weight + sun.iter().sum::<f64>();
     (direct, sky, parallel)
 }
 
@@ -424,6 +390,40 @@ struct SkyPoints<'a> {
 }
 
 impl SkyPoints<'_> {
+    /// The points' weighted irradiance from `background` (`rays` x `rays`
+    /// directions a point), as the sky's part and a map's sun. The floor
+    /// lights as a uniform sky: pi L times the open share of the
+    /// cosine-weighted hemisphere (exact over an open floor). A map's sky
+    /// and its sun by directions drawn from each one's brightness, apart,
+    /// the sun with a quarter of them (its visibility is nearly all or
+    /// nothing).
+    fn light(
+        &self,
+        bvh: &Bvh,
+        background: Background,
+        rays: u32,
+        rng: &mut Rng,
+        hints: &mut Hints,
+    ) -> ([f64; 3], [f64; 3]) {
+        let floor = background.floor();
+        let mut sky = [0.0; 3];
+        if floor.iter().any(|&l| l > 0.0) {
+            let open = self.share(bvh, rays, rng, hints);
+            sky = floor.map(|l| std::f64::consts::PI * l * open);
+        }
+        let Some(map) = background.map.filter(|m| m.has_rest()) else {
+            return (sky, [0.0; 3]);
+        };
+        let rest = self.map_irradiance(bvh, |u1, u2| map.sample(u1, u2), rays, rng, hints)[0];
+        (0..3).for_each(|c| sky[c] += rest[c]);
+        if !map.has_sun() {
+            return (sky, [0.0; 3]);
+        }
+        let draw = |u1, u2| map.sample_sun(u1, u2);
+        let sun = self.map_irradiance(bvh, draw, (rays / 2).max(1), rng, hints)[1];
+        (sky, sun)
+    }
+
     /// The points' weighted sky share, with `rays` x `rays` directions a
     /// point, all of them one stratification of the hemisphere.
     fn share(&self, bvh: &Bvh, rays: u32, rng: &mut Rng, hints: &mut Hints) -> f64 {

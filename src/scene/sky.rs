@@ -11,13 +11,14 @@
 //! the middle at +X of a glTF scene (Blender's +X): `--sky-rotation 90`.
 //!
 //! Sampling: the map is split into its floor (per channel, its darkest
-//! texel), which lights like a uniform sky and is estimated as one, and the
-//! rest, which is sampled in proportion to its brightness times each
-//! texel's solid angle, so a small bright sun costs no more rays than a dull
-//! sky and a uniform map is exactly the uniform sky. Of the rest, what is
-//! above [`SUN_CAP`] times the map's mean radiance (per channel) is its sun:
-//! direct light, which the camera image traces again per sample, as it does
-//! a `--sun`.
+//! texel), which lights like a uniform sky and is estimated as one (so a
+//! uniform map is exactly the uniform sky); its sun, what is above
+//! [`SUN_CAP`] times the map's mean radiance (per channel); and its sky,
+//! the rest between them. The sky and the sun are each sampled in
+//! proportion to their brightness times each texel's solid angle, so a
+//! small bright sun costs no more rays than a dull sky and leaves the sky
+//! its rays. The sun is direct light, which the camera image traces again
+//! per sample, as it does a `--sun`.
 
 use glam::Vec3;
 use std::f64::consts::PI;
