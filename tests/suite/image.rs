@@ -23,7 +23,7 @@ fn score_with(scene: &str, change: impl Fn(&mut RenderOptions)) -> f64 {
 }
 
 /// [`score_with`] of the scene `s` against the reference named `scene`.
-fn score_scene(
+pub(crate) fn score_scene(
     scene: &str,
     s: &radiosity::scene::Scene,
     change: impl Fn(&mut RenderOptions),
