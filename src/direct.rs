@@ -544,7 +544,7 @@ fn map_sun(
         if cos > 0.0
             && !bvh.occluded_recent(from.origin, m.direction, 0.0, f32::INFINITY, skip, hints)
         {
-            (0..3).for_each(|c| sum[c] += m.sun[c] * cos);
+            (0..3).for_each(|c| sum[c] += m.weight[c] * cos);
         }
     }
     let n = f64::from((strata.side * strata.side).max(1));

@@ -414,13 +414,13 @@ impl SkyPoints<'_> {
         let Some(map) = background.map.filter(|m| m.has_rest()) else {
             return (sky, [0.0; 3]);
         };
-        let rest = self.map_irradiance(bvh, |u1, u2| map.sample(u1, u2), rays, rng, hints)[0];
+        let rest = self.map_irradiance(bvh, |u1, u2| map.sample(u1, u2), rays, rng, hints);
         (0..3).for_each(|c| sky[c] += rest[c]);
         if !map.has_sun() {
             return (sky, [0.0; 3]);
         }
         let draw = |u1, u2| map.sample_sun(u1, u2);
-        let sun = self.map_irradiance(bvh, draw, (rays / 2).max(1), rng, hints)[1];
+        let sun = self.map_irradiance(bvh, draw, (rays / 2).max(1), rng, hints);
         (sky, sun)
     }
 
@@ -452,8 +452,7 @@ impl SkyPoints<'_> {
 
     /// The points' weighted irradiance from a map's directions `draw`
     /// gives, `rays` x `rays` a point, all of them one stratification of
-    /// the unit square `draw` maps: the part that is not the map's sun,
-    /// and the sun's.
+    /// the unit square `draw` maps.
     fn map_irradiance(
         &self,
         bvh: &Bvh,
@@ -461,13 +460,13 @@ impl SkyPoints<'_> {
         rays: u32,
         rng: &mut Rng,
         hints: &mut Hints,
-    ) -> [[f64; 3]; 2] {
+    ) -> [f64; 3] {
         let side = ELEMENT_POINTS;
         let grid = f64::from(side * rays);
-        let (mut sum, mut weight) = ([[0.0; 3]; 2], 0.0);
+        let (mut sum, mut weight) = ([0.0; 3], 0.0);
         for (&b, &(x, jac)) in self.blocks.iter().zip(self.points) {
             let origin = x + self.normal * self.eps;
-            let mut e = [[0.0; 3]; 2];
+            let mut e = [0.0; 3];
             for i in 0..rays * rays {
                 let u1 = (f64::from(b % side * rays + i % rays) + rng.unit()) / grid;
                 let u2 = (f64::from(b / side * rays + i / rays) + rng.unit()) / grid;
@@ -479,19 +478,16 @@ impl SkyPoints<'_> {
                 if cos <= 0.0 || bvh.occluded_recent(origin, d, 0.0, f32::INFINITY, skip, hints) {
                     continue;
                 }
-                (0..3).for_each(|c| e[0][c] += m.sky[c] * cos);
-                (0..3).for_each(|c| e[1][c] += m.sun[c] * cos);
+                (0..3).for_each(|c| e[c] += m.weight[c] * cos);
             }
             let share = f64::from(jac) / f64::from(rays * rays);
-            for (s, e) in sum.iter_mut().zip(e) {
-                (0..3).for_each(|c| s[c] += e[c] * share);
-            }
+            (0..3).for_each(|c| sum[c] += e[c] * share);
             weight += f64::from(jac);
         }
         if weight > 0.0 {
-            sum.map(|s| s.map(|x| x / weight))
+            sum.map(|s| s / weight)
         } else {
-            [[0.0; 3]; 2]
+            [0.0; 3]
         }
     }
 }

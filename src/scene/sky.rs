@@ -108,17 +108,15 @@ impl Table {
     }
 }
 
-/// A direction drawn from a map, in world axes, and per channel its
-/// radiance over the density it was drawn with, split into the part that
-/// is not the sun and the sun's.
+/// A direction drawn from a part of a map (its sky or its sun), in world
+/// axes, and per channel that part's radiance over the density it was
+/// drawn with.
 #[derive(Clone, Copy, Debug)]
 pub struct MapSample {
     /// The unit direction.
     pub direction: Vec3,
-    /// The radiance above the floor that is not the sun's, over the density.
-    pub sky: [f64; 3],
-    /// The sun's radiance over the density.
-    pub sun: [f64; 3],
+    /// The part's radiance over the density.
+    pub weight: [f64; 3],
 }
 
 /// A loaded environment map, turned and scaled as the flags say, with what
@@ -320,38 +318,34 @@ impl SkyMap {
     }
 
     /// A direction drawn from (u1, u2) in the unit square in proportion to
-    /// the brightness above the floor less the sun's, with that radiance
-    /// over its density there (its `sun` is 0): the mean over many of
-    /// `sky * cos * visible` estimates that part's irradiance. Drawn apart
+    /// the map's sky (the brightness above the floor less the sun's), with
+    /// that radiance over its density there: the mean over many of
+    /// `weight * cos * visible` estimates the sky's irradiance. Drawn apart
     /// from the sun, so a bright sun leaves the sky its rays. `None` when
     /// the map has nothing there.
     pub fn sample(&self, u1: f64, u2: f64) -> Option<MapSample> {
-        let (k, fx, fy) = self.rest.pick(self.size, u1, u2)?;
-        let sky = self.sky_of(k);
-        let b = brightness(sky);
-        if b <= 0.0 {
-            return None;
-        }
-        Some(MapSample {
-            direction: self.direction_in(k, fx, fy),
-            sky: sky.map(|s| s * self.rest.total / b),
-            sun: [0.0; 3],
-        })
+        self.draw(&self.rest, Self::sky_of, [u1, u2])
     }
 
-    /// A direction drawn in proportion to the sun's brightness (its `sky`
-    /// is 0). `None` when the map has no sun.
+    /// [`SkyMap::sample`] of the map's sun. `None` when it has none.
     pub fn sample_sun(&self, u1: f64, u2: f64) -> Option<MapSample> {
-        let (k, fx, fy) = self.sun.pick(self.size, u1, u2)?;
-        let sun = self.sun_of(k);
-        let b = brightness(sun);
-        if b <= 0.0 {
-            return None;
-        }
-        Some(MapSample {
+        self.draw(&self.sun, Self::sun_of, [u1, u2])
+    }
+
+    /// A direction drawn from `table` at `u`, weighted by the texel's
+    /// `part` over its density.
+    fn draw(
+        &self,
+        table: &Table,
+        part: fn(&Self, usize) -> [f64; 3],
+        u: [f64; 2],
+    ) -> Option<MapSample> {
+        let (k, fx, fy) = table.pick(self.size, u[0], u[1])?;
+        let radiance = part(self, k);
+        let b = brightness(radiance);
+        (b > 0.0).then(|| MapSample {
             direction: self.direction_in(k, fx, fy),
-            sky: [0.0; 3],
-            sun: sun.map(|s| s * self.sun.total / b),
+            weight: radiance.map(|s| s * table.total / b),
         })
     }
 
@@ -495,7 +489,7 @@ mod tests {
             );
             let m = m.sample(u1, u2).expect("a sample");
             assert!((m.direction.length() - 1.0).abs() < 1e-5);
-            sum += m.sky[0];
+            sum += m.weight[0];
         }
         let mut want = 0.0;
         for y in 0..8 {
