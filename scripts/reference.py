@@ -97,15 +97,20 @@ def main():
     for i, node in enumerate(nodes):
         path = os.path.join(tmp, f"n{i}.obj")
         tex = node.get("texture")
+        emissive = node.get("emissive_texture")
+        # One set of coordinates a shape: a node's two textures must share it.
+        uvs = node.get("uvs") if tex else node.get("emissive_uvs")
+        if tex and emissive and node["emissive_uvs"] != node["uvs"]:
+            sys.exit(f"reference.py: node {node['name']} maps its base colour and emissive textures differently")
         with open(path, "w") as obj:
             for t in node["triangles"]:
                 for v in t:
                     obj.write(f"v {v[0]!r} {v[1]!r} {v[2]!r}\n")
-            if tex:
+            if uvs:
                 # OBJ's v runs up, glTF's down: Mitsuba's loader flips it
                 # back (flip_tex_coords), so shapes see glTF's v as
                 # batch() does.
-                for t in node["uvs"]:
+                for t in uvs:
                     for uv in t:
                         obj.write(f"vt {uv[0]!r} {1.0 - uv[1]!r}\n")
                 for k in range(len(node["triangles"])):
@@ -116,26 +121,14 @@ def main():
                     obj.write(f"f {3 * k + 1} {3 * k + 2} {3 * k + 3}\n")
         reflectance = {"type": "rgb", "value": node["reflectance"]}
         if tex:
-            image = os.path.join(os.path.dirname(os.path.abspath(args.nodes)), tex["image"])
-            raw = False
-            if any(abs(f - 1.0) > 1e-6 for f in tex["factor"]):
-                # The renderer multiplies the linear texel by the factor
-                # (capped as a reflectance): bake that into a linear image.
-                import numpy as np
-                bmp = mi.Bitmap(image).convert(mi.Bitmap.PixelFormat.RGB,
-                                               mi.Struct.Type.Float32, srgb_gamma=False)
-                factor = np.array(tex["factor"][:3], dtype=np.float32)
-                scaled = np.minimum(np.array(bmp) * factor, MAX_REFLECTANCE).astype(np.float32)
-                image = os.path.join(tmp, f"tex{i}.exr")
-                mi.Bitmap(scaled).write(image)
-                raw = True
-            wrap = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp"}[tex["wrap"][0]]
-            reflectance = {"type": "bitmap", "filename": image, "wrap_mode": wrap,
-                           "filter_type": "bilinear", "raw": raw}
+            reflectance = bitmap(mi, tex, args, tmp, f"tex{i}", MAX_REFLECTANCE)
             textures[i] = mi.load_dict(reflectance)
         shape = {"type": "obj", "filename": path, "face_normals": True,
                  "bsdf": {"type": "diffuse", "reflectance": reflectance}}
-        if any(e > 0 for e in node["emission"]):
+        if emissive:
+            shape["emitter"] = {"type": "area",
+                                "radiance": bitmap(mi, emissive, args, tmp, f"emission{i}", None)}
+        elif any(e > 0 for e in node["emission"]):
             shape["emitter"] = {"type": "area",
                                 "radiance": {"type": "rgb", "value": node["emission"]}}
         d[f"n{i}"] = shape
@@ -287,6 +280,30 @@ def main():
         "how": f"Mitsuba 3 {mi.variant()}, next-event estimation + cosine sampling (MIS, power heuristic) at uniform points per node, path integrator beyond (scripts/reference.py --target {args.target})",
         "variant": mi.variant(), "seconds": time.perf_counter() - start,
         "converged": all(done), "surfaces": result}, indent=1))
+
+
+def bitmap(mi, tex, args, tmp, name, cap):
+    """A node's texture as a Mitsuba bitmap: the image as the renderer reads
+    it (sRGB texels), or, where its factor is not 1, times its factor and at
+    most `cap` (a reflectance's), baked into a linear image."""
+    image = os.path.join(os.path.dirname(os.path.abspath(args.nodes)), tex["image"])
+    raw = False
+    if any(abs(f - 1.0) > 1e-6 for f in tex["factor"]):
+        # The renderer multiplies the linear texel by the factor (capped
+        # as a reflectance): bake that into a linear image.
+        import numpy as np
+        bmp = mi.Bitmap(image).convert(mi.Bitmap.PixelFormat.RGB,
+                                       mi.Struct.Type.Float32, srgb_gamma=False)
+        factor = np.array(tex["factor"][:3], dtype=np.float32)
+        scaled = np.array(bmp) * factor
+        if cap is not None:
+            scaled = np.minimum(scaled, cap)
+        image = os.path.join(tmp, f"{name}.exr")
+        mi.Bitmap(scaled.astype(np.float32)).write(image)
+        raw = True
+    wrap = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp"}[tex["wrap"][0]]
+    return {"type": "bitmap", "filename": image, "wrap_mode": wrap,
+            "filter_type": "bilinear", "raw": raw}
 
 
 def render_image(mi, dr, d, cam, args):

@@ -23,27 +23,34 @@ use glam::{DVec3, Vec3};
 
 /// An emitting polygon, as direct light sees it.
 #[derive(Clone, Debug)]
-struct Emitter {
+struct Emitter<'a> {
     polygon: u32,
     corners: Vec<Vec3>,
     exact: Vec<DVec3>,
     normal: Vec3,
     centre: Vec3,
-    /// Exitance pi * L_e per channel, W/m^2.
+    /// Exitance pi * L_e per channel, W/m^2 (with an emissive texture,
+    /// its mean over the polygon).
     exitance: [f64; 3],
+    /// The emissive texture, if it has one: the shadow rays weigh its
+    /// points by their exitance over `exitance`.
+    texture: Option<&'a crate::scene::TexMap>,
 }
 
 /// Direct irradiance from a scene's emitters at any surface point.
 #[derive(Clone, Debug)]
 pub struct DirectLight<'a> {
     bvh: &'a Bvh,
-    emitters: Vec<Emitter>,
+    emitters: Vec<Emitter<'a>>,
     /// Point, spot and directional lights (one shadow ray each).
     lights: Vec<crate::scene::Light>,
     normals: Vec<Vec3>,
     reflectance: Vec<[f32; 3]>,
     /// Each polygon's texture map, if it has one (`reflectance` is then its mean).
     textures: Vec<Option<&'a crate::scene::TexMap>>,
+    /// Each polygon's emissive texture map, if it has one (the image shows
+    /// its emission per sample: see [`Image::emitted`]).
+    emissive: Vec<Option<&'a crate::scene::TexMap>>,
     /// Shadow rays per emitter per point (per image sample): `strata` x `strata`.
     strata: u32,
     /// Offset of ray ends off their surfaces, m.
@@ -100,8 +107,10 @@ struct Pool {
     lights: [f64; 3],
     /// Per emitter, the points' weighted unoccluded irradiance.
     unoccluded: Vec<[f64; 3]>,
-    /// Per emitter, its shadow rays' (seen, all) weights.
-    rays: Vec<[f64; 2]>,
+    /// Per emitter, its shadow rays' weights: the seen ones' per channel
+    /// (times the emitter's exitance there over its mean, on an emissive
+    /// texture), and all of them.
+    rays: Vec<([f64; 3], f64)>,
     /// Per light, then per emitter, the leaf that stopped the last shadow
     /// ray toward it (a pixel's or an element's points are near each other
     /// and mostly shadowed alike; see `Bvh::occluded_hinted`, which gives
@@ -114,7 +123,7 @@ impl Pool {
         Pool {
             lights: [0.0; 3],
             unoccluded: vec![[0.0; 3]; emitters],
-            rays: vec![[0.0; 2]; emitters],
+            rays: vec![([0.0; 3], 0.0); emitters],
             // One more for a sky map's sun, last.
             hints: vec![[None; crate::raytrace::RECENT_HINTS]; lights + emitters + 1],
         }
@@ -123,9 +132,9 @@ impl Pool {
     /// The weighted sum of the points' direct irradiance.
     fn total(&self) -> [f64; 3] {
         let mut out = self.lights;
-        for (u, [seen, all]) in self.unoccluded.iter().zip(&self.rays) {
-            let share = if *all > 0.0 { seen / all } else { 1.0 };
+        for (u, (seen, all)) in self.unoccluded.iter().zip(&self.rays) {
             for c in 0..3 {
+                let share = if *all > 0.0 { seen[c] / all } else { 1.0 };
                 out[c] += u[c] * share;
             }
         }
@@ -147,6 +156,10 @@ pub struct Image {
     /// Per pixel, the sky's radiance along its samples' camera rays that
     /// left the scene, over all its samples (what the sky adds there).
     pub sky: Vec<[f32; 3]>,
+    /// Per pixel, the emitted radiance of the emissive textures its
+    /// samples met (front sides), over all its samples; the image shows
+    /// it in place of those elements' mean emission.
+    pub emitted: Vec<[f32; 3]>,
     /// Per pixel, with a final gather ([`Gather`]), what its samples
     /// gathered (else empty).
     pub gathered: Vec<GatherPixel>,
@@ -167,6 +180,7 @@ impl Image {
             seen,
             texture: pixels.iter().map(|p| p.texture).collect(),
             sky: pixels.iter().map(|p| p.sky).collect(),
+            emitted: pixels.iter().map(|p| p.emitted).collect(),
             gathered: match gathered {
                 true => pixels.iter().map(|p| p.gathered).collect(),
                 false => Vec::new(),
@@ -183,6 +197,7 @@ struct PixelSums {
     polygon: u32,
     texture: [f32; 3],
     sky: [f32; 3],
+    emitted: [f32; 3],
     gathered: GatherPixel,
 }
 
@@ -211,6 +226,7 @@ impl<'a> DirectLight<'a> {
                 normal: p.normal,
                 centre: p.centre(),
                 exitance: p.emission.map(|e| std::f64::consts::PI * e as f64),
+                texture: p.emissive.as_ref(),
             })
             .collect();
         DirectLight {
@@ -220,6 +236,7 @@ impl<'a> DirectLight<'a> {
             normals: scene.polygons.iter().map(|p| p.normal).collect(),
             reflectance: scene.polygons.iter().map(|p| p.reflectance).collect(),
             textures: scene.polygons.iter().map(|p| p.texture.as_ref()).collect(),
+            emissive: scene.polygons.iter().map(|p| p.emissive.as_ref()).collect(),
             strata: strata.max(1),
             eps: 1e-5 * scene.extent().max(1e-6),
             sky: scene.background(),
@@ -291,14 +308,17 @@ impl<'a> DirectLight<'a> {
             for ((u, w), x) in pool.unoccluded[k].iter_mut().zip(weight).zip(e.exitance) {
                 *u += w * x * f;
             }
-            pool.rays[k][0] += seen;
-            pool.rays[k][1] += all;
+            let rays = &mut pool.rays[k];
+            (0..3).for_each(|c| rays.0[c] += seen[c]);
+            rays.1 += all;
         }
     }
 
-    /// Emitter `e`'s shadow rays from `origin`: the visible ones' and all
-    /// of them's cos cos / r^2 over the sampling density (their ratio is the
-    /// share of the unoccluded form factor `origin` sees).
+    /// Emitter `e`'s shadow rays from `origin`: the visible ones' (per
+    /// channel, each times the exitance there over the emitter's mean on
+    /// an emissive texture) and all of them's cos cos / r^2 over the
+    /// sampling density (their ratio is the share of the unoccluded form
+    /// factor `origin` sees, weighted by the texture).
     fn shadow_rays(
         &self,
         e: &Emitter,
@@ -306,13 +326,13 @@ impl<'a> DirectLight<'a> {
         rng: &mut Rng,
         strata: Strata,
         hints: &mut crate::raytrace::Hints,
-    ) -> (f64, f64) {
+    ) -> ([f64; 3], f64) {
         let RayStart {
             origin,
             normal: n,
             polygon,
         } = from;
-        let (mut all, mut seen) = (0.0f64, 0.0f64);
+        let (mut all, mut seen) = (0.0f64, [0.0f64; 3]);
         let g = strata.grid as f32;
         for i in 0..strata.side * strata.side {
             let cx = strata.first[0] + i % strata.side;
@@ -332,7 +352,18 @@ impl<'a> DirectLight<'a> {
                 .bvh
                 .occluded_recent(origin, d, 0.0, 1.0, [polygon, e.polygon], hints)
             {
-                seen += w;
+                match e.texture {
+                    None => seen.iter_mut().for_each(|s| *s += w),
+                    Some(map) => {
+                        let l = map.value(y);
+                        for c in 0..3 {
+                            let mean = e.exitance[c] / std::f64::consts::PI;
+                            if mean > 0.0 {
+                                seen[c] += w * f64::from(l[c]) / mean;
+                            }
+                        }
+                    }
+                }
             }
         }
         (seen, all)
@@ -490,6 +521,10 @@ impl<'a> DirectLight<'a> {
                 if dir.dot(self.normals[hit.polygon as usize]) >= 0.0 {
                     continue;
                 }
+                if let Some(map) = self.emissive[hit.polygon as usize] {
+                    let l = map.value(x);
+                    (0..3).for_each(|c| out.emitted[c] += l[c] / per_pixel as f32);
+                }
                 let block = order[k as usize];
                 let strata = Strata {
                     grid: ss * self.strata,
@@ -512,6 +547,7 @@ impl<'a> DirectLight<'a> {
             polygon: 0,
             texture: [1.0; 3],
             sky: [0.0; 3],
+            emitted: [0.0; 3],
             gathered: GatherPixel::default(),
         };
         let mut pixels = vec![blank; (width * height) as usize];

@@ -32,18 +32,9 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
     let mut written = std::collections::HashMap::new();
     for (i, name) in scene.nodes.iter().enumerate() {
         let polys: Vec<_> = scene.polygons.iter().filter(|p| p.node == i).collect();
-        let map = polys.iter().find_map(|p| p.texture.as_ref());
-        if let Some(m) = map {
-            let alike = polys.iter().all(|p| {
-                p.texture
-                    .as_ref()
-                    .is_some_and(|t| t.texture == m.texture && t.factor == m.factor)
-            });
-            if !alike {
-                return Err(ExportError::MixedMaterials { node: name.clone() });
-            }
-        }
-        let (mut tris, mut uvs) = (Vec::new(), Vec::new());
+        let map = one_map(&polys, |p| p.texture.as_ref(), name)?;
+        let emissive = one_map(&polys, |p| p.emissive.as_ref(), name)?;
+        let (mut tris, mut uvs, mut emissive_uvs) = (Vec::new(), Vec::new(), Vec::new());
         for p in &polys {
             for k in 1..p.vertices.len() - 1 {
                 let t = [p.vertices[0], p.vertices[k], p.vertices[k + 1]];
@@ -51,11 +42,21 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
                 if let Some(m) = &p.texture {
                     uvs.push(t.map(|v| m.uv(v).to_array()));
                 }
+                if let Some(m) = &p.emissive {
+                    emissive_uvs.push(t.map(|v| m.uv(v).to_array()));
+                }
             }
         }
-        let (refl, emit) = polys
+        let (refl, mut emit) = polys
             .first()
             .map_or(([0.0; 3], [0.0; 3]), |p| (p.reflectance, p.emission));
+        if emissive.is_some() {
+            // The node's mean emission (its polygons' differ).
+            let area: f32 = polys.iter().map(|p| p.area()).sum();
+            emit = [0, 1, 2].map(|c| {
+                polys.iter().map(|p| p.emission[c] * p.area()).sum::<f32>() / area.max(1e-30)
+            });
+        }
         let mut node = serde_json::json!({
             "name": name,
             "triangles": tris,
@@ -66,6 +67,10 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
         if let Some(m) = map {
             node["texture"] = texture_json(m, path, &mut written)?;
             node["uvs"] = serde_json::json!(uvs);
+        }
+        if let Some(m) = emissive {
+            node["emissive_texture"] = texture_json(m, path, &mut written)?;
+            node["emissive_uvs"] = serde_json::json!(emissive_uvs);
         }
         nodes.push(node);
     }
@@ -95,6 +100,29 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
         &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky, "sky_map": sky_map }),
     )?;
     Ok(())
+}
+
+/// The one texture map (`map` of each polygon) the polygons of node `name`
+/// share: `None` where none has one; an error where they differ in texture
+/// or factor, or only some have one (the path tracer takes one material a
+/// node).
+fn one_map<'a>(
+    polys: &[&'a crate::scene::Polygon],
+    map: impl Fn(&'a crate::scene::Polygon) -> Option<&'a crate::scene::texture::TexMap>,
+    name: &str,
+) -> Result<Option<&'a crate::scene::texture::TexMap>, ExportError> {
+    let Some(m) = polys.iter().find_map(|p| map(p)) else {
+        return Ok(None);
+    };
+    let alike = polys
+        .iter()
+        .all(|p| map(p).is_some_and(|t| t.texture == m.texture && t.factor == m.factor));
+    match alike {
+        true => Ok(Some(m)),
+        false => Err(ExportError::MixedMaterials {
+            node: name.to_string(),
+        }),
+    }
 }
 
 /// A textured node's texture as the path tracer reads it: its image (written

@@ -33,7 +33,8 @@ pub struct Gather<'a> {
     /// Per element, the radiance it sends on: its display radiance less
     /// its own emission (W sr^-1 m^-2).
     reflected: Vec<[f32; 3]>,
-    /// Per polygon, its emitted radiance.
+    /// Per polygon, its emitted radiance (0 where an emissive texture
+    /// gives it, which the image traces per sample).
     emitted: Vec<[f32; 3]>,
     /// What a ray that leaves the scene sees.
     sky: Background<'a>,
@@ -49,15 +50,17 @@ impl<'a> Gather<'a> {
         let emitted: Vec<[f32; 3]> = mesh
             .polygons
             .iter()
-            .map(|p| p.exitance.map(|m| (m / std::f64::consts::PI) as f32))
+            .map(|p| match p.emission_texels {
+                Some(_) => [0.0; 3],
+                None => p.exitance.map(|m| (m / std::f64::consts::PI) as f32),
+            })
             .collect();
-        let reflected: Vec<[f32; 3]> = mesh
-            .elements
+        let reflected: Vec<[f32; 3]> = radiance
             .iter()
-            .zip(radiance)
-            .map(|(e, r)| {
-                let le = emitted[e.polygon as usize];
-                [0, 1, 2].map(|c| (r[c] - le[c]).max(0.0))
+            .enumerate()
+            .map(|(j, r)| {
+                let le = mesh.element_exitance(j);
+                [0, 1, 2].map(|c| (r[c] - (le[c] / std::f64::consts::PI) as f32).max(0.0))
             })
             .collect();
         Gather {

@@ -94,6 +94,10 @@ pub struct MeshPolygon {
     pub back_side: bool,
     /// Whether a texture gives its elements their reflectances.
     pub textured: bool,
+    /// Where an emissive texture gives its elements their own exitances
+    /// (`exitance` is then the texture's mean over the polygon): the index
+    /// of its first element's in [`Mesh::textured_exitance`].
+    pub emission_texels: Option<u32>,
     /// Patches of this polygon.
     pub patches: Range<u32>,
     /// Elements of this polygon.
@@ -167,6 +171,10 @@ pub struct Mesh {
     pub occluders: crate::raytrace::Bvh,
     /// How far a ray starts off its surface, m (1e-5 of the scene's size).
     pub ray_offset: f32,
+    /// The exitances of the elements of polygons with an emissive texture
+    /// (each the texture's mean over the element), polygon by polygon (see
+    /// [`MeshPolygon::emission_texels`]); empty when no polygon has one.
+    pub textured_exitance: Vec<[f64; 3]>,
 }
 
 /// A glTF node whose polygons close a volume with their fronts facing out (a
@@ -323,7 +331,7 @@ fn outward_solid(
 /// Points per element along each axis for its texture mean.
 const TEXTURE_POINTS: u32 = 4;
 
-/// The mean reflectance of `map`'s texture over element `e`, from the
+/// The factor times `map`'s texture's mean over element `e`, from the
 /// midpoints of a [`TEXTURE_POINTS`]-square grid over it.
 fn texture_mean(map: &crate::scene::TexMap, e: &Element) -> [f32; 3] {
     let corners: &[Vec3] = if e.corners[3] == e.corners[2] {
@@ -331,15 +339,10 @@ fn texture_mean(map: &crate::scene::TexMap, e: &Element) -> [f32; 3] {
     } else {
         &e.corners
     };
-    let n = TEXTURE_POINTS;
-    let points: Vec<Vec3> = (0..n * n)
-        .map(|q| {
-            let u = ((q % n) as f32 + 0.5) / n as f32;
-            let v = ((q / n) as f32 + 0.5) / n as f32;
-            crate::sampling::point_in(corners, u, v).0
-        })
-        .collect();
-    map.mean_reflectance(&points, e.area as f32)
+    map.mean(
+        &crate::scene::texture::grid_points(corners, TEXTURE_POINTS),
+        e.area as f32,
+    )
 }
 
 impl Mesh {
@@ -435,13 +438,41 @@ impl Mesh {
 
     /// Total emitted power (exitance times area, summed over patches and RGB), W.
     pub fn emitted_power(&self) -> f64 {
-        self.patches
-            .iter()
-            .map(|p| {
-                let e = self.polygons[p.polygon as usize].exitance;
-                (e[0] + e[1] + e[2]) * p.area
+        (0..self.patches.len())
+            .map(|i| {
+                let e = self.patch_exitance(i);
+                (e[0] + e[1] + e[2]) * self.patches[i].area
             })
             .sum()
+    }
+
+    /// Element `j`'s exitance: its polygon's, or its own where an emissive
+    /// texture gives it one.
+    pub fn element_exitance(&self, j: usize) -> [f64; 3] {
+        let p = &self.polygons[self.elements[j].polygon as usize];
+        match p.emission_texels {
+            Some(first) => self.textured_exitance[first as usize + j - p.elements.start as usize],
+            None => p.exitance,
+        }
+    }
+
+    /// Patch `i`'s exitance: its polygon's, or, where an emissive texture
+    /// gives its elements their own, their mean weighted by area.
+    pub fn patch_exitance(&self, i: usize) -> [f64; 3] {
+        let p = &self.patches[i];
+        let polygon = &self.polygons[p.polygon as usize];
+        if polygon.emission_texels.is_none() {
+            return polygon.exitance;
+        }
+        let mut sum = [0.0; 3];
+        for j in p.elements.clone() {
+            let (e, a) = (
+                self.element_exitance(j as usize),
+                self.elements[j as usize].area,
+            );
+            (0..3).for_each(|c| sum[c] += e[c] * a);
+        }
+        sum.map(|s| s / p.area.max(1e-300))
     }
 
     /// Total area of all elements.
@@ -505,10 +536,20 @@ impl Mesh {
         }
         for e in &mut self.elements[first_element as usize..] {
             e.reflectance = match &poly.texture {
-                Some(map) => texture_mean(map, e).map(f64::from),
+                Some(map) => texture_mean(map, e)
+                    .map(|x| f64::from(x.min(crate::scene::texture::MAX_REFLECTANCE))),
                 None => refl,
             };
         }
+        let emission_texels = poly.emissive.as_ref().map(|map| {
+            let first = self.textured_exitance.len() as u32;
+            for e in &self.elements[first_element as usize..] {
+                let le = texture_mean(map, e);
+                let exitance = le.map(|l| std::f64::consts::PI * f64::from(l));
+                self.textured_exitance.push(exitance);
+            }
+            first
+        });
         let tangent = (v[1] - v[0]).normalize();
         self.polygons.push(MeshPolygon {
             node: poly.node,
@@ -518,6 +559,7 @@ impl Mesh {
             exitance,
             back_side: poly.back_side,
             textured: poly.texture.is_some(),
+            emission_texels,
             patches: first_patch..self.patches.len() as u32,
             elements: first_element..self.elements.len() as u32,
             patch_grid: if tri { [patch_grid[0]; 2] } else { patch_grid },
@@ -823,6 +865,7 @@ mod tests {
                     back_side: false,
                     parent: None,
                     texture: None,
+                    emissive: None,
                 });
             }
         }
@@ -871,6 +914,7 @@ mod tests {
             back_side: false,
             parent: None,
             texture: None,
+            emissive: None,
         }
     }
 

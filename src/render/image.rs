@@ -148,12 +148,12 @@ pub fn camera_image(
     }
     // Where a sample's ray leaves the scene the sky shows, at its radiance.
     let shown_sky = if rays.background { 1.0 } else { 0.0 };
-    let traced_parts = traced.direct.iter().zip(&traced.sky);
-    for (p, (d, sky)) in pixels.iter_mut().zip(traced_parts) {
+    let traced_parts = traced.direct.iter().zip(&traced.sky).zip(&traced.emitted);
+    for (p, ((d, sky), le)) in pixels.iter_mut().zip(traced_parts) {
         for c in 0..3 {
             // The rest of an element whose direct light the solution
             // underestimated can dip below 0 where the traced light is small.
-            p[c] = (p[c] + d[c]).max(0.0) + shown_sky * sky[c];
+            p[c] = (p[c] + d[c]).max(0.0) + shown_sky * sky[c] + le[c];
         }
     }
     Ok(pixels)
@@ -184,6 +184,13 @@ fn indirect_part(mesh: &Mesh, parts: &Parts, light: &DirectLight, seen: &[bool])
                 .collect()
         }
     };
+    // An emissive texture's emission is traced per sample (`Image::emitted`).
+    for (j, (r, e)) in rest.iter_mut().zip(&mesh.elements).enumerate() {
+        if mesh.polygons[e.polygon as usize].emission_texels.is_some() {
+            let le = mesh.element_exitance(j);
+            (0..3).for_each(|c| r[c] -= (le[c] / std::f64::consts::PI) as f32);
+        }
+    }
     // Textured elements interpolate their irradiance (the rest over their
     // reflectance); each pixel multiplies it by its texture.
     for (r, e) in rest.iter_mut().zip(&mesh.elements) {

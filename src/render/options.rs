@@ -291,6 +291,18 @@ pub fn fingerprint(scene: &Scene, opts: &RenderOptions, rasteriser: Rasteriser) 
         }
         let subdivision = option_text(p.subdivision.as_ref().map(subdivision_text));
         geometry.extend_from_slice(format!("{} {subdivision};", p.node).as_bytes());
+        // Only with an emissive texture, so older checkpoints still resume.
+        if let Some(m) = &p.emissive {
+            let (uv, du, dv) = (m.uv0, m.du, m.dv);
+            let floats = [uv.x, uv.y, du.x, du.y, du.z, dv.x, dv.y, dv.z].into_iter();
+            let map: Vec<String> = floats
+                .chain(m.factor)
+                .map(|x| x.to_bits().to_string())
+                .collect();
+            let texture = m.texture.texture.digest();
+            geometry
+                .extend_from_slice(format!("emissive {texture:x} {};", map.join(" ")).as_bytes());
+        }
     }
     // Lights change the numbers; scenes without them keep the text older
     // checkpoints were written with.

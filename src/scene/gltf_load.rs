@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 mod materials;
-use materials::Material;
+use materials::{Material, MaterialTexture};
 
 /// Cosine of the largest fold (0.8 degrees) between two triangles merged into
 /// a quad: the Cornell box's measured red wall is folded by 0.4 degrees.
@@ -401,27 +401,32 @@ impl Loader<'_> {
     }
 
     /// Adds the polygons of `tris` (pairs merged into quads where they make
-    /// one), both sides of a double-sided material.
+    /// one), both sides of a double-sided material. A polygon with an
+    /// emissive texture emits the texture's mean over it.
     fn add_polygons(
         &mut self,
         tris: &[[Vec3; 3]],
-        maps: &[Option<TexMap>],
+        maps: &[Maps],
         mat: &Material,
         node: usize,
         subdivision: Option<Subdivision>,
     ) {
-        for (verts, texture) in merge_quads(tris, maps) {
+        for (verts, (texture, emissive)) in merge_quads(tris, maps) {
             let normal = polygon_normal(&verts);
+            let emission = emissive
+                .as_ref()
+                .map_or(mat.emission, |m| m.mean_over(&verts));
             let poly = Polygon {
                 vertices: verts,
                 normal,
                 reflectance: mat.reflectance,
-                emission: mat.emission,
+                emission,
                 node,
                 subdivision,
                 back_side: false,
                 parent: None,
                 texture,
+                emissive,
             };
             if mat.double_sided {
                 let mut back = poly.clone();
@@ -436,17 +441,17 @@ impl Loader<'_> {
         }
     }
 
-    /// Each triangle's texture map (`None` for all without a texture; a
+    /// Each triangle's map onto `texture` (`None` for all without one; a
     /// primitive without the coordinates its texture needs falls back to
     /// the material's mean, with a warning).
     fn texture_maps(
         &mut self,
         uvs: &[[f32; 2]],
         tris: &[Indexed],
-        mat: &Material,
+        texture: Option<&MaterialTexture>,
         name: &str,
     ) -> Vec<Option<TexMap>> {
-        let Some(t) = &mat.texture else {
+        let Some(t) = texture else {
             return vec![None; tris.len()];
         };
         let mut missing = 0usize;
@@ -536,13 +541,15 @@ impl Loader<'_> {
             }
         }
         let tris = self.triangles(&positions, &indices, flip, name)?;
-        let uvs: Vec<[f32; 2]> = mat
-            .texture
-            .as_ref()
-            .and_then(|t| reader.read_tex_coords(t.set))
-            .map(|c| c.into_f32().collect())
-            .unwrap_or_default();
-        let maps = self.texture_maps(&uvs, &tris, &mat, name);
+        let uvs = |t: Option<&MaterialTexture>| -> Vec<[f32; 2]> {
+            t.and_then(|t| reader.read_tex_coords(t.set))
+                .map(|c| c.into_f32().collect())
+                .unwrap_or_default()
+        };
+        let (base_uvs, emissive_uvs) = (uvs(mat.texture.as_ref()), uvs(mat.emissive.as_ref()));
+        let base = self.texture_maps(&base_uvs, &tris, mat.texture.as_ref(), name);
+        let emissive = self.texture_maps(&emissive_uvs, &tris, mat.emissive.as_ref(), name);
+        let maps: Vec<Maps> = base.into_iter().zip(emissive).collect();
         let tris: Vec<[Vec3; 3]> = tris.into_iter().map(|t| t.0).collect();
         self.add_polygons(&tris, &maps, &mat, node, subdivision);
         Ok(())
@@ -557,24 +564,28 @@ pub fn polygon_normal(v: &[Vec3]) -> Vec3 {
     }
 }
 
+/// A triangle's maps onto its base-colour and emissive textures.
+type Maps = (Option<TexMap>, Option<TexMap>);
+
 /// Merges consecutive triangles that share an edge, are coplanar and together
 /// form a convex quad; everything else stays a triangle.
 /// A textured pair merges only where both triangles map onto their
-/// texture alike (so the quad's one affine map is exact on both).
-fn merge_quads(tris: &[[Vec3; 3]], maps: &[Option<TexMap>]) -> Vec<(Vec<Vec3>, Option<TexMap>)> {
+/// textures alike (so the quad's one affine map is exact on both).
+fn merge_quads(tris: &[[Vec3; 3]], maps: &[Maps]) -> Vec<(Vec<Vec3>, Maps)> {
     let mut out = Vec::with_capacity(tris.len());
     let mut i = 0;
-    let map = |i: usize| maps.get(i).cloned().flatten();
+    let map = |i: usize| maps.get(i).cloned().unwrap_or_default();
+    let agree = |a: &Option<TexMap>, b: &Option<TexMap>, q: &[Vec3]| match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => a.agrees(b, q),
+        _ => false,
+    };
     while i < tris.len() {
         if i + 1 < tris.len() {
             if let Some(q) = try_merge(&tris[i], &tris[i + 1]) {
-                let alike = match (map(i), map(i + 1)) {
-                    (None, None) => true,
-                    (Some(a), Some(b)) => a.agrees(&b, &q),
-                    _ => false,
-                };
-                if alike {
-                    out.push((q.to_vec(), map(i)));
+                let (a, b) = (map(i), map(i + 1));
+                if agree(&a.0, &b.0, &q) && agree(&a.1, &b.1, &q) {
+                    out.push((q.to_vec(), a));
                     i += 2;
                     continue;
                 }

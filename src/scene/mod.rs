@@ -49,6 +49,11 @@ pub struct Polygon {
     /// (then `reflectance` is the texture's mean times the factor, and
     /// each element gets its own mean: see [`texture`]).
     pub texture: Option<TexMap>,
+    /// How an emissive texture maps onto it, if its material has one (its
+    /// factor is emissiveFactor times the emissive strength; `emission` is
+    /// then the texture's mean over the polygon, and each element emits
+    /// its own mean: see [`crate::mesh::Mesh::element_exitance`]).
+    pub emissive: Option<TexMap>,
 }
 
 impl Polygon {
@@ -102,6 +107,7 @@ impl Polygon {
             back_side: false,
             parent: None,
             texture: None,
+            emissive: None,
         }
     }
 

@@ -99,6 +99,8 @@ pub struct Texture {
     pub wrap: [Wrap; 2],
     /// Level 0 (the image) down to 1 x 1, each half the last.
     levels: Vec<Level>,
+    /// A hash of the image's texels ([`Texture::digest`]), made when asked.
+    digest: std::sync::OnceLock<u64>,
 }
 
 /// sRGB to linear (the IEC 61966-2-1 curve).
@@ -175,7 +177,24 @@ impl Texture {
             name: name.to_string(),
             wrap,
             levels,
+            digest: Default::default(),
         }
+    }
+
+    /// A hash (FNV-1a) of the image's size and texels, for the checkpoint's
+    /// fingerprint: another image under the same name changes it.
+    pub fn digest(&self) -> u64 {
+        *self.digest.get_or_init(|| {
+            let l = &self.levels[0];
+            let mut h = 0xcbf2_9ce4_8422_2325u64;
+            let mut eat = |x: u64| h = (h ^ x).wrapping_mul(0x100_0000_01b3);
+            eat(l.width as u64);
+            eat(l.height as u64);
+            for i in 0..l.width * l.height {
+                l.get(i).iter().for_each(|c| eat(u64::from(c.to_bits())));
+            }
+            h
+        })
     }
 
     /// Width and height of the image, texels.
@@ -263,7 +282,42 @@ impl PartialEq for TextureRef {
 /// `gltf_load::CLAMPED`): a white texel reflecting everything never converges.
 pub const MAX_REFLECTANCE: f32 = 0.95;
 
+/// The midpoints of a `side`-square grid over the (u, v) of the polygon
+/// with `corners` (3 or 4; see [`crate::sampling::point_in`]), each
+/// standing for about an equal share of it.
+pub fn grid_points(corners: &[Vec3], side: u32) -> Vec<Vec3> {
+    (0..side * side)
+        .map(|q| {
+            let u = ((q % side) as f32 + 0.5) / side as f32;
+            let v = ((q / side) as f32 + 0.5) / side as f32;
+            crate::sampling::point_in(corners, u, v).0
+        })
+        .collect()
+}
+
+/// Points along each side of a polygon for its emissive texture's mean
+/// ([`TexMap::mean_over`]).
+const POLYGON_POINTS: u32 = 16;
+
 impl TexMap {
+    /// The factor times the texture's mean over the polygon with
+    /// `vertices` (3 or 4).
+    pub fn mean_over(&self, vertices: &[Vec3]) -> [f32; 3] {
+        let area = match vertices.len() {
+            3 => {
+                0.5 * (vertices[1] - vertices[0])
+                    .cross(vertices[2] - vertices[0])
+                    .length()
+            }
+            _ => {
+                0.5 * (vertices[2] - vertices[0])
+                    .cross(vertices[3] - vertices[1])
+                    .length()
+            }
+        };
+        self.mean(&grid_points(vertices, POLYGON_POINTS), area)
+    }
+
     /// The affine map of a triangle with corners `p` and coordinates `t`;
     /// `None` when the triangle or its coordinates are degenerate.
     pub fn of_triangle(
@@ -312,16 +366,26 @@ impl TexMap {
                 .all(|&p| (self.uv(p) - other.uv(p)).abs().max_element() < 1e-4)
     }
 
-    /// The reflectance at `p` (bilinear, finest level): the factor times
-    /// the texel colour, at most [`MAX_REFLECTANCE`].
-    pub fn reflectance(&self, p: Vec3) -> [f32; 3] {
+    /// The factor times the texel colour at `p` (bilinear, finest level).
+    pub fn value(&self, p: Vec3) -> [f32; 3] {
         let t = self.texture.texture.sample(self.uv(p), 0.0);
-        [0, 1, 2].map(|c| (self.factor[c] * t[c]).min(MAX_REFLECTANCE))
+        [0, 1, 2].map(|c| self.factor[c] * t[c])
     }
 
-    /// The mean reflectance over a region, from `points` inside it that
-    /// each stand for an equal share of it (`area` m^2 in all).
+    /// The reflectance at `p`: [`TexMap::value`], at most [`MAX_REFLECTANCE`].
+    pub fn reflectance(&self, p: Vec3) -> [f32; 3] {
+        self.value(p).map(|x| x.min(MAX_REFLECTANCE))
+    }
+
+    /// The mean reflectance over a region: [`TexMap::mean`], at most
+    /// [`MAX_REFLECTANCE`].
     pub fn mean_reflectance(&self, points: &[Vec3], area: f32) -> [f32; 3] {
+        self.mean(points, area).map(|x| x.min(MAX_REFLECTANCE))
+    }
+
+    /// The factor times the texture's mean over a region, from `points`
+    /// inside it that each stand for an equal share of it (`area` m^2 in all).
+    pub fn mean(&self, points: &[Vec3], area: f32) -> [f32; 3] {
         // One point's share of the region, as a length in uv units.
         let scale = (self.du.length() * self.dv.length()).sqrt();
         let footprint = scale * (area / points.len().max(1) as f32).sqrt();
@@ -333,7 +397,7 @@ impl TexMap {
             }
         }
         let n = points.len().max(1) as f32;
-        [0, 1, 2].map(|c| (self.factor[c] * sum[c] / n).min(MAX_REFLECTANCE))
+        [0, 1, 2].map(|c| self.factor[c] * sum[c] / n)
     }
 }
 

@@ -210,14 +210,12 @@ impl<'m> Solver<'m> {
             mean_reflectance,
             ambient_area,
         } = PerElement::of(mesh, owners, rank, traced);
-        let unshot: Vec<[f64; 3]> = mesh
-            .patches
-            .iter()
-            .map(|p| {
+        let unshot: Vec<[f64; 3]> = (0..mesh.patches.len())
+            .map(|i| {
                 if traced {
                     [0.0; 3]
                 } else {
-                    mesh.polygons[p.polygon as usize].exitance
+                    mesh.patch_exitance(i)
                 }
             })
             .collect();
@@ -588,7 +586,7 @@ impl<'m> Solver<'m> {
         }
         // The share of this shot that is the shooter's own emission (its
         // first shot carries all of it), per channel.
-        let emission = mesh.polygons[p.polygon as usize].exitance;
+        let emission = mesh.patch_exitance(i);
         if std::mem::take(&mut self.emission_unshot[i]) {
             [0, 1, 2].map(|c| {
                 if region.shoot[c] > 0.0 {

@@ -81,12 +81,11 @@ impl PerElement {
         // so it is the sum the solver took before, bit for bit.
         let (mut weighted, mut area) = ([0.0; 3], std::iter::empty::<f64>().sum::<f64>());
         for (j, e) in mesh.elements.iter().enumerate() {
-            let polygon = &mesh.polygons[e.polygon as usize];
             element_patch.push(e.patch);
             if owners.of(e.patch) == rank {
-                exitance[j] = polygon.exitance;
+                exitance[j] = mesh.element_exitance(j);
                 if !shot {
-                    element_unshot[j] = polygon.exitance;
+                    element_unshot[j] = exitance[j];
                 }
                 receiving[j] = Receiving {
                     reflectance: e.reflectance,

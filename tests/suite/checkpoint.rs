@@ -388,3 +388,44 @@ fn an_interrupt_during_the_refinement_pass_on_two_ranks_keeps_the_same_solution(
     let saved = Checkpoint::read(&path).expect("checkpoint written");
     assert_eq!(saved.state.shots, b.shots);
 }
+
+/// A room lit by an emissive texture resumes to the same bits, and the
+/// same room with the texture's halves swapped (the same mean emission)
+/// is refused: the fingerprint holds the texture.
+#[test]
+fn an_emissive_texture_resumes_to_the_same_bits_and_another_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("panel.ckpt");
+    let scene = radiosity::scene::open(crate::emissive::PANEL_ROOM).expect("fixture");
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    let straight = solve_scene(&scene, &opts, None);
+    opts.checkpoint = Some(CheckpointPlan {
+        path: path.clone(),
+        every: None,
+    });
+    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    let stopped = solve_scene(&scene, &opts, Some(200));
+    assert!(stopped.interrupted);
+    opts.interrupt = None;
+    opts.checkpoint = None;
+    opts.resume = Some(Arc::new(Checkpoint::read(&path).expect("checkpoint")));
+    same_solution(&solve_scene(&scene, &opts, None), &straight);
+    let mut swapped = scene.clone();
+    for p in &mut swapped.polygons {
+        if let Some(m) = p.emissive.as_mut() {
+            // u -> 1 - u: the lit half moves to +x.
+            m.uv0.x = 1.0 - m.uv0.x;
+            m.du = -m.du;
+        }
+    }
+    let err = render(gpu(), &swapped, &opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}

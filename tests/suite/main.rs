@@ -9,6 +9,7 @@ mod checkpoint;
 mod common;
 mod determinism;
 mod double_sided;
+mod emissive;
 mod energy;
 mod furnace;
 mod image;

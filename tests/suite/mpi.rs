@@ -819,3 +819,14 @@ fn a_sky_map_gives_the_same_bits_on_every_rank_count() {
     let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
     assert!(image("one") == image("two"), "the images differ");
 }
+
+#[test]
+fn an_emissive_texture_gives_the_same_bits_on_every_rank_count() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scene = crate::emissive::PANEL_ROOM;
+    let one = mpirun_scene(1, dir.path(), "one", scene, &["--max-shots", "60"]);
+    let two = mpirun_scene(2, dir.path(), "two", scene, &["--max-shots", "60"]);
+    same_result(&one, &two, "2 ranks lit by an emissive texture");
+    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+    assert!(image("one") == image("two"), "the images differ");
+}

@@ -54,6 +54,7 @@ fn look_with(
             back_side: false,
             parent: None,
             texture: None,
+            emissive: None,
         })
         .collect();
     let scene = Scene {

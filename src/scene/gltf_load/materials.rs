@@ -10,6 +10,9 @@ pub(super) struct Material {
     pub(super) double_sided: bool,
     /// The base-colour texture, if it loaded.
     pub(super) texture: Option<MaterialTexture>,
+    /// The emissive texture, if it loaded (its factor: emissiveFactor
+    /// times the emissive strength).
+    pub(super) emissive: Option<MaterialTexture>,
 }
 
 /// A material's base-colour texture as its primitives map it.
@@ -19,7 +22,8 @@ pub(super) struct MaterialTexture {
     pub(super) set: u32,
     /// `KHR_texture_transform` as a 2 x 3 affine matrix (rows).
     pub(super) transform: [[f32; 3]; 2],
-    /// baseColorFactor times (1 - metallic), unclamped.
+    /// What the texels are multiplied by: baseColorFactor times
+    /// (1 - metallic), unclamped, or emissiveFactor times the strength.
     pub(super) factor: [f32; 3],
 }
 
@@ -109,7 +113,19 @@ impl Loader<'_> {
         let factor = [0, 1, 2].map(|c| base[c] * (1.0 - metallic));
         let texture = pbr
             .base_color_texture()
-            .and_then(|info| self.material_texture(&info, &what, factor));
+            .and_then(|info| self.material_texture(&info, &what, factor, "base colour"));
+        let emission = e.map(|x| x * strength);
+        // glTF: emission = emissiveFactor x emissiveTexture; a texture
+        // under a black factor emits nothing and is not read.
+        let emissive = m
+            .emissive_texture()
+            .filter(|_| emission.iter().any(|&x| x > 0.0))
+            .and_then(|info| self.material_texture(&info, &what, emission, "emissive"));
+        // Where a polygon lacks coordinates, the texture's mean stands in.
+        let emission = emissive.as_ref().map_or(emission, |t| {
+            let mean = t.texture.texture.mean();
+            [0, 1, 2].map(|c| emission[c] * mean[c])
+        });
         if let Some(t) = &texture {
             // The texture's mean stands for the polygon; its elements get
             // their own (see `super::texture`).
@@ -118,9 +134,10 @@ impl Loader<'_> {
                 .map(|c| (factor[c] * mean[c]).min(crate::scene::texture::MAX_REFLECTANCE));
             return Ok(Material {
                 reflectance,
-                emission: [e[0] * strength, e[1] * strength, e[2] * strength],
+                emission,
                 double_sided: m.double_sided(),
                 texture,
+                emissive,
             });
         }
         // glTF's implicit reflectance of 1 (no factor, no texture) is
@@ -141,21 +158,24 @@ impl Loader<'_> {
         }
         Ok(Material {
             reflectance,
-            emission: [e[0] * strength, e[1] * strength, e[2] * strength],
+            emission,
             double_sided: m.double_sided(),
             texture: None,
+            emissive,
         })
     }
 
-    /// A material's base-colour texture as its polygons map it: the image
-    /// (`None` when it cannot be had), its coordinate set and transform.
+    /// A material's `kind` texture (base colour or emissive) as its
+    /// polygons map it: the image (`None` when it cannot be had), its
+    /// coordinate set and transform.
     pub(super) fn material_texture(
         &mut self,
         info: &gltf::texture::Info,
         what: &str,
         factor: [f32; 3],
+        kind: &str,
     ) -> Option<MaterialTexture> {
-        let texture = self.texture(&info.texture(), what)?;
+        let texture = self.texture(&info.texture(), what, kind)?;
         let (mut set, mut transform) =
             (info.tex_coord(), transform_matrix([0.0; 2], 0.0, [1.0; 2]));
         if let Some(t) = info.texture_transform() {
@@ -170,14 +190,16 @@ impl Loader<'_> {
         })
     }
 
-    /// The base-colour texture `texture`, decoded once (PNG or JPEG, from a
-    /// file beside the scene, a data URI or a buffer view); `None`, with a
-    /// warning naming the image, when it cannot be had (the material's
+    /// The texture `texture` (sRGB, as glTF's base colour and emissive
+    /// textures are), decoded once (PNG or JPEG, from a file beside the
+    /// scene, a data URI or a buffer view); `None`, with a warning naming
+    /// the image and its `kind`, when it cannot be had (the material's
     /// factor then stands in).
     pub(super) fn texture(
         &mut self,
         texture: &gltf::Texture,
         material: &str,
+        kind: &str,
     ) -> Option<Arc<TextureRef>> {
         let index = texture.index();
         if let Some(t) = self.textures.get(&index) {
@@ -216,7 +238,7 @@ impl Loader<'_> {
             }
             Err(why) => {
                 self.scene.warnings.push(format!(
-                    "{material}: base colour texture '{label}' cannot be used ({why}): its factor stands in"
+                    "{material}: {kind} texture '{label}' cannot be used ({why}): its factor stands in"
                 ));
                 None
             }
