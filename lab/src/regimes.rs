@@ -45,6 +45,7 @@ fn measured(gpu: &Gpu, poly: &[Vec3], res: Resolution, tessellated: bool) -> Res
             back_side: false,
             parent: None,
             texture: None,
+            emissive: None,
         }],
         ..Default::default()
     };

@@ -110,6 +110,7 @@ fn load_with_base(bytes: &[u8], name: &str, base: Option<&Path>) -> Result<Scene
         camera_at: Vec::new(),
         light_at: Vec::new(),
         explicit_base,
+        mask_cuts: crate::scene::mask::cuts_for(masked_triangles(&gltf.document)),
     };
     loader.scene.name = name.to_string();
     loader.scene.warnings = tolerated;
@@ -170,6 +171,22 @@ struct Loader<'a> {
     /// Per material, whether the file writes its baseColorFactor (one it
     /// leaves out reads as glTF's default, 1).
     explicit_base: Vec<bool>,
+    /// Pieces along each edge of a masked triangle at most
+    /// ([`crate::scene::mask::cuts_for`]).
+    mask_cuts: u32,
+}
+
+/// About how many triangles the document's masked materials cover (each
+/// mesh counted once, however many nodes use it).
+fn masked_triangles(doc: &gltf::Document) -> usize {
+    doc.meshes()
+        .flat_map(|m| m.primitives())
+        .filter(|p| p.material().alpha_mode() == gltf::material::AlphaMode::Mask)
+        .map(|p| {
+            let count = p.indices().or_else(|| p.get(&gltf::Semantic::Positions));
+            count.map_or(0, |a| a.count() / 3)
+        })
+        .sum()
 }
 
 /// A triangle's corners and their vertex indices.
@@ -411,7 +428,11 @@ impl Loader<'_> {
         node: usize,
         subdivision: Option<Subdivision>,
     ) {
-        for (verts, (texture, emissive)) in merge_quads(tris, maps) {
+        let pieces = match mat.mask {
+            Some(mask) => cut_out(tris, maps, mask, self.mask_cuts),
+            None => merge_quads(tris, maps),
+        };
+        for (verts, (texture, emissive)) in pieces {
             let normal = polygon_normal(&verts);
             let emission = emissive
                 .as_ref()
@@ -562,6 +583,24 @@ pub fn polygon_normal(v: &[Vec3]) -> Vec3 {
         3 => (v[1] - v[0]).cross(v[2] - v[0]).normalize(),
         _ => (v[2] - v[0]).cross(v[3] - v[1]).normalize(),
     }
+}
+
+/// The pieces of `tris` that a material's `mask` keeps (see
+/// [`crate::scene::mask`]), each with its triangle's maps.
+fn cut_out(
+    tris: &[[Vec3; 3]],
+    maps: &[Maps],
+    mask: crate::scene::mask::Mask,
+    most: u32,
+) -> Vec<(Vec<Vec3>, Maps)> {
+    let mut out = Vec::with_capacity(tris.len());
+    for (i, t) in tris.iter().enumerate() {
+        let map = maps.get(i).cloned().unwrap_or_default();
+        for piece in crate::scene::mask::cut(*t, map.0.as_ref(), mask, most) {
+            out.push((piece, map.clone()));
+        }
+    }
+    out
 }
 
 /// A triangle's maps onto its base-colour and emissive textures.

@@ -10,6 +10,7 @@ pub mod family;
 mod gltf_load;
 mod gltf_write;
 pub mod light;
+pub mod mask;
 pub mod sky;
 pub mod texture;
 pub mod tolerate;
@@ -52,7 +53,7 @@ pub struct Polygon {
     /// How an emissive texture maps onto it, if its material has one (its
     /// factor is emissiveFactor times the emissive strength; `emission` is
     /// then the texture's mean over the polygon, and each element emits
-    /// its own mean: see [`crate::mesh::Mesh::element_exitance`]).
+    /// its own mean: see `Mesh::element_exitance`).
     pub emissive: Option<TexMap>,
 }
 

@@ -99,6 +99,9 @@ pub struct Texture {
     pub wrap: [Wrap; 2],
     /// Level 0 (the image) down to 1 x 1, each half the last.
     levels: Vec<Level>,
+    /// The image's alpha (linear, level 0), where some texel is not opaque
+    /// (what `alphaMode: MASK` cuts by).
+    alpha: Option<Vec<u8>>,
     /// A hash of the image's texels ([`Texture::digest`]), made when asked.
     digest: std::sync::OnceLock<u64>,
 }
@@ -122,7 +125,31 @@ impl Texture {
         wrap: [Wrap; 2],
     ) -> Self {
         let texels = rgba.iter().map(|t| [t[0], t[1], t[2]]).collect();
-        Self::from_level(name, [width, height], Texels::Srgb8(texels), wrap)
+        let mut t = Self::from_level(name, [width, height], Texels::Srgb8(texels), wrap);
+        if rgba.iter().any(|t| t[3] < 255) {
+            t.alpha = Some(rgba.iter().map(|t| t[3]).collect());
+        }
+        t
+    }
+
+    /// The image's alpha at `uv` (bilinear, level 0; 1 where it has none).
+    pub fn alpha(&self, uv: Vec2) -> f32 {
+        let Some(alpha) = &self.alpha else {
+            return 1.0;
+        };
+        let l = &self.levels[0];
+        let (x, y) = (uv.x * l.width as f32 - 0.5, uv.y * l.height as f32 - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let at = |i: i64, j: i64| {
+            let xi = self.wrap[0].index(i, l.width);
+            let yj = self.wrap[1].index(j, l.height);
+            f32::from(alpha[yj * l.width + xi]) / 255.0
+        };
+        let top = at(x0, y0) + (at(x0 + 1, y0) - at(x0, y0)) * fx;
+        let bottom = at(x0, y0 + 1) + (at(x0 + 1, y0 + 1) - at(x0, y0 + 1)) * fx;
+        top + (bottom - top) * fy
     }
 
     /// A texture from linear RGB texels (`width * height`, row by row).
@@ -177,6 +204,7 @@ impl Texture {
             name: name.to_string(),
             wrap,
             levels,
+            alpha: None,
             digest: Default::default(),
         }
     }

@@ -15,6 +15,7 @@ mod furnace;
 mod image;
 mod layout;
 mod lights;
+mod masks;
 mod mpi;
 mod projections;
 mod quiet;

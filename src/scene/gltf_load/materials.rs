@@ -13,6 +13,8 @@ pub(super) struct Material {
     /// The emissive texture, if it loaded (its factor: emissiveFactor
     /// times the emissive strength).
     pub(super) emissive: Option<MaterialTexture>,
+    /// `alphaMode: MASK`: where the base colour's alpha cuts it out.
+    pub(super) mask: Option<crate::scene::mask::Mask>,
 }
 
 /// A material's base-colour texture as its primitives map it.
@@ -99,9 +101,14 @@ impl Loader<'_> {
         let strength = m.emissive_strength().unwrap_or(1.0);
         let e = m.emissive_factor();
         check_ranges(&what, [base[0], base[1], base[2]], e, metallic, strength).map_err(bad)?;
-        if m.alpha_mode() == gltf::material::AlphaMode::Mask {
+        let mask =
+            (m.alpha_mode() == gltf::material::AlphaMode::Mask).then(|| crate::scene::mask::Mask {
+                cutoff: m.alpha_cutoff().unwrap_or(0.5),
+                factor: base[3],
+            });
+        if m.alpha_mode() == gltf::material::AlphaMode::Blend {
             clamped.push(format!(
-                "{what}: alphaMode MASK is not cut out: its surfaces are treated as opaque"
+                "{what}: alphaMode BLEND is not see-through here: its surfaces are treated as opaque"
             ));
         }
         if metallic >= 1.0 && base[..3].iter().any(|&x| x > 0.0) {
@@ -138,6 +145,7 @@ impl Loader<'_> {
                 double_sided: m.double_sided(),
                 texture,
                 emissive,
+                mask,
             });
         }
         // glTF's implicit reflectance of 1 (no factor, no texture) is
@@ -162,6 +170,7 @@ impl Loader<'_> {
             double_sided: m.double_sided(),
             texture: None,
             emissive,
+            mask,
         })
     }
 
