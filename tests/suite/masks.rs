@@ -33,6 +33,15 @@ fn checker_png(k: u32) -> String {
 /// clear. Nothing but the floor reflects toward the floor, so its
 /// radiosity is rho times the light that reaches it.
 fn masked_room(mask: Option<&str>) -> scene::Scene {
+    scene::load_slice(
+        &serde_json::to_vec(&masked_doc(mask)).expect("JSON"),
+        "masked",
+    )
+    .expect("loads")
+}
+
+/// [`masked_room`] as glTF JSON.
+pub(crate) fn masked_doc(mask: Option<&str>) -> serde_json::Value {
     let light = surface(
         "light",
         vec![rect(1, 1.0, [-0.5, -0.5], [0.5, 0.5], false)],
@@ -88,7 +97,7 @@ fn masked_room(mask: Option<&str>) -> scene::Scene {
         material["alphaMode"] = json!(mode);
         material["alphaCutoff"] = json!(0.5);
     }
-    scene::load_slice(&serde_json::to_vec(&doc).expect("JSON"), "masked").expect("loads")
+    doc
 }
 
 /// The floor's light under a checkerboard mask is half way between its

@@ -830,3 +830,17 @@ fn an_emissive_texture_gives_the_same_bits_on_every_rank_count() {
     let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
     assert!(image("one") == image("two"), "the images differ");
 }
+
+#[test]
+fn an_alpha_mask_gives_the_same_bits_on_every_rank_count() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("masked.gltf");
+    let doc = crate::masks::masked_doc(Some("MASK"));
+    std::fs::write(&path, serde_json::to_vec(&doc).expect("JSON")).expect("write");
+    let scene = path.to_str().expect("utf-8");
+    let one = mpirun_scene(1, dir.path(), "one", scene, &[]);
+    let two = mpirun_scene(2, dir.path(), "two", scene, &[]);
+    same_result(&one, &two, "2 ranks with a masked surface");
+    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+    assert!(image("one") == image("two"), "the images differ");
+}
