@@ -207,6 +207,14 @@ impl PixelSums {
     fn add_sky(&mut self, radiance: [f32; 3], per_pixel: f64) {
         (0..3).for_each(|c| self.sky[c] += radiance[c] / per_pixel as f32);
     }
+
+    /// Adds one of `per_pixel` samples' emission where it met `x` on a
+    /// polygon whose emissive texture is `map`, if any.
+    fn add_emitted(&mut self, map: Option<&crate::scene::TexMap>, x: Vec3, per_pixel: f64) {
+        if let Some(l) = map.map(|m| m.value(x)) {
+            (0..3).for_each(|c| self.emitted[c] += l[c] / per_pixel as f32);
+        }
+    }
 }
 
 impl<'a> DirectLight<'a> {
@@ -521,10 +529,7 @@ impl<'a> DirectLight<'a> {
                 if dir.dot(self.normals[hit.polygon as usize]) >= 0.0 {
                     continue;
                 }
-                if let Some(map) = self.emissive[hit.polygon as usize] {
-                    let l = map.value(x);
-                    (0..3).for_each(|c| out.emitted[c] += l[c] / per_pixel as f32);
-                }
+                out.add_emitted(self.emissive[hit.polygon as usize], x, per_pixel);
                 let block = order[k as usize];
                 let strata = Strata {
                     grid: ss * self.strata,

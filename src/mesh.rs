@@ -331,6 +331,31 @@ fn outward_solid(
 /// Points per element along each axis for its texture mean.
 const TEXTURE_POINTS: u32 = 4;
 
+impl Mesh {
+    /// Gives the elements from `first` on (all of `poly`'s) their
+    /// textures' means: reflectance (or the polygon's), and, with an
+    /// emissive texture, exitance in [`Mesh::textured_exitance`], whose
+    /// index of the first it returns.
+    fn texture_elements(&mut self, poly: &Polygon, first: usize) -> Option<u32> {
+        let refl = poly.reflectance.map(f64::from);
+        for e in &mut self.elements[first..] {
+            e.reflectance = match &poly.texture {
+                Some(map) => texture_mean(map, e)
+                    .map(|x| f64::from(x.min(crate::scene::texture::MAX_REFLECTANCE))),
+                None => refl,
+            };
+        }
+        let map = poly.emissive.as_ref()?;
+        let start = self.textured_exitance.len() as u32;
+        for e in &self.elements[first..] {
+            let le = texture_mean(map, e);
+            let exitance = le.map(|l| std::f64::consts::PI * f64::from(l));
+            self.textured_exitance.push(exitance);
+        }
+        Some(start)
+    }
+}
+
 /// The factor times `map`'s texture's mean over element `e`, from the
 /// midpoints of a [`TEXTURE_POINTS`]-square grid over it.
 fn texture_mean(map: &crate::scene::TexMap, e: &Element) -> [f32; 3] {
@@ -534,22 +559,7 @@ impl Mesh {
         } else {
             self.quad(index, v, patch_grid, element_grid);
         }
-        for e in &mut self.elements[first_element as usize..] {
-            e.reflectance = match &poly.texture {
-                Some(map) => texture_mean(map, e)
-                    .map(|x| f64::from(x.min(crate::scene::texture::MAX_REFLECTANCE))),
-                None => refl,
-            };
-        }
-        let emission_texels = poly.emissive.as_ref().map(|map| {
-            let first = self.textured_exitance.len() as u32;
-            for e in &self.elements[first_element as usize..] {
-                let le = texture_mean(map, e);
-                let exitance = le.map(|l| std::f64::consts::PI * f64::from(l));
-                self.textured_exitance.push(exitance);
-            }
-            first
-        });
+        let emission_texels = self.texture_elements(poly, first_element as usize);
         let tangent = (v[1] - v[0]).normalize();
         self.polygons.push(MeshPolygon {
             node: poly.node,

@@ -138,18 +138,30 @@ impl Texture {
             return 1.0;
         };
         let l = &self.levels[0];
-        let (x, y) = (uv.x * l.width as f32 - 0.5, uv.y * l.height as f32 - 0.5);
+        let (corners, [fx, fy]) = self.bilinear([l.width, l.height], uv);
+        let [a, b, c, d] = corners.map(|i| f32::from(alpha[i]) / 255.0);
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        top + (bottom - top) * fy
+    }
+
+    /// Bilinear filtering at `uv` over a `size` level: its four texels'
+    /// indices (top-left, top-right, bottom-left, bottom-right, wrapped)
+    /// and the weights along x and y.
+    fn bilinear(&self, [width, height]: [usize; 2], uv: Vec2) -> ([usize; 4], [f32; 2]) {
+        let (x, y) = (uv.x * width as f32 - 0.5, uv.y * height as f32 - 0.5);
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = (x - x0, y - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let at = |i: i64, j: i64| {
-            let xi = self.wrap[0].index(i, l.width);
-            let yj = self.wrap[1].index(j, l.height);
-            f32::from(alpha[yj * l.width + xi]) / 255.0
-        };
-        let top = at(x0, y0) + (at(x0 + 1, y0) - at(x0, y0)) * fx;
-        let bottom = at(x0, y0 + 1) + (at(x0 + 1, y0 + 1) - at(x0, y0 + 1)) * fx;
-        top + (bottom - top) * fy
+        let at =
+            |i: i64, j: i64| self.wrap[1].index(j, height) * width + self.wrap[0].index(i, width);
+        let corners = [
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        ];
+        (corners, [fx, fy])
     }
 
     /// A texture from linear RGB texels (`width * height`, row by row).
@@ -246,21 +258,8 @@ impl Texture {
             0
         };
         let l = &self.levels[level];
-        let (x, y) = (uv.x * l.width as f32 - 0.5, uv.y * l.height as f32 - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let at = |i: i64, j: i64| {
-            let xi = self.wrap[0].index(i, l.width);
-            let yj = self.wrap[1].index(j, l.height);
-            l.get(yj * l.width + xi)
-        };
-        let (a, b, c, d) = (
-            at(x0, y0),
-            at(x0 + 1, y0),
-            at(x0, y0 + 1),
-            at(x0 + 1, y0 + 1),
-        );
+        let ([a, b, c, d], [fx, fy]) = self.bilinear([l.width, l.height], uv);
+        let (a, b, c, d) = (l.get(a), l.get(b), l.get(c), l.get(d));
         [0, 1, 2].map(|k| {
             let top = a[k] + (b[k] - a[k]) * fx;
             let bottom = c[k] + (d[k] - c[k]) * fx;

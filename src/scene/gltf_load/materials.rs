@@ -74,6 +74,26 @@ fn check_ranges(
     Ok(())
 }
 
+/// The material `m`'s `alphaMode: MASK` (its cutoff, glTF's default 0.5,
+/// and `factor`, the baseColorFactor's alpha); `BLEND` is opaque, said in
+/// `warnings`.
+fn alpha_mode(
+    m: &gltf::Material,
+    what: &str,
+    factor: f32,
+    warnings: &mut Vec<String>,
+) -> Option<crate::scene::mask::Mask> {
+    if m.alpha_mode() == gltf::material::AlphaMode::Blend {
+        warnings.push(format!(
+            "{what}: alphaMode BLEND is not see-through here: its surfaces are treated as opaque"
+        ));
+    }
+    (m.alpha_mode() == gltf::material::AlphaMode::Mask).then(|| crate::scene::mask::Mask {
+        cutoff: m.alpha_cutoff().unwrap_or(0.5),
+        factor,
+    })
+}
+
 impl Loader<'_> {
     /// The primitive's material, checked against the glTF specification's
     /// ranges: baseColorFactor and emissiveFactor in [0, 1], the emissive
@@ -101,16 +121,7 @@ impl Loader<'_> {
         let strength = m.emissive_strength().unwrap_or(1.0);
         let e = m.emissive_factor();
         check_ranges(&what, [base[0], base[1], base[2]], e, metallic, strength).map_err(bad)?;
-        let mask =
-            (m.alpha_mode() == gltf::material::AlphaMode::Mask).then(|| crate::scene::mask::Mask {
-                cutoff: m.alpha_cutoff().unwrap_or(0.5),
-                factor: base[3],
-            });
-        if m.alpha_mode() == gltf::material::AlphaMode::Blend {
-            clamped.push(format!(
-                "{what}: alphaMode BLEND is not see-through here: its surfaces are treated as opaque"
-            ));
-        }
+        let mask = alpha_mode(&m, &what, base[3], clamped);
         if metallic >= 1.0 && base[..3].iter().any(|&x| x > 0.0) {
             // glTF's default when a material gives no metallicFactor.
             clamped.push(format!(
@@ -121,18 +132,7 @@ impl Loader<'_> {
         let texture = pbr
             .base_color_texture()
             .and_then(|info| self.material_texture(&info, &what, factor, "base colour"));
-        let emission = e.map(|x| x * strength);
-        // glTF: emission = emissiveFactor x emissiveTexture; a texture
-        // under a black factor emits nothing and is not read.
-        let emissive = m
-            .emissive_texture()
-            .filter(|_| emission.iter().any(|&x| x > 0.0))
-            .and_then(|info| self.material_texture(&info, &what, emission, "emissive"));
-        // Where a polygon lacks coordinates, the texture's mean stands in.
-        let emission = emissive.as_ref().map_or(emission, |t| {
-            let mean = t.texture.texture.mean();
-            [0, 1, 2].map(|c| emission[c] * mean[c])
-        });
+        let (emission, emissive) = self.emission(&m, &what, e.map(|x| x * strength));
         if let Some(t) = &texture {
             // The texture's mean stands for the polygon; its elements get
             // their own (see `super::texture`).
@@ -172,6 +172,28 @@ impl Loader<'_> {
             emissive,
             mask,
         })
+    }
+
+    /// The material `m`'s emission (`factor` the emissive factor times the
+    /// strength) and its emissive texture. glTF: emission = emissiveFactor
+    /// x emissiveTexture; a texture under a black factor emits nothing and
+    /// is not read. The emission is the texture's mean times the factor:
+    /// what stands in where a polygon lacks coordinates.
+    fn emission(
+        &mut self,
+        m: &gltf::Material,
+        what: &str,
+        factor: [f32; 3],
+    ) -> ([f32; 3], Option<MaterialTexture>) {
+        let emissive = m
+            .emissive_texture()
+            .filter(|_| factor.iter().any(|&x| x > 0.0))
+            .and_then(|info| self.material_texture(&info, what, factor, "emissive"));
+        let emission = emissive.as_ref().map_or(factor, |t| {
+            let mean = t.texture.texture.mean();
+            [0, 1, 2].map(|c| factor[c] * mean[c])
+        });
+        (emission, emissive)
     }
 
     /// A material's `kind` texture (base colour or emissive) as its
