@@ -148,7 +148,14 @@ def main():
         sys.exit("reference.py: --sky with --sky-map has no Mitsuba counterpart here")
     if doc.get("sky"):
         d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": doc["sky"]}}
-    if doc.get("sky_map"):
+    if doc.get("sky_map") and "sun_sky" in doc["sky_map"]:
+        # --sun-sky is Mitsuba's sunsky (its sky Z-up: turned to Y-up) in
+        # the renderer's units, its sun included.
+        s = doc["sky_map"]["sun_sky"]
+        d["sky"] = {"type": "sunsky", "sun_direction": s["toward"], "turbidity": s["turbidity"],
+                    "albedo": s["albedo"], "sun_scale": s["scale"], "sky_scale": s["scale"],
+                    "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90)}
+    elif doc.get("sky_map"):
         # The renderer's --sky-map convention is Mitsuba's envmap, turned
         # about +Y as its to_world rotation is.
         m = doc["sky_map"]

@@ -85,21 +85,34 @@ pub fn write_nodes(scene: &Scene, path: &Path) -> Result<(), ExportError> {
         "aspect": cam.aspect,
     });
     // Lights as the report gives them (reference.py hands them to Mitsuba).
+    // A sun-sky's sun is Mitsuba's sunsky's own (below).
     let lights: Vec<crate::report::LightSummary> = scene
         .lights
         .iter()
+        .filter(|l| scene.sun_sky.is_none() || l.name != crate::scene::sunsky::SUN_NAME)
         .map(crate::report::LightSummary::of)
         .collect();
-    // The map as Mitsuba's envmap takes it: file, turn about +Y, scale.
-    let sky_map = scene.sky_map.as_ref().map(|m| {
-        let path = std::fs::canonicalize(&m.path).unwrap_or_else(|_| m.path.clone().into());
-        serde_json::json!({ "path": path, "rotation_degrees": m.rotation, "strength": m.strength })
-    });
+    let sky_map = sky_map_json(scene);
     output::write_json(
         path,
         &serde_json::json!({ "nodes": nodes, "camera": camera, "lights": lights, "sky": scene.sky, "sky_map": sky_map }),
     )?;
     Ok(())
+}
+
+/// The map as Mitsuba's envmap takes it (file, turn about +Y, scale), or
+/// the sun-sky as its sunsky does (direction, turbidity, albedo, scale).
+fn sky_map_json(scene: &Scene) -> Option<serde_json::Value> {
+    scene.sky_map.as_ref().map(|m| match scene.sun_sky {
+        Some(s) => serde_json::json!({ "sun_sky": {
+            "toward": s.toward(), "turbidity": s.turbidity,
+            "albedo": crate::scene::sunsky::ALBEDO,
+            "scale": crate::scene::sunsky::MITSUBA_UNIT * m.strength } }),
+        None => {
+            let path = std::fs::canonicalize(&m.path).unwrap_or_else(|_| m.path.clone().into());
+            serde_json::json!({ "path": path, "rotation_degrees": m.rotation, "strength": m.strength })
+        }
+    })
 }
 
 /// The one texture map (`map` of each polygon) the polygons of node `name`

@@ -156,8 +156,20 @@ pub struct LightArgs {
     /// linear radiance, W sr^-1 m^-2, +Y up, oriented as Mitsuba's envmap
     /// (the middle of the image toward +Z). It replaces the sun and sky a
     /// generated room carries; added to --sky.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "sun_sky")]
     pub sky_map: Option<std::path::PathBuf>,
+    /// A clear sky and its sun (Hosek-Wilkie, as Mitsuba's sunsky): the
+    /// sun's ELEVATION above the horizon and AZIMUTH from -Z (north)
+    /// toward +X (east), degrees, and the TURBIDITY (1 clear to 10 hazy,
+    /// default 3). Luminance-equivalent units (x 683 = cd/m^2); lights
+    /// and is drawn as a sky map is, and replaces a generated room's sun
+    /// and sky.
+    #[arg(
+        long,
+        value_name = "ELEVATION,AZIMUTH[,TURBIDITY]",
+        allow_hyphen_values = true
+    )]
+    pub sun_sky: Option<super::sunsky::SunSky>,
     /// Turns the sky map about +Y by DEGREES (right-handed: 90 takes the
     /// middle of the image from +Z to +X; 90 matches Blender's world).
     #[arg(
@@ -167,7 +179,7 @@ pub struct LightArgs {
         allow_hyphen_values = true
     )]
     pub sky_rotation: f64,
-    /// Multiplies the sky map's radiance.
+    /// Multiplies the sky map's radiance (the sun-sky's sky and sun).
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     pub sky_strength: f64,
     /// Read the file's light units as photometric: point and spot
@@ -184,6 +196,7 @@ impl Default for LightArgs {
             sun: None,
             sky: None,
             sky_map: None,
+            sun_sky: None,
             sky_rotation: 0.0,
             sky_strength: 1.0,
             photometric: false,
@@ -200,14 +213,23 @@ impl LightArgs {
         }
         if let Some(path) = &self.sky_map {
             let map = super::SkyMap::load(path, self.sky_rotation, self.sky_strength)?;
-            // A map is the whole environment, its sun included.
-            scene
-                .lights
-                .retain(|l| l.name != super::family::CARRIED_SUN);
-            if super::family::family_lights(&scene.name).is_some() {
-                scene.sky = None;
-            }
-            scene.sky_map = Some(std::sync::Arc::new(map));
+            install_map(scene, map);
+        }
+        if let Some(sun_sky) = self.sun_sky {
+            let map = super::SkyMap::from_texels(
+                &sun_sky.describe(),
+                super::sunsky::MAP_SIZE,
+                sun_sky.texels(),
+                [0.0, self.sky_strength],
+            )?;
+            install_map(scene, map);
+            let mut sun = Light::sun(
+                -sun_sky.sun_travel(),
+                sun_sky.sun_irradiance().map(|e| e * self.sky_strength),
+            );
+            sun.name = super::sunsky::SUN_NAME.into();
+            scene.lights.push(sun);
+            scene.sun_sky = Some(sun_sky);
         }
         if let Some(sun) = &self.sun {
             scene.lights.push(sun.clone());
@@ -217,6 +239,18 @@ impl LightArgs {
         }
         Ok(())
     }
+}
+
+/// Makes `map` the scene's environment: it is the whole of it, its sun
+/// included, so a generated room's own sun and sky go.
+fn install_map(scene: &mut super::Scene, map: super::SkyMap) {
+    scene
+        .lights
+        .retain(|l| l.name != super::family::CARRIED_SUN);
+    if super::family::family_lights(&scene.name).is_some() {
+        scene.sky = None;
+    }
+    scene.sky_map = Some(std::sync::Arc::new(map));
 }
 
 /// Why a `--sun` or `--sky` value could not be read.

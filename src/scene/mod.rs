@@ -12,6 +12,7 @@ mod gltf_write;
 pub mod light;
 pub mod mask;
 pub mod sky;
+pub mod sunsky;
 pub mod texture;
 pub mod tolerate;
 
@@ -190,6 +191,9 @@ pub struct Scene {
     /// An environment map seen along every direction that leaves the scene
     /// (`--sky-map`), added to the uniform sky.
     pub sky_map: Option<std::sync::Arc<SkyMap>>,
+    /// The sun and sky `sky_map` and the light named
+    /// [`sunsky::SUN_NAME`] were made from (`--sun-sky`), if so.
+    pub sun_sky: Option<sunsky::SunSky>,
 }
 
 impl Scene {

@@ -44,6 +44,27 @@ fn sky_map(turn: f64) -> radiosity::scene::SkyMap {
     radiosity::scene::SkyMap::from_texels("test", [8, 4], texels, [turn, 1.0]).expect("a map")
 }
 
+/// Solves `scene` with a checkpoint at `path`, stopped by a signal after
+/// shot `stop_at`, then resumes it from the checkpoint (`opts` is left
+/// resuming).
+fn stop_and_resume(
+    scene: &radiosity::scene::Scene,
+    opts: &mut RenderOptions,
+    path: &std::path::Path,
+    stop_at: u64,
+) -> Rendered {
+    opts.checkpoint = Some(CheckpointPlan {
+        path: path.to_path_buf(),
+        every: None,
+    });
+    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
+    assert!(solve_scene(scene, opts, Some(stop_at)).interrupted);
+    opts.interrupt = None;
+    opts.checkpoint = None;
+    opts.resume = Some(Arc::new(Checkpoint::read(path).expect("checkpoint")));
+    solve_scene(scene, opts, None)
+}
+
 fn solve_scene(
     scene: &radiosity::scene::Scene,
     opts: &RenderOptions,
@@ -402,17 +423,7 @@ fn an_emissive_texture_resumes_to_the_same_bits_and_another_is_refused() {
         ..RenderOptions::default()
     };
     let straight = solve_scene(&scene, &opts, None);
-    opts.checkpoint = Some(CheckpointPlan {
-        path: path.clone(),
-        every: None,
-    });
-    opts.interrupt = Some(Arc::new(AtomicBool::new(false)));
-    let stopped = solve_scene(&scene, &opts, Some(200));
-    assert!(stopped.interrupted);
-    opts.interrupt = None;
-    opts.checkpoint = None;
-    opts.resume = Some(Arc::new(Checkpoint::read(&path).expect("checkpoint")));
-    same_solution(&solve_scene(&scene, &opts, None), &straight);
+    same_solution(&stop_and_resume(&scene, &mut opts, &path, 200), &straight);
     let mut swapped = scene.clone();
     for p in &mut swapped.polygons {
         if let Some(m) = p.emissive.as_mut() {
@@ -422,6 +433,42 @@ fn an_emissive_texture_resumes_to_the_same_bits_and_another_is_refused() {
         }
     }
     let err = render(gpu(), &swapped, &opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}
+
+/// A furnished room under `--sun-sky` (a map and a sun, both in the
+/// fingerprint) resumes to the same bits; the same sun an hour later is
+/// refused.
+#[test]
+fn a_sun_sky_resumes_to_the_same_bits_and_another_hour_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("sun-sky.ckpt");
+    let lit = |value: &str| {
+        let mut s = radiosity::scene::open("family-furnished-1").expect("scene");
+        let lights = radiosity::scene::light::LightArgs {
+            sun_sky: Some(value.parse().expect("a sun-sky")),
+            ..Default::default()
+        };
+        lights.apply(&mut s).expect("the sun-sky");
+        s
+    };
+    let scene = lit("40,250");
+    let mut opts = RenderOptions {
+        width: 0,
+        stop: radiosity::solver::StopRule {
+            max_shots: 400,
+            ..Default::default()
+        },
+        ..RenderOptions::default()
+    };
+    let straight = solve_scene(&scene, &opts, None);
+    same_solution(&stop_and_resume(&scene, &mut opts, &path, 150), &straight);
+    let err = render(gpu(), &lit("45,265"), &opts, Duration::ZERO, &mut |_| {})
         .err()
         .expect("refused");
     assert!(

@@ -25,5 +25,6 @@ mod reference;
 mod refine;
 mod shaders;
 mod sky_maps;
+mod sun_sky;
 mod textures;
 mod traps;

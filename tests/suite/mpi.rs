@@ -821,6 +821,21 @@ fn a_sky_map_gives_the_same_bits_on_every_rank_count() {
 }
 
 #[test]
+fn a_sun_sky_gives_the_same_bits_on_every_rank_count() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let args = ["--sun-sky", "35,240,4", "--max-shots", "60"];
+    let scene = "family-furnished-1";
+    let one = mpirun_scene(1, dir.path(), "one", scene, &args);
+    assert!(one["sky_map"]
+        .as_str()
+        .is_some_and(|m| m.contains("sun-sky 35.0,240.0,4.0")));
+    let two = mpirun_scene(2, dir.path(), "two", scene, &args);
+    same_result(&one, &two, "2 ranks under a sun-sky");
+    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
+    assert!(image("one") == image("two"), "the images differ");
+}
+
+#[test]
 fn an_emissive_texture_gives_the_same_bits_on_every_rank_count() {
     let dir = tempfile::tempdir().expect("temp dir");
     let scene = crate::emissive::PANEL_ROOM;

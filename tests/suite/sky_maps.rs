@@ -57,11 +57,11 @@ fn spot(toward: Vec3, e: f64, turn: f64) -> SkyMap {
 }
 
 /// The floor's quarters, by the signs of x and z.
-const QUARTERS: [&str; 4] = ["-x-z", "-x+z", "+x-z", "+x+z"];
+pub(crate) const QUARTERS: [&str; 4] = ["-x-z", "-x+z", "+x-z", "+x+z"];
 
 /// A floor of four 3 m quarters around a unit box standing at the origin
 /// (the box's shadow edges fall inside them, not on their borders).
-fn box_on_quarters() -> Scene {
+pub(crate) fn box_on_quarters() -> Scene {
     let mut surfaces: Vec<_> = QUARTERS
         .iter()
         .map(|name| {
