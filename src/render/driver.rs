@@ -6,7 +6,7 @@ use super::options::{fingerprint, RenderError, RenderOptions};
 use super::passes::{refined_mesh, shared_transport, wants_transport, Handoff, Refined};
 use super::shoot::{shoot_until, LoopStats, Until};
 use super::source::{GpuFormFactors, PhaseTimes};
-use super::trace::{gather_whole, Extra, Trace};
+use super::trace::{gather_whole_consuming, Extra, Trace};
 use crate::checkpoint::Header;
 use crate::gpu::Gpu;
 use crate::hemisphere::{Resolution, TileLayout};
@@ -328,12 +328,11 @@ pub fn render_on(
     // The trace's summaries are left out of the solve's CPU as of its time.
     let cpu = crate::parallel::process_cpu_seconds() - cpu_start - solved.trace.spent_cpu;
     let layout = source.layout();
-    let Some(gathered) = gather_to_root(comm, &solver, &solved.stats, &source, (excluded, cpu))
+    let Some(gathered) = gather_to_root(comm, solver, &solved.stats, source, (excluded, cpu))
     else {
         return Ok(None);
     };
     crate::report::log_memory("the solve");
-    drop((solver, source));
     let shots = gathered.whole.shots();
     phase_timings(&mut timings, &gathered.phases, &solved.stats, shots);
     let (solver, parallel) = gathered.parallel(layout, opts, &mesh);
@@ -450,24 +449,32 @@ impl<'m> Gathered<'m> {
 }
 
 /// Gathers the solution and every rank's statistics to rank 0; `None` on
-/// the other ranks.
+/// the other ranks. The rasteriser and the rank's solver are dropped before
+/// the whole solution is built: the three at once were double-sided
+/// Sponza's peak memory.
 fn gather_to_root<'m>(
     comm: &dyn Collectives,
-    solver: &Solver<'m>,
+    solver: Solver<'m>,
     stats: &LoopStats,
-    source: &GpuFormFactors,
+    mut source: GpuFormFactors,
     (excluded, cpu): (Traffic, f64),
 ) -> Option<Gathered<'m>> {
     let extra = Extra {
         direct: true,
         ..Extra::default()
     };
-    let whole = gather_whole(comm, solver, extra);
+    let (timings, busy, busy_cpu) = (
+        source.timings,
+        std::mem::take(&mut source.busy),
+        std::mem::take(&mut source.busy_cpu),
+    );
+    drop(source);
+    let whole = gather_whole_consuming(comm, solver, extra);
     let traffic = comm.traffic().since(excluded);
-    let mine = pack_rank_stats(&source.timings, stats, traffic, cpu);
+    let mine = pack_rank_stats(&timings, stats, traffic, cpu);
     let all_stats = comm.gather_f64(&mine);
-    let busy = comm.gather_f64(&source.busy);
-    let busy_cpu = comm.gather_f64(&source.busy_cpu);
+    let busy = comm.gather_f64(&busy);
+    let busy_cpu = comm.gather_f64(&busy_cpu);
     let rows: Vec<f64> = stats
         .rows
         .iter()
@@ -500,7 +507,7 @@ fn gather_to_root<'m>(
     rows.sort_by_key(|r| (r.batch_start, r.round, r.index));
     Some(Gathered {
         whole,
-        phases: source.timings,
+        phases: timings,
         per_rank: all_stats
             .iter()
             .enumerate()

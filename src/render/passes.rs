@@ -6,7 +6,7 @@ use super::hooks::Progress;
 use super::options::{RenderError, RenderOptions};
 use super::shoot::{shoot_until, Flags, LoopHooks, Until};
 use super::source::GpuFormFactors;
-use super::trace::{gather_whole, Extra, Trace};
+use super::trace::{gather_whole_consuming, Extra, Trace};
 use crate::ambient::{GroupRays, Transport, PASS_RAY_BUDGET};
 use crate::gpu::Gpu;
 use crate::lit_mesh::LitMesh;
@@ -445,12 +445,18 @@ fn one_pass(
         });
         return Ok(measured);
     }
-    let patches = patch_stats(run, mesh, &solver, &source.penumbra, &stats.patch_power);
+    // The rasteriser and the solver go before the whole solution is
+    // gathered (see `patch_stats`): the three at once were double-sided
+    // Sponza's peak memory.
+    let penumbra = std::mem::take(&mut source.penumbra);
+    drop(source);
+    let emitted = solver.emitted_power();
+    let patches = patch_stats(run, mesh, solver, &penumbra, &stats.patch_power);
     let settings = opts.mesh_settings();
     measured.decided = refine::decide(
         mesh,
         &patches,
-        solver.emitted_power(),
+        emitted,
         settings.receiver_tol,
         settings.shading_tol,
     );
@@ -465,7 +471,7 @@ fn one_pass(
 fn patch_stats(
     run: &PassRun<'_>,
     mesh: &LitMesh,
-    solver: &Solver,
+    solver: Solver,
     penumbra: &[[u64; 2]],
     patch_power: &[f64],
 ) -> Vec<PatchStats> {
@@ -476,7 +482,7 @@ fn patch_stats(
         let share = if emitted > 0.0 { w / emitted } else { 0.0 };
         crate::numeric::round_u64(share.clamp(0.0, 1.0) * one)
     }));
-    sums.extend(shading_errors(run, mesh, solver));
+    sums.extend(shading_errors(run, mesh, solver, emitted));
     run.comm.reduce_broadcast_sum(&mut sums);
     let n = mesh.patches.len();
     let (penumbra, rest) = sums.split_at(2 * n);
@@ -497,7 +503,7 @@ fn patch_stats(
 /// Per patch, how badly the image would shade it (fixed point). The
 /// shading error needs neighbours' values across patches (and ranks):
 /// rank 0 judges the whole solution; the others add zeros.
-fn shading_errors(run: &PassRun<'_>, mesh: &LitMesh, solver: &Solver) -> Vec<u64> {
+fn shading_errors(run: &PassRun<'_>, mesh: &LitMesh, solver: Solver, emitted: f64) -> Vec<u64> {
     let mut shading = vec![0u64; mesh.patches.len()];
     if run.opts.mesh_settings().shading_tol <= 0.0 {
         return shading;
@@ -506,10 +512,9 @@ fn shading_errors(run: &PassRun<'_>, mesh: &LitMesh, solver: &Solver) -> Vec<u64
         direct: true,
         ..Extra::default()
     };
-    let whole = gather_whole(run.comm, solver, extra);
+    let whole = gather_whole_consuming(run.comm, solver, extra);
     // (A pass's solver always knows its direct part.)
     if let Some((whole, direct)) = whole.as_ref().and_then(|w| Some((w, w.direct()?))) {
-        let emitted = solver.emitted_power();
         let radiosity = whole.display_radiosity(crate::settings::AmbientTerm::Off);
         let errors = refine::shading_error(mesh, &radiosity, direct, &whole.unlit(), emitted);
         let one = crate::formfactor::SHARE_ONE;

@@ -4,6 +4,15 @@
 
 use super::*;
 
+/// A solver's retention and energy records and which emitters have shot
+/// (see [`Solver::retained`]).
+pub struct Retained {
+    retention: [f64; 2],
+    energy: [f64; 3],
+    emission_unshot: Vec<bool>,
+    direct_known: bool,
+}
+
 impl<'m> Solver<'m> {
     /// Records that a shot of `power` (of either sign) landed the fraction
     /// `landed` of it on the scene (the sum of its form factors over all
@@ -30,10 +39,26 @@ impl<'m> Solver<'m> {
     /// emitters have shot (for a solver assembled from ranks: every rank
     /// holds these whole).
     pub fn copy_retention(&mut self, other: &Solver) {
-        self.retention = other.retention;
-        self.energy = other.energy;
-        self.emission_unshot.clone_from(&other.emission_unshot);
-        self.direct_known = other.direct_known;
+        self.restore_retained(other.retained());
+    }
+
+    /// What [`Solver::copy_retention`] takes over, held apart so that the
+    /// solver it comes from can be dropped first.
+    pub fn retained(&self) -> Retained {
+        Retained {
+            retention: self.retention,
+            energy: self.energy,
+            emission_unshot: self.emission_unshot.clone(),
+            direct_known: self.direct_known,
+        }
+    }
+
+    /// Takes over what [`Solver::retained`] held.
+    pub fn restore_retained(&mut self, r: Retained) {
+        self.retention = r.retention;
+        self.energy = r.energy;
+        self.emission_unshot = r.emission_unshot;
+        self.direct_known = r.direct_known;
     }
 
     /// Records that a shot of `shot` W (signed, sum over RGB) delivered

@@ -24,6 +24,7 @@ mod state;
 mod vote;
 use crate::settings::AmbientTerm;
 pub use crate::shot::{FormFactorSource, ShotRegion, Transfer};
+pub use energy::Retained;
 pub use state::{SolverState, StateMismatch};
 
 /// When to stop shooting.
