@@ -35,6 +35,12 @@ pub struct ViewSettings {
     pub wireframe: bool,
 }
 
+/// Vertices in one draw of the view at most (whole triangles).
+const DRAW_VERTICES: u32 = 3 << 16;
+/// Vertices in one upload of the view's vertex buffer at most: each is
+/// staged and handed to the device before the next is made.
+const UPLOAD_VERTICES: usize = 1 << 19;
+
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct Vertex {
@@ -42,18 +48,30 @@ struct Vertex {
     radiance: [f32; 3],
 }
 
-fn vertices(
-    mesh: &Mesh,
-    radiance: &[[f32; 3]],
-    shading: Shading,
-    hidden: Option<&[bool]>,
-) -> Vec<Vertex> {
-    let mut out = Vec::with_capacity(mesh.elements.len() * 6);
+/// Vertices of the view's triangles per element: two triangles for a
+/// quadrilateral, one for a triangle.
+fn vertex_count(mesh: &Mesh) -> usize {
+    mesh.elements
+        .iter()
+        .map(|e| if e.vertices[3] != e.vertices[2] { 6 } else { 3 })
+        .sum()
+}
+
+/// The view's triangles, element by element, handed to `emit` in chunks
+/// of at most [`UPLOAD_VERTICES`] (whole triangles), so the whole list is
+/// never held at once (Sponza's is 250 MB).
+fn vertex_chunks(shown: &Shown<'_>, shading: Shading, mut emit: impl FnMut(&[Vertex])) {
+    let Shown {
+        mesh,
+        radiance,
+        hidden,
+    } = *shown;
     let smooth: Vec<[f32; 3]> = if shading == Shading::Smooth {
         crate::interpolate::vertex_values(mesh, radiance, hidden)
     } else {
         Vec::new()
     };
+    let mut out = Vec::with_capacity(UPLOAD_VERTICES.min(6 * mesh.elements.len()));
     for (e, r) in mesh.elements.iter().zip(radiance) {
         let corner = |k: usize| Vertex {
             pos: e.corners[k].to_array(),
@@ -67,8 +85,14 @@ fn vertices(
         if e.vertices[3] != e.vertices[2] {
             out.extend([corner(0), corner(2), corner(3)]);
         }
+        if out.len() + 6 > UPLOAD_VERTICES {
+            emit(&out);
+            out.clear();
+        }
     }
-    out
+    if !out.is_empty() {
+        emit(&out);
+    }
 }
 
 /// Renders `mesh` with per-element `radiance` (W sr^-1 m^-2) from `camera`.
@@ -119,20 +143,29 @@ impl Grown {
         queue: &wgpu::Queue,
         bytes: &[u8],
     ) -> Option<wgpu::Buffer> {
-        let size = (bytes.len() as u64).max(16).next_multiple_of(4);
-        if self.buffer.as_ref().is_none_or(|b| b.size() < size) {
-            self.buffer = Some(device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(self.label),
-                size: size.next_power_of_two(),
-                usage: self.usage,
-                mapped_at_creation: false,
-            }));
-        }
-        let buffer = self.buffer.clone()?;
+        let buffer = self.reserve(device, bytes.len() as u64);
         if !bytes.is_empty() {
             queue.write_buffer(&buffer, 0, bytes);
         }
         Some(buffer)
+    }
+
+    /// The buffer, grown to hold at least `bytes`.
+    fn reserve(&mut self, device: &wgpu::Device, bytes: u64) -> wgpu::Buffer {
+        let size = bytes.max(16).next_multiple_of(4);
+        match &self.buffer {
+            Some(b) if b.size() >= size => b.clone(),
+            _ => {
+                let b = device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(self.label),
+                    size: size.next_power_of_two(),
+                    usage: self.usage,
+                    mapped_at_creation: false,
+                });
+                self.buffer = Some(b.clone());
+                b
+            }
+        }
     }
 }
 
@@ -234,11 +267,7 @@ impl ViewRenderer {
         camera: &Camera,
         settings: &ViewSettings,
     ) -> Result<Vec<[f32; 3]>, GpuError> {
-        let Shown {
-            mesh,
-            radiance,
-            hidden,
-        } = shown;
+        let mesh = shown.mesh;
         let ss = settings.supersample.max(1);
         let (w, h) = (settings.width * ss, settings.height * ss);
         let max_dim = device.limits().max_texture_dimension_2d;
@@ -247,7 +276,6 @@ impl ViewRenderer {
                 "image {w}x{h} (limit {max_dim})"
             )));
         }
-        let verts = vertices(mesh, radiance, settings.shading, hidden);
         let (near, far) = view_depth_range(mesh, camera);
         let aspect = settings.width as f32 / settings.height as f32;
         let view = Mat4::from_rotation_translation(camera.rotation, camera.position).inverse();
@@ -257,10 +285,25 @@ impl ViewRenderer {
             0,
             bytemuck::cast_slice(&view_proj.to_cols_array()),
         );
-        let vbuf = self
-            .vertices
-            .write(device, queue, bytemuck::cast_slice(&verts))
-            .ok_or_else(|| GpuError::Failed("no vertex buffer".into()))?;
+        let vertex_count = vertex_count(mesh);
+        let vbuf = self.vertices.reserve(
+            device,
+            (vertex_count * std::mem::size_of::<Vertex>()) as u64,
+        );
+        let mut offset = 0;
+        vertex_chunks(&shown, settings.shading, |chunk| {
+            let bytes: &[u8] = bytemuck::cast_slice(chunk);
+            queue.write_buffer(&vbuf, offset, bytes);
+            offset += bytes.len() as u64;
+            // Hands the staged copy to the device and waits for it, so
+            // that no more than one chunk is staged at a time.
+            let done = queue.submit([]);
+            let _ = device.poll(wgpu::PollType::Wait {
+                submission_index: Some(done),
+                timeout: Some(super::DEVICE_TIMEOUT),
+            });
+        });
+        let vertex_count = vertex_count as u32;
         let lines = if settings.wireframe {
             wire_lines(mesh)
         } else {
@@ -291,7 +334,13 @@ impl ViewRenderer {
             ] {
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, group, &[]);
-                pass.draw(0..verts.len() as u32, 0..1);
+                // In draws of a bounded size, as the hemisphere's: lavapipe
+                // keeps the vertices of its largest draw, and Sponza's 10
+                // million in one draw took hundreds of megabytes. Draws keep
+                // their order, so the picture is the same.
+                for first in (0..vertex_count).step_by(DRAW_VERTICES as usize) {
+                    pass.draw(first..(first + DRAW_VERTICES).min(vertex_count), 0..1);
+                }
             }
             if let Some(buffer) = &lbuf {
                 pass.set_pipeline(&self.wire_pipeline);
