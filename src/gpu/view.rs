@@ -256,6 +256,35 @@ impl ViewRenderer {
         self.render_masked(device, queue, shown, camera, settings)
     }
 
+    /// Uploads `shown`'s triangles chunk by chunk (see [`vertex_chunks`]):
+    /// the vertex buffer and how many vertices it holds.
+    fn upload(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        shown: &Shown<'_>,
+        shading: Shading,
+    ) -> (wgpu::Buffer, u32) {
+        let count = vertex_count(shown.mesh);
+        let buffer = self
+            .vertices
+            .reserve(device, (count * std::mem::size_of::<Vertex>()) as u64);
+        let mut offset = 0;
+        vertex_chunks(shown, shading, |chunk| {
+            let bytes: &[u8] = bytemuck::cast_slice(chunk);
+            queue.write_buffer(&buffer, offset, bytes);
+            offset += bytes.len() as u64;
+            // Hands the staged copy to the device and waits for it, so
+            // that no more than one chunk is staged at a time.
+            let done = queue.submit([]);
+            let _ = device.poll(wgpu::PollType::Wait {
+                submission_index: Some(done),
+                timeout: Some(super::DEVICE_TIMEOUT),
+            });
+        });
+        (buffer, count as u32)
+    }
+
     /// [`ViewRenderer::render`] of what `shown` says, where smooth shading
     /// leaves the elements marked hidden (no light reached them) out of
     /// their vertices' values ([`crate::interpolate::vertex_values`]).
@@ -285,25 +314,7 @@ impl ViewRenderer {
             0,
             bytemuck::cast_slice(&view_proj.to_cols_array()),
         );
-        let vertex_count = vertex_count(mesh);
-        let vbuf = self.vertices.reserve(
-            device,
-            (vertex_count * std::mem::size_of::<Vertex>()) as u64,
-        );
-        let mut offset = 0;
-        vertex_chunks(&shown, settings.shading, |chunk| {
-            let bytes: &[u8] = bytemuck::cast_slice(chunk);
-            queue.write_buffer(&vbuf, offset, bytes);
-            offset += bytes.len() as u64;
-            // Hands the staged copy to the device and waits for it, so
-            // that no more than one chunk is staged at a time.
-            let done = queue.submit([]);
-            let _ = device.poll(wgpu::PollType::Wait {
-                submission_index: Some(done),
-                timeout: Some(super::DEVICE_TIMEOUT),
-            });
-        });
-        let vertex_count = vertex_count as u32;
+        let (vbuf, vertex_count) = self.upload(device, queue, &shown, settings.shading);
         let lines = if settings.wireframe {
             wire_lines(mesh)
         } else {
