@@ -132,16 +132,20 @@ impl Gpu {
     }
 }
 
-/// Maps `buffer` for reading, waiting at most [`DEVICE_TIMEOUT`] for `submission`.
+/// Maps the first `bytes` of `buffer` for reading, waiting at most
+/// [`DEVICE_TIMEOUT`] for `submission`.
 pub(crate) fn map_read(
     device: &wgpu::Device,
     buffer: &wgpu::Buffer,
     submission: wgpu::SubmissionIndex,
+    bytes: std::ops::RangeTo<u64>,
 ) -> Result<(), GpuError> {
     let (tx, rx) = std::sync::mpsc::channel();
-    buffer.slice(..).map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
+    buffer
+        .slice(bytes)
+        .map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
     device
         .poll(wgpu::PollType::Wait {
             submission_index: Some(submission),

@@ -11,7 +11,6 @@ pub(crate) struct RenderTarget {
     readback: wgpu::Buffer,
     size: wgpu::Extent3d,
     row_bytes: u32,
-    padded_row: u32,
 }
 
 impl RenderTarget {
@@ -66,7 +65,6 @@ impl RenderTarget {
             readback,
             size,
             row_bytes,
-            padded_row,
         }
     }
 
@@ -103,6 +101,14 @@ impl RenderTarget {
 
     /// Records the copy of the colour texture into the readback buffer.
     pub(crate) fn copy_out(&self, enc: &mut wgpu::CommandEncoder) {
+        self.copy_out_part(enc, [self.size.width, self.size.height]);
+    }
+
+    /// Records the copy of the texture's top-left `part` (width, height)
+    /// into the readback buffer, rows padded to the part's width: what a
+    /// shot that drew only there needs (a rank's packed lattice cells).
+    pub(crate) fn copy_out_part(&self, enc: &mut wgpu::CommandEncoder, part: [u32; 2]) {
+        let [width, height] = self.clamped(part);
         enc.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.color,
@@ -114,11 +120,15 @@ impl RenderTarget {
                 buffer: &self.readback,
                 layout: wgpu::TexelCopyBufferLayout {
                     offset: 0,
-                    bytes_per_row: Some(self.padded_row),
-                    rows_per_image: Some(self.size.height),
+                    bytes_per_row: Some(self.padded(width)),
+                    rows_per_image: Some(height),
                 },
             },
-            self.size,
+            wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
         );
     }
 
@@ -128,20 +138,51 @@ impl RenderTarget {
         &self,
         device: &wgpu::Device,
         submission: wgpu::SubmissionIndex,
+        row: impl FnMut(usize, &[u8]),
+    ) -> Result<(), GpuError> {
+        let whole = [self.size.width, self.size.height];
+        self.read_rows_part(device, submission, whole, row)
+    }
+
+    /// [`RenderTarget::read_rows`] of what [`RenderTarget::copy_out_part`]
+    /// copied of `part`: only its bytes are mapped and read.
+    pub(crate) fn read_rows_part(
+        &self,
+        device: &wgpu::Device,
+        submission: wgpu::SubmissionIndex,
+        part: [u32; 2],
         mut row: impl FnMut(usize, &[u8]),
     ) -> Result<(), GpuError> {
-        map_read(device, &self.readback, submission)?;
+        let [width, height] = self.clamped(part);
+        let padded = u64::from(self.padded(width));
+        let bytes = padded * u64::from(height);
+        let row_bytes = (self.row_bytes / self.size.width.max(1) * width) as usize;
+        map_read(device, &self.readback, submission, ..bytes)?;
         {
             let view = self
                 .readback
-                .slice(..)
+                .slice(..bytes)
                 .get_mapped_range()
                 .map_err(|e| GpuError::Failed(e.to_string()))?;
-            for (y, padded) in view.chunks_exact(self.padded_row as usize).enumerate() {
-                row(y, &padded[..self.row_bytes as usize]);
+            for (y, padded) in view.chunks_exact(padded as usize).enumerate() {
+                row(y, &padded[..row_bytes]);
             }
         }
         self.readback.unmap();
         Ok(())
+    }
+
+    /// `part` within the texture, at least one texel each way.
+    fn clamped(&self, part: [u32; 2]) -> [u32; 2] {
+        [
+            part[0].clamp(1, self.size.width),
+            part[1].clamp(1, self.size.height),
+        ]
+    }
+
+    /// A row of `width` texels padded as buffer copies need (256 bytes).
+    fn padded(&self, width: u32) -> u32 {
+        let row = self.row_bytes / self.size.width.max(1) * width;
+        row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
     }
 }

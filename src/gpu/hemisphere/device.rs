@@ -355,11 +355,26 @@ impl DeviceCells {
                 None => {}
             }
         }
-        self.target.copy_out(&mut enc);
+        self.target.copy_out_part(&mut enc, self.drawn_part(shot));
         if shot.coverage {
             enc.copy_buffer_to_buffer(&self.coverage_buf, 0, &self.coverage_read, 0, None);
         }
         queue.submit([enc.finish()])
+    }
+
+    /// The part of the item buffer a shot drew into (columns, rows): a
+    /// rank's packed lattice cells fill only the top-left of it, one cell
+    /// of every `px` x `py`; otherwise all of it.
+    fn drawn_part(&self, shot: &CellShot<'_>) -> [u32; 2] {
+        let (cols, rows) = (self.res.cols, self.res.rows);
+        if !shot.lattice {
+            return [cols, rows];
+        }
+        let (layout, (x0, y0)) = (shot.layout, shot.own);
+        [
+            (cols - x0.min(cols)).div_ceil(layout.px.max(1)),
+            (rows - y0.min(rows)).div_ceil(layout.py.max(1)),
+        ]
     }
 
     /// Reads this rank's cells of the item buffer into `items` (a packed
@@ -390,19 +405,20 @@ impl DeviceCells {
                 own.0 as usize,
                 own.1 as usize,
             );
-            self.target.read_rows(device, submission, |r, row| {
-                waited.get_or_insert_with(Instant::now);
-                let p = r * py + y0;
-                if p < rows {
-                    for (c, b) in row
-                        .chunks_exact(4)
-                        .enumerate()
-                        .take_while(|(c, _)| c * px + x0 < cols)
-                    {
-                        items[p * cols + c * px + x0] = word(b);
+            self.target
+                .read_rows_part(device, submission, self.drawn_part(shot), |r, row| {
+                    waited.get_or_insert_with(Instant::now);
+                    let p = r * py + y0;
+                    if p < rows {
+                        for (c, b) in row
+                            .chunks_exact(4)
+                            .enumerate()
+                            .take_while(|(c, _)| c * px + x0 < cols)
+                        {
+                            items[p * cols + c * px + x0] = word(b);
+                        }
                     }
-                }
-            })?;
+                })?;
         } else {
             items.reserve(self.res.cells());
             self.target.read_rows(device, submission, |_, row| {
@@ -422,7 +438,12 @@ impl DeviceCells {
     ) -> Result<(), GpuError> {
         {
             // The item buffer's wait covered this submission; this map is immediate.
-            super::super::map_read(device, &self.coverage_read, submission)?;
+            super::super::map_read(
+                device,
+                &self.coverage_read,
+                submission,
+                ..self.coverage_read.size(),
+            )?;
             {
                 let view = self
                     .coverage_read
