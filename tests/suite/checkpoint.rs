@@ -476,3 +476,28 @@ fn a_sun_sky_resumes_to_the_same_bits_and_another_hour_is_refused() {
         "{err}"
     );
 }
+
+/// A room with an alpha-masked square between its light and its floor
+/// resumes to the same bits; the same square opaque (other geometry, as the
+/// cut makes pieces) is refused.
+#[test]
+fn an_alpha_mask_resumes_to_the_same_bits_and_the_square_opaque_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("masked.ckpt");
+    let scene = crate::masks::masked_room(Some("MASK"));
+    let mut opts = RenderOptions {
+        width: 0,
+        ..RenderOptions::default()
+    };
+    let straight = solve_scene(&scene, &opts, None);
+    // Stopped in the final solve (the refinement pass takes 36 shots).
+    same_solution(&stop_and_resume(&scene, &mut opts, &path, 300), &straight);
+    let opaque = crate::masks::masked_room(Some("OPAQUE"));
+    let err = render(gpu(), &opaque, &opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}

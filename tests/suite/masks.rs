@@ -32,7 +32,7 @@ fn checker_png(k: u32) -> String {
 /// facing up, textured by an 8 x 8 checkerboard whose odd squares are
 /// clear. Nothing but the floor reflects toward the floor, so its
 /// radiosity is rho times the light that reaches it.
-fn masked_room(mask: Option<&str>) -> scene::Scene {
+pub(crate) fn masked_room(mask: Option<&str>) -> scene::Scene {
     scene::load_slice(
         &serde_json::to_vec(&masked_doc(mask)).expect("JSON"),
         "masked",
