@@ -82,6 +82,18 @@ fn solve_scene(
     .expect("render")
 }
 
+/// Asserts that resuming `opts`'s checkpoint with `scene` is refused as
+/// another scene or settings.
+fn refused(scene: &radiosity::scene::Scene, opts: &RenderOptions) {
+    let err = render(gpu(), scene, opts, Duration::ZERO, &mut |_| {})
+        .err()
+        .expect("refused");
+    assert!(
+        err.to_string().contains("other geometry or settings"),
+        "{err}"
+    );
+}
+
 fn same_solution(a: &Rendered, b: &Rendered) {
     assert!(a.radiosity == b.radiosity, "element radiosities differ");
     assert_eq!(a.report.surfaces, b.report.surfaces);
@@ -104,13 +116,7 @@ fn same_solution(a: &Rendered, b: &Rendered) {
 /// other settings) and checks that the resume is refused as such.
 fn refused_as_other_settings(opts: &RenderOptions) {
     let scene = radiosity::scene::open("cornell").expect("built-in scene");
-    let err = render(gpu(), &scene, opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    refused(&scene, opts);
 }
 
 /// The Cornell box to unshot 2e-3, saving to `path` when interrupted
@@ -260,13 +266,7 @@ fn a_solve_with_lights_sun_sky_and_a_map_resumes_to_the_same_bits_and_other_ligh
     let mut turned = scene.clone();
     turned.sky_map = Some(Arc::new(sky_map(90.0)));
     for other in [brighter, turned] {
-        let err = render(gpu(), &other, &opts, Duration::ZERO, &mut |_| {})
-            .err()
-            .expect("refused");
-        assert!(
-            err.to_string().contains("other geometry or settings"),
-            "{err}"
-        );
+        refused(&other, &opts);
     }
 }
 
@@ -432,13 +432,7 @@ fn an_emissive_texture_resumes_to_the_same_bits_and_another_is_refused() {
             m.du = -m.du;
         }
     }
-    let err = render(gpu(), &swapped, &opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    refused(&swapped, &opts);
 }
 
 /// A furnished room under `--sun-sky` (a map and a sun, both in the
@@ -468,13 +462,7 @@ fn a_sun_sky_resumes_to_the_same_bits_and_another_hour_is_refused() {
     };
     let straight = solve_scene(&scene, &opts, None);
     same_solution(&stop_and_resume(&scene, &mut opts, &path, 150), &straight);
-    let err = render(gpu(), &lit("45,265"), &opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    refused(&lit("45,265"), &opts);
 }
 
 /// A room with an alpha-masked square between its light and its floor
@@ -493,11 +481,5 @@ fn an_alpha_mask_resumes_to_the_same_bits_and_the_square_opaque_is_refused() {
     // Stopped in the final solve (the refinement pass takes 36 shots).
     same_solution(&stop_and_resume(&scene, &mut opts, &path, 300), &straight);
     let opaque = crate::masks::masked_room(Some("OPAQUE"));
-    let err = render(gpu(), &opaque, &opts, Duration::ZERO, &mut |_| {})
-        .err()
-        .expect("refused");
-    assert!(
-        err.to_string().contains("other geometry or settings"),
-        "{err}"
-    );
+    refused(&opaque, &opts);
 }
