@@ -137,3 +137,40 @@ fn clip_z(poly: &[[f64; 3]]) -> Vec<[f64; 3]> {
 pub fn rel(a: f64, b: f64) -> f64 {
     (a - b).abs() / b.abs()
 }
+
+/// Gives mesh `mesh` of a glTF document its texture coordinates `uv` (one
+/// pair a vertex, as a data-URI buffer) and its material a base-colour
+/// texture of the image at `image_uri`, sampled clamped.
+pub fn add_base_texture(doc: &mut serde_json::Value, mesh: usize, uv: &[f32], image_uri: &str) {
+    use base64::Engine;
+    use serde_json::json;
+    let bytes: Vec<u8> = uv.iter().flat_map(|f| f.to_le_bytes()).collect();
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bytes)
+    );
+    let push = |doc: &mut serde_json::Value, key: &str, item: serde_json::Value| {
+        let list = doc[key].as_array_mut().expect("a glTF array");
+        list.push(item);
+        list.len() - 1
+    };
+    let buffer = push(
+        doc,
+        "buffers",
+        json!({"uri": uri, "byteLength": bytes.len()}),
+    );
+    let view = push(
+        doc,
+        "bufferViews",
+        json!({"buffer": buffer, "byteLength": bytes.len()}),
+    );
+    let accessor = push(
+        doc,
+        "accessors",
+        json!({"bufferView": view, "componentType": 5126, "count": uv.len() / 2, "type": "VEC2"}),
+    );
+    doc["meshes"][mesh]["primitives"][0]["attributes"]["TEXCOORD_0"] = json!(accessor);
+    doc["images"] = json!([{ "uri": image_uri }]);
+    doc["samplers"] = json!([{"wrapS": 33071, "wrapT": 33071}]);
+    doc["textures"] = json!([{"source": 0, "sampler": 0}]);
+}

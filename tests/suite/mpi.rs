@@ -792,6 +792,23 @@ fn a_cluttered_scene_gives_the_same_bits_culled_on_one_rank_and_on_five() {
     assert_eq!(lattice["timings"]["occluded_per_shot"].as_f64(), Some(0.0));
 }
 
+/// Renders `scene` with `args` on one rank and on two (in `dir`): the
+/// same report numbers and the same image bytes. Returns the one rank's
+/// report.
+fn one_and_two_ranks_agree(
+    dir: &Path,
+    scene: &str,
+    args: &[&str],
+    what: &str,
+) -> serde_json::Value {
+    let one = mpirun_scene(1, dir, "one", scene, args);
+    let two = mpirun_scene(2, dir, "two", scene, args);
+    same_result(&one, &two, &format!("2 ranks {what}"));
+    let image = |tag: &str| std::fs::read(dir.join(format!("{tag}.exr"))).expect("image");
+    assert!(image("one") == image("two"), "the images differ {what}");
+    one
+}
+
 #[test]
 fn a_sky_map_gives_the_same_bits_on_every_rank_count() {
     // The map's rays are drawn per element from its own seed, as the
@@ -809,41 +826,28 @@ fn a_sky_map_gives_the_same_bits_on_every_rank_count() {
         "--max-shots",
         "60",
     ];
-    let scene = "family-furnished-1";
-    let one = mpirun_scene(1, dir.path(), "one", scene, &args);
+    let one = one_and_two_ranks_agree(dir.path(), "family-furnished-1", &args, "under a sky map");
     assert!(one["sky_map"]
         .as_str()
         .is_some_and(|m| m.contains("window-sun.exr")));
-    let two = mpirun_scene(2, dir.path(), "two", scene, &args);
-    same_result(&one, &two, "2 ranks under a sky map");
-    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
-    assert!(image("one") == image("two"), "the images differ");
 }
 
 #[test]
 fn a_sun_sky_gives_the_same_bits_on_every_rank_count() {
     let dir = tempfile::tempdir().expect("temp dir");
     let args = ["--sun-sky", "35,240,4", "--max-shots", "60"];
-    let scene = "family-furnished-1";
-    let one = mpirun_scene(1, dir.path(), "one", scene, &args);
+    let one = one_and_two_ranks_agree(dir.path(), "family-furnished-1", &args, "under a sun-sky");
     assert!(one["sky_map"]
         .as_str()
         .is_some_and(|m| m.contains("sun-sky 35.0,240.0,4.0")));
-    let two = mpirun_scene(2, dir.path(), "two", scene, &args);
-    same_result(&one, &two, "2 ranks under a sun-sky");
-    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
-    assert!(image("one") == image("two"), "the images differ");
 }
 
 #[test]
 fn an_emissive_texture_gives_the_same_bits_on_every_rank_count() {
     let dir = tempfile::tempdir().expect("temp dir");
     let scene = crate::emissive::PANEL_ROOM;
-    let one = mpirun_scene(1, dir.path(), "one", scene, &["--max-shots", "60"]);
-    let two = mpirun_scene(2, dir.path(), "two", scene, &["--max-shots", "60"]);
-    same_result(&one, &two, "2 ranks lit by an emissive texture");
-    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
-    assert!(image("one") == image("two"), "the images differ");
+    let what = "lit by an emissive texture";
+    one_and_two_ranks_agree(dir.path(), scene, &["--max-shots", "60"], what);
 }
 
 #[test]
@@ -853,9 +857,5 @@ fn an_alpha_mask_gives_the_same_bits_on_every_rank_count() {
     let doc = crate::masks::masked_doc(Some("MASK"));
     std::fs::write(&path, serde_json::to_vec(&doc).expect("JSON")).expect("write");
     let scene = path.to_str().expect("utf-8");
-    let one = mpirun_scene(1, dir.path(), "one", scene, &[]);
-    let two = mpirun_scene(2, dir.path(), "two", scene, &[]);
-    same_result(&one, &two, "2 ranks with a masked surface");
-    let image = |tag: &str| std::fs::read(dir.path().join(format!("{tag}.exr"))).expect("image");
-    assert!(image("one") == image("two"), "the images differ");
+    one_and_two_ranks_agree(dir.path(), scene, &[], "with a masked surface");
 }

@@ -60,30 +60,7 @@ fn textured_floor(image: &str, transform: Option<serde_json::Value>, camera: boo
     // The quad's corners as written: (z, x) = (lo, lo), (hi, lo), (hi, hi), (lo, hi).
     let xs = [-1.0f32, -1.0, 1.0, 1.0];
     let uv: Vec<f32> = xs.iter().flat_map(|x| [(x + 1.0) / 2.0, 0.5]).collect();
-    let bytes: Vec<u8> = uv.iter().flat_map(|f| f.to_le_bytes()).collect();
-    let uri = format!(
-        "data:application/octet-stream;base64,{}",
-        base64::engine::general_purpose::STANDARD.encode(&bytes)
-    );
-    doc["buffers"]
-        .as_array_mut()
-        .expect("buffers")
-        .push(json!({"uri": uri, "byteLength": bytes.len()}));
-    let buffer = doc["buffers"].as_array().expect("buffers").len() - 1;
-    doc["bufferViews"]
-        .as_array_mut()
-        .expect("views")
-        .push(json!({"buffer": buffer, "byteLength": bytes.len()}));
-    let view = doc["bufferViews"].as_array().expect("views").len() - 1;
-    doc["accessors"]
-        .as_array_mut()
-        .expect("accessors")
-        .push(json!({"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC2"}));
-    let accessor = doc["accessors"].as_array().expect("accessors").len() - 1;
-    doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = json!(accessor);
-    doc["images"] = json!([{"uri": image}]);
-    doc["samplers"] = json!([{"wrapS": 33071, "wrapT": 33071}]);
-    doc["textures"] = json!([{"source": 0, "sampler": 0}]);
+    add_base_texture(&mut doc, 0, &uv, image);
     let pbr = &mut doc["materials"][0]["pbrMetallicRoughness"];
     pbr.as_object_mut().expect("pbr").remove("baseColorFactor");
     pbr["baseColorTexture"] = json!({"index": 0});
