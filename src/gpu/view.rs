@@ -274,13 +274,9 @@ impl ViewRenderer {
             let bytes: &[u8] = bytemuck::cast_slice(chunk);
             queue.write_buffer(&buffer, offset, bytes);
             offset += bytes.len() as u64;
-            // Hands the staged copy to the device and waits for it, so
-            // that no more than one chunk is staged at a time.
-            let done = queue.submit([]);
-            let _ = device.poll(wgpu::PollType::Wait {
-                submission_index: Some(done),
-                timeout: Some(super::DEVICE_TIMEOUT),
-            });
+            // Hands the staged copy to the device now: the staging of
+            // the chunks need not all be held until the draw's submission.
+            queue.submit([]);
         });
         (buffer, count as u32)
     }
